@@ -1,0 +1,264 @@
+"""Rigid-body inverse dynamics: a thin wrapper over Pinocchio's RNEA.
+
+The nominal model of an arm is a URDF (kinematics, masses, centres of mass,
+inertias) plus the rotor inertia of each joint ("armature"), which URDF cannot
+express. The inverse dynamics computed here is
+
+.. math::
+
+    \\tau_{RBD}(q, \\dot q, \\ddot q) = M(q)\\ddot q + C(q, \\dot q)\\dot q + g(q)
+        + \\operatorname{diag}(a)\\,\\ddot q,
+
+with :math:`a` the armature. Pinocchio's ``rnea`` (4.1.0) adds
+``model.armature * qdd`` itself (checked in ``tests/test_rbd.py``), so the
+armature is stored in ``model.armature`` and nothing is added by hand.
+
+Only fixed-base models whose configuration and velocity spaces coincide
+(``nq == nv``: revolute / prismatic joints) are accepted: the callers pass
+joint angles as ``(N,)`` vectors.
+
+``load_nominal(urdf_path)`` reads the JSON sidecar written next to the URDF by
+``scripts/generate_urdf.py`` (armature, torque and velocity limits, gravity,
+calibration error and seed).
+
+Not thread-safe: a model owns one ``pinocchio.Data`` workspace.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pinocchio as pin
+
+__all__ = ["RigidBodyModel", "load_nominal", "sidecar_path"]
+
+#: Sidecar layout versions this module can read.
+SUPPORTED_SIDECAR_VERSIONS = (1,)
+
+
+def sidecar_path(urdf_path: str | os.PathLike) -> Path:
+    """The JSON sidecar of a URDF: same path with the ``.json`` suffix."""
+    return Path(urdf_path).with_suffix(".json")
+
+
+def _as_vector(name: str, value: Any, n: int) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise ValueError(f"{name} must have shape ({n},) (one value per joint), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} must be finite, got {arr}")
+    return arr
+
+
+class RigidBodyModel:
+    """Inverse dynamics of a fixed-base N-DOF arm from Pinocchio's RNEA.
+
+    Attributes:
+        dof: number of joints N (``nq == nv``).
+        joint_names: names of the N joints, in URDF/Pinocchio order.
+        armature: (N,) rotor inertia per joint (kg m^2), included in the inverse dynamics.
+        gravity: (3,) gravity vector in the world frame (m/s^2).
+        torque_limits, velocity_limits: (N,) or ``None`` (from the sidecar).
+        meta: the sidecar dict (empty for :meth:`from_urdf`).
+        pin_model: the underlying ``pinocchio.Model`` (do not change its shape).
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        *,
+        armature: Any = None,
+        gravity: Any = None,
+        torque_limits: Any = None,
+        velocity_limits: Any = None,
+        meta: dict | None = None,
+        source: str | None = None,
+    ) -> None:
+        if model.nq != model.nv:
+            raise ValueError(
+                f"model has nq={model.nq} != nv={model.nv} (continuous, spherical or floating joints);"
+                " only fixed-base models with revolute/prismatic joints are supported"
+            )
+        if model.nv == 0:
+            raise ValueError("model has no degrees of freedom")
+        self.pin_model = model
+        self.dof: int = int(model.nv)
+        self.joint_names: tuple[str, ...] = tuple(model.names[1:])
+        if armature is not None:
+            model.armature = _as_vector("armature", armature, self.dof).copy()
+        if gravity is not None:
+            g = _as_vector("gravity", gravity, 3)
+            model.gravity = pin.Motion(g, np.zeros(3))
+        self.torque_limits = None if torque_limits is None else _as_vector("torque_limits", torque_limits, self.dof)
+        self.velocity_limits = (
+            None if velocity_limits is None else _as_vector("velocity_limits", velocity_limits, self.dof)
+        )
+        self.meta: dict = dict(meta or {})
+        self.source = source
+        self._data = model.createData()
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_urdf(
+        cls,
+        path: str | os.PathLike,
+        armature: Any = None,
+        *,
+        gravity: Any = None,
+        dof: int | None = None,
+    ) -> "RigidBodyModel":
+        """Build from a fixed-base URDF.
+
+        Args:
+            path: URDF file.
+            armature: rotor inertia per joint, (N,) or a scalar; ``None`` keeps the URDF's (zero).
+            gravity: (3,) world gravity; ``None`` keeps Pinocchio's default (0, 0, -9.81).
+            dof: if given, the expected number of joints; a mismatch raises ``ValueError``.
+        """
+        path = Path(path)
+        if not path.is_file():
+            raise FileNotFoundError(f"URDF file not found: {str(path)!r}")
+        try:
+            model = pin.buildModelFromUrdf(str(path))
+        except Exception as exc:  # Pinocchio raises a bare ValueError/RuntimeError with a terse message
+            raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}") from exc
+        rbd = cls(model, armature=armature, gravity=gravity, source=str(path))
+        if dof is not None and rbd.dof != dof:
+            raise ValueError(f"dof mismatch: expected {dof} joints, URDF {str(path)!r} has {rbd.dof}")
+        return rbd
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def armature(self) -> np.ndarray:
+        return np.array(self.pin_model.armature, dtype=float)
+
+    @property
+    def gravity(self) -> np.ndarray:
+        return np.array(self.pin_model.gravity.linear, dtype=float)
+
+    # ------------------------------------------------------------------ dynamics
+    def _check(self, name: str, x: Any) -> np.ndarray:
+        arr = np.asarray(x, dtype=np.float64)
+        if arr.ndim not in (1, 2) or arr.shape[-1] != self.dof:
+            raise ValueError(f"{name} must have shape ({self.dof},) or (T, {self.dof}), got {arr.shape}")
+        if not np.isfinite(arr).all():
+            bad = np.argwhere(~np.isfinite(arr))[0]
+            raise ValueError(f"{name} must be finite; first non-finite entry at index {tuple(int(i) for i in bad)}")
+        return np.ascontiguousarray(arr)
+
+    def inverse_dynamics(self, q: Any, qd: Any, qdd: Any) -> np.ndarray:
+        """Joint torques ``tau = M(q) qdd + C(q, qd) qd + g(q) + armature * qdd``.
+
+        Args:
+            q, qd, qdd: joint positions (rad), velocities (rad/s), accelerations (rad/s^2),
+                each (N,) or all (T, N).
+
+        Returns:
+            tau: (N,) or (T, N) in N m, float64.
+        """
+        q = self._check("q", q)
+        qd = self._check("qd", qd)
+        qdd = self._check("qdd", qdd)
+        if not (q.shape == qd.shape == qdd.shape):
+            raise ValueError(f"q, qd, qdd must have the same shape, got {q.shape}, {qd.shape}, {qdd.shape}")
+        model, data = self.pin_model, self._data
+        if q.ndim == 1:
+            return pin.rnea(model, data, q, qd, qdd).copy()
+        out = np.empty_like(q)
+        rnea = pin.rnea
+        for t in range(q.shape[0]):
+            out[t] = rnea(model, data, q[t], qd[t], qdd[t])
+        return out
+
+    def gravity_torque(self, q: Any) -> np.ndarray:
+        """Generalised gravity ``g(q)`` (= inverse dynamics at zero velocity and acceleration).
+
+        Args:
+            q: (N,) or (T, N) joint positions (rad).
+
+        Returns:
+            (N,) or (T, N) in N m.
+        """
+        q = self._check("q", q)
+        model, data = self.pin_model, self._data
+        if q.ndim == 1:
+            return pin.computeGeneralizedGravity(model, data, q).copy()
+        out = np.empty_like(q)
+        for t in range(q.shape[0]):
+            out[t] = pin.computeGeneralizedGravity(model, data, q[t])
+        return out
+
+    def mass_matrix(self, q: Any) -> np.ndarray:
+        """Joint-space inertia ``M(q) + diag(armature)``, (N, N), for a single (N,) configuration."""
+        q = self._check("q", q)
+        if q.ndim != 1:
+            raise ValueError(f"q must have shape ({self.dof},) for mass_matrix, got {q.shape}")
+        M = pin.crba(self.pin_model, self._data, q)
+        M = np.triu(M) + np.triu(M, 1).T  # crba fills the upper triangle only
+        return M
+
+    def __repr__(self) -> str:
+        return f"RigidBodyModel(dof={self.dof}, joints={list(self.joint_names)}, source={self.source!r})"
+
+
+def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> RigidBodyModel:
+    """Load a nominal model: the URDF plus its JSON sidecar (same name, ``.json``).
+
+    The sidecar (written by ``scripts/generate_urdf.py``) holds ``armature``,
+    ``torque_limits``, ``velocity_limits``, ``gravity``, ``calibration_error``,
+    ``seed``, ``joint_names``, ``dof`` and provenance; the whole dict is kept as
+    ``model.meta``.
+
+    Args:
+        urdf_path: the URDF file.
+        dof: if given, the expected number of joints.
+
+    Raises:
+        FileNotFoundError: the URDF or its sidecar is missing.
+        ValueError: the sidecar is not valid JSON, lacks a field, or disagrees with the URDF.
+    """
+    urdf_path = Path(urdf_path)
+    if not urdf_path.is_file():
+        raise FileNotFoundError(f"URDF file not found: {str(urdf_path)!r}")
+    js = sidecar_path(urdf_path)
+    if not js.is_file():
+        raise FileNotFoundError(f"sidecar JSON of {str(urdf_path)!r} not found: expected {str(js)!r}")
+    try:
+        meta = json.loads(js.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"sidecar {str(js)!r} is not valid JSON: {exc}") from exc
+    if not isinstance(meta, dict):
+        raise ValueError(f"sidecar {str(js)!r} must hold a JSON object, got {type(meta).__name__}")
+    version = meta.get("format_version")
+    if version not in SUPPORTED_SIDECAR_VERSIONS:
+        raise ValueError(
+            f"sidecar {str(js)!r}: format_version must be one of {SUPPORTED_SIDECAR_VERSIONS}, got {version!r}"
+        )
+    for key in ("armature", "torque_limits", "velocity_limits", "joint_names"):
+        if key not in meta:
+            raise ValueError(f"sidecar {str(js)!r} lacks the field {key!r}")
+    rbd = RigidBodyModel.from_urdf(urdf_path, dof=dof)
+    if "dof" in meta and meta["dof"] != rbd.dof:
+        raise ValueError(f"sidecar {str(js)!r}: dof {meta['dof']} does not match the URDF's {rbd.dof} joints")
+    if list(meta["joint_names"]) != list(rbd.joint_names):
+        raise ValueError(
+            f"sidecar {str(js)!r}: joint_names {meta['joint_names']} do not match the URDF's {list(rbd.joint_names)}"
+        )
+    try:
+        return RigidBodyModel(
+            rbd.pin_model,
+            armature=meta["armature"],
+            gravity=meta.get("gravity"),
+            torque_limits=meta["torque_limits"],
+            velocity_limits=meta["velocity_limits"],
+            meta=meta,
+            source=str(urdf_path),
+        )
+    except ValueError as exc:
+        raise ValueError(f"sidecar {str(js)!r}: {exc}") from exc

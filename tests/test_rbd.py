@@ -1,0 +1,321 @@
+"""Tests of cascgp.rbd (Pinocchio RNEA wrapper) and scripts/generate_urdf.py (nominal URDF).
+
+Reference: MuJoCo's inverse dynamics (``mj_inverse``) of the bare simulated arm with
+armature, zero friction/damping and the constraint solver disabled (so joint limits and
+self-contacts add nothing), i.e. pure rigid-body dynamics plus rotor inertia.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from cascgp.rbd import RigidBodyModel, load_nominal
+from jaco_env import robot
+from scripts import generate_urdf as gen
+
+REPO = Path(__file__).resolve().parents[1]
+ASSET = REPO / "assets" / "jaco2_nominal.urdf"
+TOL = 1e-8
+
+
+def _write(tmp: Path, error: float, seed: int) -> Path:
+    out = tmp / f"jaco_e{error}_s{seed}.urdf"
+    gen.write(out, error=error, seed=seed)
+    return out
+
+
+@pytest.fixture(scope="module")
+def tmp(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("rbd")
+
+
+@pytest.fixture(scope="module")
+def exact_urdf(tmp) -> Path:
+    return _write(tmp, 0.0, 0)
+
+
+@pytest.fixture(scope="module")
+def exact(exact_urdf) -> RigidBodyModel:
+    return load_nominal(exact_urdf)
+
+
+@pytest.fixture(scope="module")
+def mj():
+    """Bare arm with armature, no friction, no damping, constraints off."""
+    arm = robot.build_arm_mjcf(armature=robot.ARMATURE, frictionloss=None, damping=None)
+    m = mujoco.MjModel.from_xml_string(arm.to_xml_string(), arm.get_assets())
+    m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
+    return m, mujoco.MjData(m)
+
+
+def _states(n: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(0.0, 2 * np.pi, (n, 6))
+    qd = rng.uniform(-2.0, 2.0, (n, 6))
+    qdd = rng.uniform(-10.0, 10.0, (n, 6))
+    return q, qd, qdd
+
+
+def _mj_inverse(mj, q, qd, qdd) -> np.ndarray:
+    m, d = mj
+    out = np.empty_like(q)
+    for t in range(q.shape[0]):
+        d.qpos[:], d.qvel[:], d.qacc[:] = q[t], qd[t], qdd[t]
+        mujoco.mj_inverse(m, d)
+        out[t] = d.qfrc_inverse
+    return out
+
+
+# ---------------------------------------------------------------------------- reference equality
+def test_rnea_equals_mujoco_inverse_dynamics(exact, mj):
+    q, qd, qdd = _states(200)
+    ref = _mj_inverse(mj, q, qd, qdd)
+    tau = exact.inverse_dynamics(q, qd, qdd)
+    assert tau.shape == (200, 6)
+    assert np.max(np.abs(tau - ref)) < TOL
+    # single-row path agrees with the batch path
+    for t in range(5):
+        np.testing.assert_array_equal(exact.inverse_dynamics(q[t], qd[t], qdd[t]), tau[t])
+
+
+def test_gravity_matches_mujoco_bias_at_zero_velocity(exact, mj):
+    m, d = mj
+    q, _, _ = _states(50, seed=1)
+    g = exact.gravity_torque(q)
+    for t in range(q.shape[0]):
+        d.qpos[:], d.qvel[:] = q[t], 0.0
+        mujoco.mj_forward(m, d)
+        assert np.max(np.abs(g[t] - d.qfrc_bias)) < TOL
+    np.testing.assert_allclose(exact.inverse_dynamics(q, 0 * q, 0 * q), g, atol=1e-12)
+    assert exact.gravity_torque(q[0]).shape == (6,)
+
+
+def test_pinocchio_rnea_includes_armature(exact_urdf):
+    """pin 4.1.0's rnea adds armature * qdd itself; the wrapper relies on it."""
+    bare = RigidBodyModel.from_urdf(exact_urdf)
+    arm = RigidBodyModel.from_urdf(exact_urdf, armature=robot.ARMATURE)
+    np.testing.assert_array_equal(bare.armature, 0.0)
+    np.testing.assert_array_equal(arm.armature, robot.ARMATURE)
+    q, qd, qdd = _states(20, seed=2)
+    diff = arm.inverse_dynamics(q, qd, qdd) - bare.inverse_dynamics(q, qd, qdd)
+    np.testing.assert_allclose(diff, robot.ARMATURE * qdd, rtol=1e-12, atol=1e-10)
+    # scalar armature broadcasts
+    np.testing.assert_array_equal(RigidBodyModel.from_urdf(exact_urdf, armature=0.5).armature, 0.5)
+
+
+def test_mass_matrix_consistent_with_rnea(exact, mj):
+    m, d = mj
+    q, qd, qdd = _states(5, seed=3)
+    for t in range(5):
+        M = exact.mass_matrix(q[t])
+        np.testing.assert_allclose(M, M.T, atol=0)
+        h = exact.inverse_dynamics(q[t], qd[t], 0 * qdd[t])
+        np.testing.assert_allclose(M @ qdd[t] + h, exact.inverse_dynamics(q[t], qd[t], qdd[t]), atol=1e-10)
+        d.qpos[:] = q[t]
+        mujoco.mj_forward(m, d)
+        full = np.empty((6, 6))
+        mujoco.mj_fullM(m, d, full)
+        np.testing.assert_allclose(M, full, atol=TOL)
+
+
+def test_kinematics_agree_with_simulation(exact, mj):
+    """Site frames of the URDF (Pinocchio frames) sit where MuJoCo puts the sites."""
+    m, d = mj
+    model, data = exact.pin_model, exact.pin_model.createData()
+    q, _, _ = _states(10, seed=4)
+    for t in range(10):
+        d.qpos[:] = q[t]
+        mujoco.mj_kinematics(m, d)
+        pin.framesForwardKinematics(model, data, q[t])
+        for s in range(m.nsite):
+            name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SITE, s)
+            oMf = data.oMf[model.getFrameId(name)]
+            np.testing.assert_allclose(oMf.translation, d.site_xpos[s], atol=1e-12)
+            np.testing.assert_allclose(oMf.rotation, d.site_xmat[s].reshape(3, 3), atol=1e-12)
+
+
+def test_metadata(exact, exact_urdf):
+    assert exact.dof == 6
+    assert exact.joint_names == robot.JOINT_NAMES
+    np.testing.assert_array_equal(exact.torque_limits, robot.TORQUE_LIMITS)
+    np.testing.assert_array_equal(exact.velocity_limits, robot.VELOCITY_LIMITS)
+    np.testing.assert_array_equal(exact.gravity, [0.0, 0.0, -9.81])
+    assert exact.meta["calibration_error"] == 0.0 and exact.meta["seed"] == 0
+    assert exact.meta["urdf"] == exact_urdf.name
+
+
+# ---------------------------------------------------------------------------- calibration error
+def _link_inertials(text: str) -> dict[str, tuple[float, np.ndarray]]:
+    out = {}
+    for link in ET.fromstring(text.split("\n", 1)[1]).iter("link"):
+        inertial = link.find("inertial")
+        if inertial is not None:
+            com = np.array([float(x) for x in inertial.find("origin").get("xyz").split()])
+            out[link.get("name")] = (float(inertial.find("mass").get("value")), com)
+    return out
+
+
+def test_calibration_error_is_bounded_seeded_and_changes_dynamics(tmp, exact):
+    text0, _ = gen.generate(error=0.0, seed=0)
+    text_a, side_a = gen.generate(error=0.1, seed=0)
+    text_b, _ = gen.generate(error=0.1, seed=0)
+    text_c, _ = gen.generate(error=0.1, seed=1)
+    assert text_a == text_b  # deterministic for a fixed seed
+    assert text_c != text_a
+    assert side_a["calibration_error"] == 0.1 and side_a["seed"] == 0
+
+    exact_links, err_links = _link_inertials(text0), _link_inertials(text_a)
+    assert exact_links.keys() == err_links.keys()
+    for name, (mass, com) in exact_links.items():
+        mass_e, com_e = err_links[name]
+        assert abs(mass_e / mass - 1.0) <= 0.1 + 1e-12, name
+        assert np.all(np.abs(com_e - com) <= 0.1 * np.linalg.norm(com) + 1e-15), name
+    assert any(abs(err_links[n][0] / m - 1) > 0.02 for n, (m, _) in exact_links.items())
+
+    nominal = load_nominal(_write(tmp, 0.1, 0))
+    (tmp / "again").mkdir()
+    again = load_nominal(_write(tmp / "again", 0.1, 0))
+    q, qd, qdd = _states(50, seed=5)
+    tau_exact = exact.inverse_dynamics(q, qd, qdd)
+    tau_nom = nominal.inverse_dynamics(q, qd, qdd)
+    np.testing.assert_array_equal(tau_nom, again.inverse_dynamics(q, qd, qdd))
+    g_exact, g_nom = exact.gravity_torque(q), nominal.gravity_torque(q)
+    # differs by a calibration-sized amount: a few per cent of gravity torque, not noise, not 100%
+    rel = np.abs(g_nom - g_exact)[:, :3].max() / np.abs(g_exact)[:, :3].max()
+    assert 1e-3 < rel < 0.3
+    assert np.max(np.abs(tau_nom - tau_exact)) > 1e-3
+
+
+# ---------------------------------------------------------------------------- committed asset
+def _numbers_and_skeleton(text: str) -> tuple[np.ndarray, str]:
+    pattern = r"-?\d+(?:\.\d*)?(?:[eE][-+]?\d+)?"
+    return np.array([float(x) for x in re.findall(pattern, text)]), re.sub(pattern, "#", text)
+
+
+@pytest.mark.parametrize("suffix", [".urdf", ".json"])
+def test_committed_asset_equals_regeneration(suffix):
+    """The committed nominal model is what the script writes (error 0.1, seed 0): nobody hand-edits it."""
+    text, sidecar = gen.generate(error=0.1, seed=0, urdf_name=ASSET.name)
+    fresh = text if suffix == ".urdf" else gen.sidecar_text(sidecar)
+    committed = ASSET.with_suffix(suffix).read_text(encoding="utf-8")
+    if committed != fresh:  # tolerate last-digit libm differences between machines, nothing else
+        num_c, skel_c = _numbers_and_skeleton(committed)
+        num_f, skel_f = _numbers_and_skeleton(fresh)
+        assert skel_c == skel_f, f"{ASSET.with_suffix(suffix)} differs from `python -m scripts.generate_urdf`"
+        np.testing.assert_allclose(num_c, num_f, rtol=1e-13, atol=1e-15)
+
+
+def test_committed_asset_loads():
+    rbd = load_nominal(ASSET, dof=6)
+    assert rbd.dof == 6 and rbd.joint_names == robot.JOINT_NAMES
+    np.testing.assert_array_equal(rbd.armature, robot.ARMATURE)
+    assert rbd.meta["calibration_error"] == 0.1 and rbd.meta["seed"] == 0
+    meta = json.loads(ASSET.with_suffix(".json").read_text())
+    assert meta == rbd.meta
+
+
+# ---------------------------------------------------------------------------- error paths
+def test_input_errors(exact):
+    q = np.zeros(6)
+    with pytest.raises(ValueError, match=r"q must have shape \(6,\) or \(T, 6\), got \(7,\)"):
+        exact.inverse_dynamics(np.zeros(7), np.zeros(7), np.zeros(7))
+    with pytest.raises(ValueError, match=r"qd must have shape"):
+        exact.inverse_dynamics(q, np.zeros((2, 3, 6)), q)
+    with pytest.raises(ValueError, match=r"same shape"):
+        exact.inverse_dynamics(q, np.zeros((2, 6)), q)
+    bad = q.copy()
+    bad[3] = np.nan
+    with pytest.raises(ValueError, match=r"qdd must be finite; first non-finite entry at index \(3,\)"):
+        exact.inverse_dynamics(q, q, bad)
+    with pytest.raises(ValueError, match=r"q must be finite.*\(1, 2\)"):
+        exact.gravity_torque(np.array([[0.0] * 6, [0, 0, np.inf, 0, 0, 0]]))
+    with pytest.raises(ValueError, match="q must have shape"):
+        exact.gravity_torque(np.zeros((3, 5)))
+    with pytest.raises(ValueError, match="mass_matrix"):
+        exact.mass_matrix(np.zeros((2, 6)))
+
+
+def test_construction_errors(tmp, exact_urdf):
+    with pytest.raises(FileNotFoundError, match="URDF file not found"):
+        RigidBodyModel.from_urdf(tmp / "missing.urdf")
+    with pytest.raises(FileNotFoundError, match="URDF file not found"):
+        load_nominal(tmp / "missing.urdf")
+    with pytest.raises(ValueError, match="dof mismatch: expected 7 joints.*has 6"):
+        RigidBodyModel.from_urdf(exact_urdf, dof=7)
+    with pytest.raises(ValueError, match="dof mismatch"):
+        load_nominal(exact_urdf, dof=7)
+    with pytest.raises(ValueError, match=r"armature must have shape \(6,\)"):
+        RigidBodyModel.from_urdf(exact_urdf, armature=[1.0, 2.0])
+    with pytest.raises(ValueError, match="armature must be finite"):
+        RigidBodyModel.from_urdf(exact_urdf, armature=[np.nan] * 6)
+
+    lone = tmp / "lone" / "arm.urdf"
+    lone.parent.mkdir()
+    lone.write_text(exact_urdf.read_text())
+    with pytest.raises(FileNotFoundError, match=r"sidecar JSON .* not found: expected .*arm\.json"):
+        load_nominal(lone)
+    lone.with_suffix(".json").write_text("{not json")
+    with pytest.raises(ValueError, match="not valid JSON"):
+        load_nominal(lone)
+    side = json.loads(exact_urdf.with_suffix(".json").read_text())
+    lone.with_suffix(".json").write_text(json.dumps({k: v for k, v in side.items() if k != "armature"}))
+    with pytest.raises(ValueError, match="lacks the field 'armature'"):
+        load_nominal(lone)
+    lone.with_suffix(".json").write_text(json.dumps({**side, "armature": [1.0] * 7}))
+    with pytest.raises(ValueError, match=r"armature must have shape \(6,\)"):
+        load_nominal(lone)
+    lone.with_suffix(".json").write_text(json.dumps({**side, "format_version": 99}))
+    with pytest.raises(ValueError, match="format_version"):
+        load_nominal(lone)
+    lone.with_suffix(".json").write_text(json.dumps({**side, "dof": 7}))
+    with pytest.raises(ValueError, match="dof 7 does not match"):
+        load_nominal(lone)
+
+    garbage = tmp / "garbage.urdf"
+    garbage.write_text("<robot name='x'><link name='a'>")
+    with pytest.raises(ValueError, match="cannot parse URDF"):
+        RigidBodyModel.from_urdf(garbage)
+
+
+def test_continuous_joint_rejected(tmp):
+    """A URDF 'continuous' joint is (cos, sin) in Pinocchio: nq != nv, arrays of N angles cannot match."""
+    urdf = tmp / "continuous.urdf"
+    urdf.write_text(
+        """<?xml version="1.0"?>
+<robot name="c">
+  <link name="base"/>
+  <link name="l1"><inertial><origin xyz="0 0 0.1"/><mass value="1"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <joint name="j1" type="continuous"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/></joint>
+</robot>
+"""
+    )
+    with pytest.raises(ValueError, match="nq=2 != nv=1"):
+        RigidBodyModel.from_urdf(urdf)
+
+
+def test_generator_errors(tmp):
+    for error in (-0.1, 1.0, float("nan")):
+        with pytest.raises(ValueError, match="error must be a finite relative error"):
+            gen.generate(error=error, seed=0)
+    with pytest.raises(ValueError, match="seed must be a non-negative int"):
+        gen.generate(error=0.1, seed=-1)
+    with pytest.raises(ValueError, match=r"out must end in \.urdf"):
+        gen.write(tmp / "x.xml", error=0.1, seed=0)
+
+
+def test_generator_cli(tmp, capsys):
+    out = tmp / "cli" / "arm.urdf"
+    gen.main(["--out", str(out), "--error", "0.1", "--seed", "0"])
+    assert "wrote" in capsys.readouterr().out
+    text, sidecar = gen.generate(error=0.1, seed=0, urdf_name="arm.urdf")
+    assert out.read_text() == text
+    assert json.loads(out.with_suffix(".json").read_text()) == sidecar
