@@ -1,0 +1,61 @@
+"""cascgp: cascaded Gaussian processes for robot inverse dynamics (N-DOF, numpy + torch).
+
+Public names are imported lazily (so ``import cascgp.data`` does not import torch):
+
+==================  =====================  =================================================
+name                module                 what
+==================  =====================  =================================================
+DynamicsData        cascgp.data            samples q, qd, qdd, tau, t, segment, meta
+SavGol              cascgp.data            smoothing option for numerical differentiation
+state_features      cascgp.features        db / df per-joint states
+input_spec          cascgp.features        inputs of joint i's GP (standard/inward/outward)
+build_inputs        cascgp.features        GP input matrices of every joint
+load_ias            cascgp.sarcos          IAS SARCOS file -> (train, test)
+load_gpml           cascgp.sarcos          GPML SARCOS file -> DynamicsData
+nrmse, rmse         cascgp.metrics         per-joint errors
+MODEL_NAMES         cascgp.models          the twelve model variants
+make_model          cascgp.models          build a model by name
+load_model          cascgp.models          read a saved model
+GPBank              cascgp.gp              batched exact GPs
+GPFitConfig         cascgp.gp              GP fit options
+RigidBodyModel      cascgp.rbd             Pinocchio RNEA wrapper
+==================  =====================  =================================================
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+_EXPORTS = {
+    "DynamicsData": "cascgp.data",
+    "SavGol": "cascgp.data",
+    "state_features": "cascgp.features",
+    "input_spec": "cascgp.features",
+    "build_inputs": "cascgp.features",
+    "load_ias": "cascgp.sarcos",
+    "load_gpml": "cascgp.sarcos",
+    "nrmse": "cascgp.metrics",
+    "rmse": "cascgp.metrics",
+    "MODEL_NAMES": "cascgp.models",
+    "make_model": "cascgp.models",
+    "load_model": "cascgp.models",
+    "GPBank": "cascgp.gp",
+    "GPFitConfig": "cascgp.gp",
+    "RigidBodyModel": "cascgp.rbd",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str) -> Any:
+    mod = _EXPORTS.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'cascgp' has no attribute {name!r}")
+    value = getattr(importlib.import_module(mod), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

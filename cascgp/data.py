@@ -1,0 +1,450 @@
+"""One record type for everything the inverse-dynamics models learn from.
+
+:class:`DynamicsData` holds, per time step, the joint positions ``q``, velocities ``qd``,
+accelerations ``qdd`` and torques ``tau`` of an N-DOF arm (each ``(T, N)``), the sample
+times ``t`` and a ``segment`` id per row (time-contiguous pieces: episodes, recordings, ...),
+plus JSON metadata.
+
+================  ===========  ==========================================================
+field             shape        meaning
+================  ===========  ==========================================================
+``q``             (T, N)       joint positions (rad)
+``qd``            (T, N)       joint velocities (rad/s)
+``qdd``           (T, N)       joint accelerations (rad/s^2)
+``tau``           (T, N)       joint torques (N m)
+``t``             (T,)         time (s), strictly increasing within a segment
+``segment``       (T,)         int64 segment id, non-decreasing
+``meta``          dict         JSON-serialisable: robot, source, payload_mass, ...
+================  ===========  ==========================================================
+
+Every instance is validated on construction (shapes, finite values, non-decreasing segment
+ids, strictly increasing time within a segment); a violation raises ``ValueError`` whose
+message names the field and the first bad row.  An empty record (``T = 0``) is refused.
+
+Files are ``.npz`` archives (``numpy.savez``) written atomically (temporary file in the same
+folder, then :func:`os.replace`) and re-validated on load.  Format version:
+:data:`FORMAT_VERSION`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+__all__ = ["DynamicsData", "SavGol", "FORMAT_VERSION", "atomic_savez", "read_npz"]
+
+#: Version of the ``.npz`` layout written by :meth:`DynamicsData.save`.
+FORMAT_VERSION = 1
+_KIND = "cascgp.DynamicsData"
+_ARRAY_FIELDS = ("q", "qd", "qdd", "tau")
+
+
+# --------------------------------------------------------------------------- file helpers
+def atomic_savez(path: str | os.PathLike, arrays: dict[str, np.ndarray]) -> Path:
+    """Write ``arrays`` to ``path`` (``.npz``) atomically.
+
+    The archive is written to a temporary file in the destination folder, flushed and
+    fsync'ed, then moved over ``path`` with :func:`os.replace`, so a reader never sees a
+    half-written file.  ``numpy.savez`` would append ``.npz`` to a name without it; we keep
+    the path exactly as given.
+    """
+    path = Path(path)
+    folder = path.parent if str(path.parent) else Path(".")
+    folder.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, **arrays)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return path
+
+
+def read_npz(path: str | os.PathLike, what: str) -> dict[str, np.ndarray]:
+    """Read every array of an ``.npz`` file eagerly (no pickle).
+
+    Raises ``FileNotFoundError`` for a missing file and ``ValueError`` naming ``path`` and
+    ``what`` for anything unreadable (truncated or corrupt archive, bad CRC, pickled data).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{what} file not found: {path}")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: np.asarray(z[k]) for k in z.files}
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as exc:
+        raise ValueError(
+            f"{path}: not a readable {what} .npz file (corrupt or truncated?): "
+            f"{type(exc).__name__}: {exc}") from exc
+
+
+# --------------------------------------------------------------------------- validation
+def _first_bad_row(mask: np.ndarray) -> int:
+    return int(np.flatnonzero(mask)[0])
+
+
+def _check_finite(name: str, a: np.ndarray) -> None:
+    bad = ~np.isfinite(a)
+    if bad.any():
+        rows = bad.reshape(bad.shape[0], -1).any(axis=1) if bad.ndim > 1 else bad
+        r = _first_bad_row(rows)
+        col = ""
+        if a.ndim > 1:
+            col = f", column {int(np.flatnonzero(bad[r].ravel())[0])}"
+        raise ValueError(f"DynamicsData.{name}: non-finite value (NaN or inf) at row {r}{col}")
+
+
+@dataclass(frozen=True)
+class SavGol:
+    """Savitzky-Golay smoothing for :meth:`DynamicsData.from_measurements`.
+
+    The acceleration is the first derivative of a local polynomial of degree ``polyorder``
+    fitted by least squares to ``window`` consecutive velocity samples
+    (:func:`scipy.signal.savgol_filter` with ``deriv=1``, ``mode="interp"``).  It assumes
+    uniform sampling within a segment (the segment's median period is used); segments
+    shorter than ``window`` fall back to plain central differences.
+    """
+
+    window: int = 7
+    polyorder: int = 2
+
+    def __post_init__(self) -> None:
+        if self.window < 3 or self.window % 2 == 0:
+            raise ValueError(f"SavGol.window: expected an odd integer >= 3, got {self.window}")
+        if not 1 <= self.polyorder < self.window:
+            raise ValueError(
+                f"SavGol.polyorder: expected 1 <= polyorder < window, got {self.polyorder}")
+
+
+@dataclass(frozen=True, eq=False)
+class DynamicsData:
+    """Samples of an N-DOF arm's inverse dynamics (see the module docstring for the table).
+
+    Arrays are stored as C-contiguous float64 (``segment`` as int64) copies.
+    """
+
+    q: np.ndarray
+    qd: np.ndarray
+    qdd: np.ndarray
+    tau: np.ndarray
+    t: np.ndarray
+    segment: np.ndarray | None = None
+    meta: dict = field(default_factory=dict)
+
+    # ------------------------------------------------------------------ construction
+    def __post_init__(self) -> None:
+        arrays: dict[str, np.ndarray] = {}
+        for name in _ARRAY_FIELDS:
+            raw = getattr(self, name)
+            try:
+                a = np.array(raw, dtype=np.float64, order="C", copy=True)
+            except (TypeError, ValueError) as exc:
+                raise TypeError(f"DynamicsData.{name}: expected a numeric (T, N) array ({exc})")
+            if a.ndim != 2:
+                raise ValueError(f"DynamicsData.{name}: expected shape (T, N), got {a.shape}")
+            arrays[name] = a
+        shape = arrays["q"].shape
+        for name in _ARRAY_FIELDS[1:]:
+            if arrays[name].shape != shape:
+                raise ValueError(
+                    f"DynamicsData.{name}: expected shape {shape} (the shape of q), "
+                    f"got {arrays[name].shape}")
+        T, N = shape
+        if T == 0:
+            raise ValueError("DynamicsData.q: empty data set (T = 0 rows); at least one sample is needed")
+        if N == 0:
+            raise ValueError("DynamicsData.q: expected at least one joint (N >= 1), got N = 0")
+        try:
+            t = np.array(self.t, dtype=np.float64, order="C", copy=True)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"DynamicsData.t: expected a numeric (T,) array ({exc})")
+        if t.shape != (T,):
+            raise ValueError(f"DynamicsData.t: expected shape ({T},), got {t.shape}")
+        if self.segment is None:
+            seg = np.zeros(T, dtype=np.int64)
+        else:
+            seg_raw = np.asarray(self.segment)
+            if seg_raw.shape != (T,):
+                raise ValueError(f"DynamicsData.segment: expected shape ({T},), got {seg_raw.shape}")
+            if seg_raw.dtype.kind not in "iub":
+                if seg_raw.dtype.kind == "f" and np.all(np.isfinite(seg_raw)) and np.all(
+                        seg_raw == np.round(seg_raw)):
+                    pass
+                else:
+                    raise TypeError(
+                        f"DynamicsData.segment: expected integer ids, got dtype {seg_raw.dtype}")
+            seg = np.array(seg_raw, dtype=np.int64, order="C", copy=True)
+        for name in _ARRAY_FIELDS:
+            _check_finite(name, arrays[name])
+        _check_finite("t", t)
+        if T > 1:
+            dseg = np.diff(seg)
+            if (dseg < 0).any():
+                r = _first_bad_row(dseg < 0) + 1
+                raise ValueError(
+                    f"DynamicsData.segment: ids must be non-decreasing; row {r} has id {seg[r]} "
+                    f"after {seg[r - 1]}")
+            same = dseg == 0
+            bad = same & (np.diff(t) <= 0)
+            if bad.any():
+                r = _first_bad_row(bad) + 1
+                raise ValueError(
+                    f"DynamicsData.t: time must be strictly increasing within a segment; row {r} "
+                    f"(t = {t[r]!r}) does not come after row {r - 1} (t = {t[r - 1]!r}) "
+                    f"in segment {seg[r]}")
+        meta = dict(self.meta) if self.meta is not None else {}
+        try:
+            meta = json.loads(json.dumps(meta))
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"DynamicsData.meta: expected a JSON-serialisable dict ({exc})")
+        for name, a in arrays.items():
+            a.setflags(write=False)
+            object.__setattr__(self, name, a)
+        t.setflags(write=False)
+        seg.setflags(write=False)
+        object.__setattr__(self, "t", t)
+        object.__setattr__(self, "segment", seg)
+        object.__setattr__(self, "meta", meta)
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def n_samples(self) -> int:
+        """Number of rows T."""
+        return int(self.q.shape[0])
+
+    @property
+    def dof(self) -> int:
+        """Number of joints N."""
+        return int(self.q.shape[1])
+
+    @property
+    def dt(self) -> float:
+        """Median sample period (s) over consecutive rows of the same segment; ``nan`` if no
+        segment has two rows."""
+        d = self._within_segment_diffs()
+        return float(np.median(d)) if d.size else float("nan")
+
+    @property
+    def duration(self) -> float:
+        """Seconds of data: the sum over segments of ``t_last - t_first + dt`` (for regular
+        sampling this is ``n_samples * dt``).  Segments of one row count ``dt`` (0 if ``dt``
+        is undefined)."""
+        dt = self.dt
+        dt = 0.0 if not np.isfinite(dt) else dt
+        total = 0.0
+        for lo, hi in self.segment_bounds():
+            total += float(self.t[hi - 1] - self.t[lo]) + dt
+        return total
+
+    @property
+    def segments(self) -> np.ndarray:
+        """The distinct segment ids in order."""
+        return np.unique(self.segment)
+
+    def segment_bounds(self) -> list[tuple[int, int]]:
+        """``[(start, stop), ...]`` row ranges of the segments, in order."""
+        if self.n_samples == 0:
+            return []
+        cuts = np.flatnonzero(np.diff(self.segment) != 0) + 1
+        starts = np.concatenate([[0], cuts])
+        stops = np.concatenate([cuts, [self.n_samples]])
+        return [(int(a), int(b)) for a, b in zip(starts, stops)]
+
+    def _within_segment_diffs(self) -> np.ndarray:
+        if self.n_samples < 2:
+            return np.zeros(0)
+        same = np.diff(self.segment) == 0
+        return np.diff(self.t)[same]
+
+    def __len__(self) -> int:
+        return self.n_samples
+
+    def __repr__(self) -> str:
+        return (f"DynamicsData(n_samples={self.n_samples}, dof={self.dof}, dt={self.dt:.4g}, "
+                f"segments={len(self.segments)}, meta={self.meta})")
+
+    # ------------------------------------------------------------------ constructors
+    @classmethod
+    def from_measurements(cls, t: np.ndarray, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, *,
+                          smoothing: SavGol | int | None = None, meta: dict | None = None,
+                          segment: np.ndarray | None = None) -> "DynamicsData":
+        """Build a record from measured ``q``, ``qd`` and ``tau``, with ``qdd`` by numerical
+        differentiation of ``qd`` with respect to ``t``.
+
+        Without smoothing (``smoothing=None``) the derivative is taken within each segment by
+        :func:`numpy.gradient` with the sample times as coordinates: second-order central
+        differences in the interior (exact for non-uniform spacing of a quadratic) and
+        first-order one-sided differences at the segment's ends.  A segment of a single row
+        gets ``qdd = 0``.
+
+        ``smoothing=SavGol(window, polyorder)`` (or an odd ``int`` window, polyorder 2) uses a
+        Savitzky-Golay differentiating filter instead (see :class:`SavGol`): less noise, a
+        little more bias on fast motions; no phase lag (the filter is centred).
+        """
+        if isinstance(smoothing, (int, np.integer)) and not isinstance(smoothing, bool):
+            smoothing = SavGol(int(smoothing))
+        if smoothing is not None and not isinstance(smoothing, SavGol):
+            raise TypeError(f"smoothing: expected None, an odd int window or SavGol, got {smoothing!r}")
+        qd_a = np.asarray(qd, dtype=np.float64)
+        # Build once without qdd to get all shape/finite/time checks with the usual messages.
+        probe = cls(q=q, qd=qd_a, qdd=np.zeros_like(qd_a), tau=tau, t=t, segment=segment,
+                    meta=meta or {})
+        qdd = np.zeros_like(probe.qd)
+        for lo, hi in probe.segment_bounds():
+            if hi - lo < 2:
+                continue
+            ts, v = probe.t[lo:hi], probe.qd[lo:hi]
+            if smoothing is not None and hi - lo >= smoothing.window:
+                from scipy.signal import savgol_filter
+
+                h = float(np.median(np.diff(ts)))
+                qdd[lo:hi] = savgol_filter(v, smoothing.window, smoothing.polyorder, deriv=1,
+                                           delta=h, axis=0, mode="interp")
+            else:
+                qdd[lo:hi] = np.gradient(v, ts, axis=0, edge_order=1)
+        meta2 = dict(probe.meta)
+        meta2.setdefault("qdd_source", "numerical differentiation of qd" + (
+            f" (Savitzky-Golay window={smoothing.window}, polyorder={smoothing.polyorder})"
+            if smoothing is not None else " (central differences)"))
+        return cls(q=probe.q, qd=probe.qd, qdd=qdd, tau=probe.tau, t=probe.t,
+                   segment=probe.segment, meta=meta2)
+
+    @classmethod
+    def concat(cls, parts: Sequence["DynamicsData"], meta: dict | None = None) -> "DynamicsData":
+        """Stack records row-wise.  Segment ids are renumbered so that segments of different
+        parts never merge (part k's segments come after part k-1's).  ``meta`` defaults to
+        the first part's meta if all parts share it, else ``{"concat_of": [metas]}``."""
+        parts = list(parts)
+        if not parts:
+            raise ValueError("DynamicsData.concat: parts: expected at least one DynamicsData, got none")
+        for i, p in enumerate(parts):
+            if not isinstance(p, DynamicsData):
+                raise TypeError(f"DynamicsData.concat: parts[{i}]: expected DynamicsData, got {type(p).__name__}")
+            if p.dof != parts[0].dof:
+                raise ValueError(
+                    f"DynamicsData.concat: parts[{i}]: dof {p.dof} differs from parts[0]'s {parts[0].dof}")
+        segs, offset = [], 0
+        for p in parts:
+            _, inv = np.unique(p.segment, return_inverse=True)
+            segs.append(inv.astype(np.int64) + offset)
+            offset += int(inv.max()) + 1
+        if meta is None:
+            metas = [p.meta for p in parts]
+            meta = metas[0] if all(m == metas[0] for m in metas) else {"concat_of": metas}
+        return cls(q=np.concatenate([p.q for p in parts]), qd=np.concatenate([p.qd for p in parts]),
+                   qdd=np.concatenate([p.qdd for p in parts]),
+                   tau=np.concatenate([p.tau for p in parts]), t=np.concatenate([p.t for p in parts]),
+                   segment=np.concatenate(segs), meta=meta)
+
+    # ------------------------------------------------------------------ selections
+    def take(self, idx: np.ndarray | slice | Sequence[int]) -> "DynamicsData":
+        """Rows ``idx`` (indices, boolean mask or slice), in the order given.  The result is
+        validated like any record: indices must keep segments non-decreasing and time
+        increasing within a segment (sort them first)."""
+        if isinstance(idx, slice):
+            sel: Any = idx
+        else:
+            sel = np.asarray(idx)
+            if sel.dtype == bool:
+                if sel.shape != (self.n_samples,):
+                    raise ValueError(f"take: idx: boolean mask of shape ({self.n_samples},) expected, got {sel.shape}")
+            elif sel.dtype.kind not in "iu":
+                raise TypeError(f"take: idx: expected integer indices, a boolean mask or a slice, got {sel.dtype}")
+        return DynamicsData(q=self.q[sel], qd=self.qd[sel], qdd=self.qdd[sel], tau=self.tau[sel],
+                            t=self.t[sel], segment=self.segment[sel], meta=self.meta)
+
+    def subsample(self, rate_hz: float) -> "DynamicsData":
+        """Keep rows at (about) ``rate_hz`` within each segment: the first row of a segment,
+        then every row at least ``1/rate_hz`` after the last kept one (with a tolerance of a
+        quarter sample period).  For regular 50 Hz data and 10 Hz this keeps every 5th row.
+        A rate at or above the data rate keeps every row.  Segments are kept."""
+        if not np.isfinite(rate_hz) or rate_hz <= 0:
+            raise ValueError(f"subsample: rate_hz: expected a positive finite rate, got {rate_hz}")
+        period = 1.0 / float(rate_hz)
+        dt = self.dt
+        tol = 0.25 * dt if np.isfinite(dt) else 0.0
+        keep = np.zeros(self.n_samples, dtype=bool)
+        for lo, hi in self.segment_bounds():
+            last = None
+            for r in range(lo, hi):
+                if last is None or self.t[r] >= last + period - tol:
+                    keep[r] = True
+                    last = self.t[r]
+        out = self.take(keep)
+        meta = dict(out.meta)
+        meta["subsampled_hz"] = float(rate_hz)
+        return DynamicsData(q=out.q, qd=out.qd, qdd=out.qdd, tau=out.tau, t=out.t,
+                            segment=out.segment, meta=meta)
+
+    def split(self, k: int) -> list["DynamicsData"]:
+        """Split into ``k`` time-contiguous subsets of (nearly) equal row counts, in order
+        (``numpy.array_split`` over the rows; a segment may straddle two subsets)."""
+        if not isinstance(k, (int, np.integer)) or k < 1:
+            raise ValueError(f"split: k: expected a positive integer, got {k!r}")
+        if k > self.n_samples:
+            raise ValueError(f"split: k: {k} subsets requested but only {self.n_samples} rows")
+        return [self.take(ix) for ix in np.array_split(np.arange(self.n_samples), int(k))]
+
+    def first_seconds(self, seconds: float) -> "DynamicsData":
+        """The leading rows covering ``seconds`` of data, counted as in :attr:`duration`
+        (segment after segment): row r is kept when the data time elapsed before it is below
+        ``seconds``.  At 10 Hz, ``first_seconds(30)`` keeps 300 rows."""
+        if not np.isfinite(seconds) or seconds <= 0:
+            raise ValueError(f"first_seconds: seconds: expected a positive number, got {seconds}")
+        dt = self.dt
+        dt = 0.0 if not np.isfinite(dt) else dt
+        elapsed = np.empty(self.n_samples)
+        base = 0.0
+        for lo, hi in self.segment_bounds():
+            elapsed[lo:hi] = base + (self.t[lo:hi] - self.t[lo])
+            base += float(self.t[hi - 1] - self.t[lo]) + dt
+        keep = elapsed < seconds - 1e-9 * max(1.0, abs(seconds))
+        return self.take(keep)
+
+    # ------------------------------------------------------------------ files
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write an ``.npz`` archive atomically (see :func:`atomic_savez`); returns the path."""
+        return atomic_savez(path, {
+            "format_kind": np.array(_KIND), "format_version": np.array(FORMAT_VERSION),
+            "q": self.q, "qd": self.qd, "qdd": self.qdd, "tau": self.tau, "t": self.t,
+            "segment": self.segment, "meta_json": np.array(json.dumps(self.meta)),
+        })
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "DynamicsData":
+        """Read and validate a file written by :meth:`save`.  A missing file raises
+        ``FileNotFoundError``; a corrupt/truncated archive, a missing field, another format
+        version or invalid contents raise ``ValueError`` naming the file and the field."""
+        z = read_npz(path, "DynamicsData")
+        kind = str(z["format_kind"]) if "format_kind" in z else None
+        if kind != _KIND:
+            raise ValueError(f"{path}: format_kind: expected {_KIND!r}, got {kind!r}")
+        version = int(z["format_version"]) if "format_version" in z else None
+        if version != FORMAT_VERSION:
+            raise ValueError(f"{path}: format_version: expected {FORMAT_VERSION}, got {version}")
+        missing = [k for k in (*_ARRAY_FIELDS, "t", "segment", "meta_json") if k not in z]
+        if missing:
+            raise ValueError(f"{path}: missing field(s) {missing}")
+        try:
+            meta = json.loads(str(z["meta_json"]))
+        except ValueError as exc:
+            raise ValueError(f"{path}: meta_json: not valid JSON ({exc})") from exc
+        try:
+            return cls(q=z["q"], qd=z["qd"], qdd=z["qdd"], tau=z["tau"], t=z["t"],
+                       segment=z["segment"], meta=meta)
+        except (ValueError, TypeError) as exc:
+            raise type(exc)(f"{path}: {exc}") from exc

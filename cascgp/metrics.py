@@ -1,0 +1,47 @@
+"""Error metrics for torque predictions (paper: nRMSE = RMSE / range of the test targets)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["rmse", "nrmse"]
+
+
+def _pair(pred: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    p = np.asarray(pred, dtype=np.float64)
+    y = np.asarray(target, dtype=np.float64)
+    if p.ndim == 1:
+        p = p[:, None]
+    if y.ndim == 1:
+        y = y[:, None]
+    if p.ndim != 2 or p.shape != y.shape:
+        raise ValueError(f"pred: expected the shape of target {np.shape(target)}, got {np.shape(pred)}")
+    if p.shape[0] == 0:
+        raise ValueError("target: expected at least one row, got 0")
+    for name, a in (("pred", p), ("target", y)):
+        bad = ~np.isfinite(a)
+        if bad.any():
+            r = int(np.flatnonzero(bad.any(axis=1))[0])
+            raise ValueError(f"{name}: non-finite value at row {r}")
+    return p, y
+
+
+def rmse(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Root-mean-square error per column (joint): ``sqrt(mean((pred - target)^2, axis=0))``.
+
+    ``pred``, ``target``: (T, N) or (T,) -> (N,) (a 1-element array for (T,))."""
+    p, y = _pair(pred, target)
+    return np.sqrt(np.mean((p - y) ** 2, axis=0))
+
+
+def nrmse(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Normalised RMSE per joint: ``rmse / (max(target) - min(target))`` over the test rows.
+
+    A joint whose test targets are constant (zero range) raises ``ValueError`` (the
+    normalisation is undefined)."""
+    p, y = _pair(pred, target)
+    rng = y.max(axis=0) - y.min(axis=0)
+    if (rng <= 0).any():
+        j = int(np.flatnonzero(rng <= 0)[0])
+        raise ValueError(f"target: column {j} is constant (zero range); nRMSE is undefined")
+    return np.sqrt(np.mean((p - y) ** 2, axis=0)) / rng

@@ -1,0 +1,63 @@
+"""SARCOS loaders (skip when ../shared/data/sarcos is missing)."""
+
+import numpy as np
+import pytest
+
+from cascgp.sarcos import IAS_TO_GPML_TORQUE, duplicate_rows, load_gpml, load_ias
+
+
+def test_load_ias(sarcos_dir):
+    tr, te = load_ias(sarcos_dir / "ias_sarcos_data.mat")
+    assert (tr.n_samples, tr.dof) == (13922, 7)
+    assert te.n_samples == 5569 - 2785 and te.meta["n_duplicates_removed"] == 2785
+    assert tr.dt == pytest.approx(0.02) and te.dt == pytest.approx(0.04)
+    # no remaining test row stands in the training set
+    Xtr = np.c_[tr.q, tr.qd, tr.qdd]
+    Xte = np.c_[te.q, te.qd, te.qdd]
+    assert not duplicate_rows(Xte, Xtr).any()
+    # recordings are concatenated: several segments, first one long
+    assert 8 <= len(tr.segments) <= 40
+    assert tr.segment_bounds()[0][1] > 1500
+    # 10 Hz subsampling == every 5th row
+    s = tr.subsample(10.0).first_seconds(30.0)
+    assert s.n_samples == 300
+    np.testing.assert_array_equal(s.q, tr.q[::5][:300])
+    _, te_all = load_ias(sarcos_dir / "ias_sarcos_data.mat", dedup=False)
+    assert te_all.n_samples == 5569
+    tr3, _ = load_ias(sarcos_dir / "ias_sarcos_data.mat", torque_scale=IAS_TO_GPML_TORQUE)
+    np.testing.assert_allclose(tr3.tau, 3 * tr.tau)
+    assert tr3.meta["torque_units"] == "GPML" and tr.meta["torque_units"] == "IAS"
+
+
+def test_load_gpml_units_match_ias(sarcos_dir):
+    g = load_gpml(sarcos_dir / "sarcos_inv_test.mat")
+    assert (g.n_samples, g.dof) == (4449, 7)
+    tr, te = load_ias(sarcos_dir / "ias_sarcos_data.mat", dedup=False)
+    # SOURCE.txt: one input row is shared by both files; GPML torques are 3x IAS's there
+    Xg = np.c_[g.q, g.qd, g.qdd]
+    for d in (tr, te):
+        X = np.c_[d.q, d.qd, d.qdd]
+        m = duplicate_rows(Xg, X, 6)
+        if m.any():
+            i = int(np.flatnonzero(m)[0])
+            j = int(np.flatnonzero(duplicate_rows(X, Xg[i:i + 1], 6))[0])
+            np.testing.assert_allclose(g.tau[i], IAS_TO_GPML_TORQUE * d.tau[j], rtol=1e-5, atol=1e-5)
+            break
+    else:
+        pytest.fail("no shared row found between the GPML and IAS files")
+    gi = load_gpml(sarcos_dir / "sarcos_inv_test.mat", torque_scale=1 / IAS_TO_GPML_TORQUE)
+    assert gi.meta["torque_units"] == "IAS"
+
+
+def test_loader_errors(tmp_path, sarcos_dir):
+    with pytest.raises(FileNotFoundError):
+        load_ias(tmp_path / "missing.mat")
+    (tmp_path / "bad.mat").write_bytes(b"not a mat file at all" * 10)
+    with pytest.raises(ValueError, match="bad.mat"):
+        load_ias(tmp_path / "bad.mat")
+    with pytest.raises(ValueError, match="missing variable"):
+        load_ias(sarcos_dir / "sarcos_inv_test.mat")
+    with pytest.raises(ValueError, match="28"):
+        load_gpml(sarcos_dir / "ias_sarcos_data.mat")
+    with pytest.raises(ValueError, match="torque_scale"):
+        load_ias(sarcos_dir / "ias_sarcos_data.mat", torque_scale=0)
