@@ -1,0 +1,829 @@
+r"""Batched exact Gaussian-process regression (float64, torch) with hand-written analytic gradients.
+
+Model (one GP per output ``b``, all independent)
+------------------------------------------------
+Inputs and targets are normalised per GP: :math:`\tilde x = (x - \mu_x) / \sigma_x` per column,
+:math:`\tilde y = (y - \mu_y) / \sigma_y`. On the normalised data
+
+.. math::
+
+    \tilde y = f(\tilde x) + \varepsilon, \quad f \sim \mathcal{GP}(0, s_f^2\, k(r^2)), \quad
+    \varepsilon \sim \mathcal N(0, s_n^2), \quad
+    r^2 = \sum_k (\tilde x_k - \tilde x'_k)^2 / \ell_k^2
+
+with a Matern 5/2 (default) or squared-exponential kernel :math:`k` (:mod:`cascgp.kernels`). The
+hyperparameters are optimised in log space,
+
+.. math::
+
+    \theta = (\log \ell_1, \dots, \log \ell_d, \log s_f^2, \log(s_n^2 - s_{n,\min}^2)),
+
+so that :math:`s_f^2 = e^{\theta_{d+1}} > 0` and :math:`s_n^2 = s_{n,\min}^2 + e^{\theta_{d+2}} > 0`
+(``noise_floor`` :math:`s_{n,\min}^2`, default 1e-6 in normalised units, keeps the noise away from exactly zero).
+
+Negative log marginal likelihood and its gradient
+-------------------------------------------------
+With :math:`K = s_f^2 k(R^2) + s_n^2 I = L L^\top` and :math:`\alpha = K^{-1} \tilde y`,
+
+.. math::
+
+    \mathcal L(\theta) = \tfrac12 \tilde y^\top \alpha + \sum_i \log L_{ii} + \tfrac n2 \log 2\pi,
+    \qquad
+    \frac{\partial \mathcal L}{\partial \theta_j} = \tfrac12 \operatorname{tr}\!\Big(M \frac{\partial K}{\partial \theta_j}\Big),
+    \quad M = K^{-1} - \alpha\alpha^\top.
+
+For the lengthscales, with scaled inputs :math:`Z = \tilde X \operatorname{diag}(1/\ell)`,
+:math:`\partial K_{ij} / \partial \log \ell_k = -2 s_f^2 k'(r^2_{ij}) (z_{ik} - z_{jk})^2`. Writing
+:math:`P = M \circ s_f^2 k'(R^2)` (symmetric),
+
+.. math::
+
+    \frac{\partial \mathcal L}{\partial \log \ell_k}
+      = -\sum_{ij} P_{ij} (z_{ik} - z_{jk})^2
+      = -2 \Big( \sum_i z_{ik}^2 (P\mathbf 1)_i - \sum_i z_{ik} (P Z)_{ik} \Big),
+
+which costs one ``(n, n) @ (n, d)`` product: :math:`O(n^2 d)` without an ``(n, n, d)`` tensor. Further
+:math:`\partial \mathcal L / \partial \log s_f^2 = \tfrac12 s_f^2 \sum_{ij} M_{ij} k_{ij}` and
+:math:`\partial \mathcal L / \partial \theta_{d+2} = \tfrac12 e^{\theta_{d+2}} \operatorname{tr} M`.
+:math:`K^{-1}` comes from the Cholesky factor once per evaluation (``torch.cholesky_inverse``). This is about 2x
+cheaper than autograd through the Cholesky (DESIGN.md).
+
+Batching
+--------
+All GPs x all restarts form one batch ``(B, n, n)``. GPs with fewer inputs than the widest are padded with zero
+columns; their lengthscales are masked (gradient zero, never moved, reported as ``inf`` scale). Input columns that
+are constant in the training data are treated the same way (they carry no information; at prediction time their
+value is ignored). Each batch member runs its own L-BFGS (:mod:`cascgp.lbfgs`) and leaves the batch when it stops.
+
+Restarts and early dropping
+---------------------------
+``n_restarts`` starts per GP: start 0 is a data-driven default (lengthscales :math:`\sqrt{d}` on standardised
+inputs, :math:`s_f^2 = 1`, noise from the residual of a linear least-squares fit), the others are random
+perturbations of it (seeded by ``seed``); with ``init=`` a previous bank's hyperparameters (converted to the new
+normalisation) replace start 0. Optionally (``screen_n``) all starts are first optimised on a random subset of
+``screen_n`` training points (cheap), and only the ``screen_keep`` best per GP continue on the full data.
+Optionally (``drop_after``) a start is dropped once it has done ``drop_after`` iterations and its NLL is more than
+``drop_margin`` nats worse than the best current NLL of the same GP. The best start per GP is kept.
+
+Jitter is added only when a Cholesky fails (``torch.linalg.cholesky_ex``), for just the failing members, starting
+at ``1e-8`` times the mean diagonal and growing 10x up to ``jitter_max``; the amount is recorded in ``fit_info``.
+A point where even that fails has NLL ``inf`` (the line search backs off).
+
+Edge cases (documented behaviour)
+---------------------------------
+* Constant target ``y[b]`` (standard deviation <= 1e-12 x max(1, |mean|)): the GP is not optimised,
+  ``y_std = 1``, hyperparameters stay at the default start, the posterior mean is exactly the constant and
+  ``fit_info[b]["constant_target"]`` is True.
+* Constant input column: ignored (see above).
+* NaN/inf or wrong shapes, ``n < 2``, different ``n`` across GPs, unknown kernel: ``ValueError`` naming the field.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict, dataclass, field, fields
+from typing import Any
+
+import numpy as np
+import torch
+
+from cascgp.kernels import check_kernel, kernel_and_grad_r2, kernel_of_r2, kernel_of_r2_torch, scaled_sqdist
+from cascgp.lbfgs import LBFGSOptions, MemberState, minimize_batched
+
+__all__ = ["GPFitConfig", "GPBank", "GPPosterior", "nll_and_grad", "STATE_VERSION"]
+
+STATE_VERSION = 1
+_DT = torch.float64
+_LOG2PI = math.log(2.0 * math.pi)
+
+
+@dataclass
+class GPFitConfig:
+    """Hyperparameter optimisation settings.
+
+    Attributes:
+        kernel: ``"matern52"`` (paper) or ``"rbf"``.
+        n_restarts: starts per GP (>= 1); the best is kept.
+        max_iter: L-BFGS iterations per start.
+        grad_tol: stop when max |dNLL/dtheta| <= grad_tol.
+        rel_tol: stop when the relative NLL decrease of one iteration <= rel_tol (SciPy's ``factr`` test).
+        seed: seed of the random starts and of the screening subset.
+        history: L-BFGS memory.
+        noise_floor: lower bound of the noise variance in normalised units.
+        jitter_max: largest jitter (relative to the mean diagonal of K) tried when a Cholesky fails.
+        init_spread: half-width (in log units) of the random perturbation of the log lengthscales.
+        drop_after: drop hopeless starts after this many iterations (``None``: never drop).
+        drop_margin: a start is hopeless when its NLL exceeds the best of its GP by more than this (nats).
+        screen_n: if set and ``n > screen_n``, first optimise all starts on ``screen_n`` random training points.
+        screen_keep: starts per GP that continue on the full data after screening.
+        screen_max_iter: iteration cap of the screening stage.
+        screen_rel_tol: relative-change tolerance of the screening stage.
+    """
+
+    kernel: str = "matern52"
+    n_restarts: int = 10
+    max_iter: int = 1000
+    grad_tol: float = 1e-5
+    rel_tol: float = 2e-9
+    seed: int = 0
+    history: int = 10
+    noise_floor: float = 1e-6
+    jitter_max: float = 1e-2
+    init_spread: float = 1.0
+    drop_after: int | None = None
+    drop_margin: float = 20.0
+    screen_n: int | None = None
+    screen_keep: int = 2
+    screen_max_iter: int = 200
+    screen_rel_tol: float = 1e-6
+
+    def __post_init__(self) -> None:
+        check_kernel(self.kernel)
+        for name in ("n_restarts", "max_iter", "history", "screen_keep", "screen_max_iter"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
+                raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
+        for name in ("grad_tol", "rel_tol", "noise_floor", "jitter_max", "init_spread", "drop_margin",
+                     "screen_rel_tol"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+                raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
+        if self.drop_after is not None and (not isinstance(self.drop_after, int) or self.drop_after < 1):
+            raise ValueError(f"drop_after: expected None or an integer >= 1, got {self.drop_after!r}")
+        if self.screen_n is not None and (not isinstance(self.screen_n, int) or self.screen_n < 2):
+            raise ValueError(f"screen_n: expected None or an integer >= 2, got {self.screen_n!r}")
+
+
+@dataclass(frozen=True)
+class GPPosterior:
+    r"""Cached posterior of one fitted GP as plain NumPy float64 arrays (for hand-written fast paths).
+
+    .. math::
+
+        z = (x - x_{mean}) / x_{scale}, \quad
+        \mu(x) = y_{mean} + y_{std}\, s_f^2\, k(r^2(z, Z))^\top \alpha, \quad
+        \sigma^2(x) = y_{std}^2\, \big(s_f^2 - \|L^{-1} s_f^2 k(r^2(z, Z))\|^2\big)
+
+    ``x_scale`` is ``inf`` for ignored (constant) input columns, so their ``z`` is 0.
+    ``noise_var`` and ``signal_var`` are in normalised units (multiply by ``y_std**2`` for target units).
+    """
+
+    kernel: str
+    x_mean: np.ndarray
+    x_scale: np.ndarray
+    Z: np.ndarray
+    alpha: np.ndarray
+    L: np.ndarray
+    signal_var: float
+    noise_var: float
+    y_mean: float
+    y_std: float
+    jitter: float = 0.0
+
+    def predict(self, x: np.ndarray, return_var: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Reference NumPy prediction: ``x`` ``(m, d)`` or ``(d,)`` -> mean ``(m,)``, latent variance ``(m,)``."""
+        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        z = (x - self.x_mean) / self.x_scale
+        r2 = (z * z).sum(1)[:, None] + (self.Z * self.Z).sum(1)[None, :] - 2.0 * z @ self.Z.T
+        ks = self.signal_var * kernel_of_r2(self.kernel, r2)
+        mean = self.y_mean + self.y_std * (ks @ self.alpha)
+        if not return_var:
+            return mean, None
+        from scipy.linalg import solve_triangular
+
+        v = solve_triangular(self.L, ks.T, lower=True)
+        var = np.maximum(self.signal_var - (v * v).sum(0), 0.0) * self.y_std**2
+        return mean, var
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# core evaluation
+
+
+def _robust_cholesky(K: torch.Tensor, jitter_max: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Batched Cholesky; jitter only for the members whose factorisation fails.
+
+    Returns ``(L, jitter (k,), failed (k,) bool)``; failed members get an identity factor (caller marks them).
+    """
+    L, info = torch.linalg.cholesky_ex(K)
+    jitter = torch.zeros(K.shape[0], dtype=K.dtype, device=K.device)
+    bad = info != 0
+    failed = torch.zeros_like(bad)
+    if bool(bad.any()):
+        idx = bad.nonzero().squeeze(1)
+        scale = K[idx].diagonal(dim1=-2, dim2=-1).mean(-1).abs().clamp_min(1e-300)
+        j = 1e-8
+        while idx.numel() > 0 and j <= jitter_max * (1 + 1e-12):
+            Kj = K[idx].clone()
+            Kj.diagonal(dim1=-2, dim2=-1).add_((j * scale)[:, None])
+            Lj, infoj = torch.linalg.cholesky_ex(Kj)
+            ok = infoj == 0
+            if bool(ok.any()):
+                L[idx[ok]] = Lj[ok]
+                jitter[idx[ok]] = j * scale[ok]
+            idx, scale = idx[~ok], scale[~ok]
+            j *= 10.0
+        if idx.numel() > 0:
+            failed[idx] = True
+            L[idx] = torch.eye(K.shape[-1], dtype=K.dtype, device=K.device)
+    return L, jitter, failed
+
+
+def nll_and_grad(
+    theta: torch.Tensor,
+    X: torch.Tensor,
+    y: torch.Tensor,
+    mask: torch.Tensor | None = None,
+    kernel: str = "matern52",
+    noise_floor: float = 1e-6,
+    jitter_max: float = 1e-2,
+    need_grad: bool = True,
+) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+    r"""Negative log marginal likelihood and its analytic gradient for a batch of GPs.
+
+    Args:
+        theta: ``(k, D + 2)`` log hyperparameters ``(log l_1..l_D, log s_f^2, log(s_n^2 - noise_floor))``.
+        X: ``(k, n, D)`` normalised inputs (padded columns must be zero).
+        y: ``(k, n)`` normalised targets.
+        mask: ``(k, D)`` 1 for active input columns, 0 for padding/ignored columns (default: all active).
+        kernel: kernel name.
+        noise_floor: :math:`s_{n,\min}^2`.
+        jitter_max: see :func:`_robust_cholesky`.
+        need_grad: compute the gradient.
+
+    Returns:
+        ``(nll (k,), grad (k, D+2) or None, jitter (k,))``; ``nll`` is ``inf`` where the Cholesky failed even with
+        jitter or the value is not finite (the gradient there is 0).
+    """
+    k_, n, D = X.shape
+    if mask is None:
+        mask = torch.ones(k_, D, dtype=_DT, device=X.device)
+    inv_l = torch.exp(-theta[:, :D]) * mask
+    Z = X * inv_l[:, None, :]
+    r2 = scaled_sqdist(Z)
+    kk, dk = kernel_and_grad_r2(kernel, r2)
+    del r2
+    sf2 = torch.exp(theta[:, D])
+    en = torch.exp(theta[:, D + 1])
+    sn2 = noise_floor + en
+    K = kk * sf2[:, None, None]
+    K.diagonal(dim1=-2, dim2=-1).add_(sn2[:, None])
+    L, jitter, failed = _robust_cholesky(K, jitter_max)
+    del K
+    alpha = torch.cholesky_solve(y.unsqueeze(-1), L).squeeze(-1)
+    nll = 0.5 * (y * alpha).sum(-1) + torch.log(L.diagonal(dim1=-2, dim2=-1)).sum(-1) + 0.5 * n * _LOG2PI
+    bad = failed | ~torch.isfinite(nll)
+    nll = torch.where(bad, torch.full_like(nll, math.inf), nll)
+    if not need_grad:
+        return nll, None, jitter
+    M = torch.cholesky_inverse(L)
+    M.sub_(alpha.unsqueeze(-1) * alpha.unsqueeze(-2))
+    g_sn = 0.5 * en * M.diagonal(dim1=-2, dim2=-1).sum(-1)
+    g_sf = 0.5 * sf2 * (M * kk).sum((-2, -1))
+    del kk
+    P = M.mul_(dk).mul_(sf2[:, None, None])
+    del dk
+    PZ = torch.matmul(P, Z)
+    P1 = P.sum(-1)
+    g_l = -2.0 * ((Z * Z * P1.unsqueeze(-1)).sum(1) - (Z * PZ).sum(1))
+    g_l = g_l * mask
+    grad = torch.cat([g_l, g_sf.unsqueeze(-1), g_sn.unsqueeze(-1)], dim=1)
+    grad = torch.where(bad.unsqueeze(-1) | ~torch.isfinite(grad), torch.zeros_like(grad), grad)
+    return nll, grad, jitter
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# validation helpers
+
+
+def _num(v: float) -> float | None:
+    """JSON-friendly float: ``None`` for NaN (a start that was not run or not screened)."""
+    return None if not np.isfinite(v) and np.isnan(v) else float(v)
+
+
+def _as_list(v: Any, field_name: str) -> list[np.ndarray]:
+    if isinstance(v, np.ndarray):
+        raise TypeError(f"{field_name}: expected a list of arrays (one per GP), got a single ndarray")
+    if not isinstance(v, (list, tuple)) or len(v) == 0:
+        raise ValueError(f"{field_name}: expected a non-empty list of arrays (one per GP), got {type(v).__name__}")
+    return list(v)
+
+
+def _check_matrix(a: Any, field_name: str, d: int | None = None, n: int | None = None) -> np.ndarray:
+    try:
+        a = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{field_name}: expected a numeric array ({e})") from None
+    if a.ndim != 2:
+        raise ValueError(f"{field_name}: expected a 2-D array (n, d), got shape {a.shape}")
+    if a.shape[1] < 1:
+        raise ValueError(f"{field_name}: expected at least one input column, got shape {a.shape}")
+    if d is not None and a.shape[1] != d:
+        raise ValueError(f"{field_name}: expected {d} columns, got shape {a.shape}")
+    if n is not None and a.shape[0] != n:
+        raise ValueError(f"{field_name}: expected {n} rows (the same n for every GP), got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        row = int(np.argwhere(~np.isfinite(a))[0, 0])
+        raise ValueError(f"{field_name}: contains NaN or inf (first at row {row})")
+    return a
+
+
+def _check_vector(a: Any, field_name: str, n: int) -> np.ndarray:
+    try:
+        a = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{field_name}: expected a numeric array ({e})") from None
+    if a.ndim != 1 or a.shape[0] != n:
+        raise ValueError(f"{field_name}: expected shape ({n},), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        row = int(np.argwhere(~np.isfinite(a))[0, 0])
+        raise ValueError(f"{field_name}: contains NaN or inf (first at row {row})")
+    return a
+
+
+# ----------------------------------------------------------------------------------------------------------------
+
+
+class GPBank:
+    """``B`` independent exact GPs (one per output), fitted together in one batch.
+
+    Example::
+
+        bank = GPBank(GPFitConfig(n_restarts=10)).fit([X0, X1], [y0, y1])
+        mean, var = bank.predict([Xq0, Xq1])        # (m, 2), (m, 2) in target units
+        post = bank.posterior(0)                     # NumPy factors for a single-query fast path
+
+    Attributes:
+        config: the :class:`GPFitConfig`.
+        fit_info: per GP a dict (JSON-serialisable): ``nll`` (final NLL per start in normalised units; for a
+            dropped start its last NLL, for a start screened out or not run ``None``), ``n_iter``, ``n_eval``,
+            ``reason`` (per start: ``grad_tol``, ``rel_tol``, ``dropped``, ``screened_out``, ...), ``best``
+            (index of the kept start), ``best_nll``, ``converged`` (reason of the kept start), ``jitter``
+            (jitter in the final factor, normalised units), ``max_jitter_fit`` (largest jitter met during the
+            fit), ``constant_target``, ``warm_start`` (start 0 came from ``init``), ``screen_nll`` (subset NLL
+            per start when screening was used).
+        fit_summary: totals of the last fit (``time_s``, ``n_eval``, ``batch_rounds``).
+    """
+
+    def __init__(self, config: GPFitConfig | None = None) -> None:
+        if config is not None and not isinstance(config, GPFitConfig):
+            raise TypeError(f"config: expected GPFitConfig or None, got {type(config).__name__}")
+        self.config = config or GPFitConfig()
+        self.fit_info: list[dict[str, Any]] = []
+        self.fit_summary: dict[str, Any] = {}
+        self._fitted = False
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def fitted(self) -> bool:
+        return self._fitted
+
+    @property
+    def n_gps(self) -> int:
+        self._require_fitted()
+        return int(self._dims.shape[0])
+
+    @property
+    def dims(self) -> tuple[int, ...]:
+        """Input dimension of each GP."""
+        self._require_fitted()
+        return tuple(int(d) for d in self._dims)
+
+    @property
+    def n_train(self) -> int:
+        self._require_fitted()
+        return int(self._X.shape[1])
+
+    def hyperparameters(self, b: int) -> dict[str, np.ndarray | float]:
+        """Hyperparameters of GP ``b`` in *original* units: ``lengthscale`` (d,) (``inf`` for ignored columns),
+        ``signal_var``, ``noise_var`` (target units squared)."""
+        self._require_fitted()
+        b = self._check_b(b)
+        d = int(self._dims[b])
+        th = self._theta[b]
+        ls = np.where(self._mask[b, :d] > 0, np.exp(th[:d]) * self._x_std[b, :d], np.inf)
+        ys2 = self._y_std[b] ** 2
+        return {
+            "lengthscale": ls,
+            "signal_var": float(np.exp(th[-2]) * ys2),
+            "noise_var": float((self.config.noise_floor + np.exp(th[-1])) * ys2),
+        }
+
+    def _require_fitted(self) -> None:
+        if not self._fitted:
+            raise RuntimeError("GPBank: not fitted; call fit() or from_state_dict() first")
+
+    def _check_b(self, b: int) -> int:
+        if not isinstance(b, (int, np.integer)) or not 0 <= int(b) < self._dims.shape[0]:
+            raise ValueError(f"b: expected an integer in [0, {self._dims.shape[0]}), got {b!r}")
+        return int(b)
+
+    # ------------------------------------------------------------------ fit
+    def fit(self, X: list[np.ndarray], y: list[np.ndarray], init: GPBank | None = None) -> GPBank:
+        """Normalise, optimise all GPs x all starts in one batch, keep the best start, cache the factors.
+
+        Args:
+            X: per GP ``(n, d_b)`` inputs (the same ``n`` for all GPs, ``d_b`` may differ).
+            y: per GP ``(n,)`` targets.
+            init: a fitted bank with the same number of GPs and input dimensions; its hyperparameters (converted
+                to this data's normalisation) are used as start 0 of every GP.
+
+        Returns:
+            ``self``.
+        """
+        t0 = time.perf_counter()
+        cfg = self.config
+        X = _as_list(X, "X")
+        y = _as_list(y, "y")
+        if len(X) != len(y):
+            raise ValueError(f"y: expected {len(X)} target vectors (one per GP in X), got {len(y)}")
+        X0 = _check_matrix(X[0], "X[0]")
+        n = X0.shape[0]
+        if n < 2:
+            raise ValueError(f"X[0]: a GP needs at least 2 training samples, got n={n}")
+        Xs = [X0] + [_check_matrix(X[b], f"X[{b}]", n=n) for b in range(1, len(X))]
+        ys = [_check_vector(y[b], f"y[{b}]", n) for b in range(len(y))]
+        B = len(Xs)
+        dims = np.array([a.shape[1] for a in Xs], dtype=np.int64)
+        D = int(dims.max())
+        p = D + 2
+        if init is not None:
+            if not isinstance(init, GPBank) or not init.fitted:
+                raise ValueError("init: expected a fitted GPBank or None")
+            if init.dims != tuple(int(d) for d in dims):
+                raise ValueError(f"init: input dimensions {init.dims} do not match X's {tuple(int(d) for d in dims)}")
+
+        # --- normalisation (constant columns masked, constant targets flagged)
+        Xp = np.zeros((B, n, D))
+        x_mean = np.zeros((B, D))
+        x_std = np.ones((B, D))
+        mask = np.zeros((B, D))
+        y_arr = np.zeros((B, n))
+        y_mean = np.zeros(B)
+        y_std = np.ones(B)
+        const_y = np.zeros(B, dtype=bool)
+        for b in range(B):
+            d = dims[b]
+            Xp[b, :, :d] = Xs[b]
+            mu = Xs[b].mean(0)
+            sd = Xs[b].std(0)
+            active = sd > 1e-12 * np.maximum(1.0, np.abs(mu))
+            x_mean[b, :d] = mu
+            x_std[b, :d] = np.where(active, sd, 1.0)
+            mask[b, :d] = active
+            y_arr[b] = ys[b]
+            y_mean[b] = ys[b].mean()
+            s = ys[b].std()
+            if s <= 1e-12 * max(1.0, abs(y_mean[b])):
+                const_y[b] = True
+            else:
+                y_std[b] = s
+        Xn = (Xp - x_mean[:, None, :]) / x_std[:, None, :] * mask[:, None, :]
+        yn = (y_arr - y_mean[:, None]) / y_std[:, None]
+
+        # --- starts
+        rng = np.random.default_rng(cfg.seed)
+        R = cfg.n_restarts
+        theta0 = np.zeros((B, R, p))
+        d_eff = np.maximum(mask.sum(1), 1.0)
+        for b in range(B):
+            noise0 = self._linear_noise(Xn[b][:, mask[b] > 0], yn[b]) if not const_y[b] else 0.1
+            base = np.concatenate([np.full(D, 0.5 * math.log(d_eff[b])), [0.0, math.log(max(noise0, 1e-6))]])
+            theta0[b, :, :] = base
+            if R > 1:
+                theta0[b, 1:, :D] += rng.uniform(-cfg.init_spread, cfg.init_spread, size=(R - 1, D))
+                theta0[b, 1:, D] += rng.uniform(-1.0, 0.5, size=R - 1)
+                theta0[b, 1:, D + 1] = np.log(np.clip(noise0 * np.exp(rng.uniform(-2.5, 1.5, size=R - 1)), 1e-6, 1.0))
+        warm = False
+        if init is not None:
+            theta0[:, 0, :] = init._converted_theta(x_std, y_std, mask, D)
+            warm = True
+        theta0[:, :, :D] *= mask[:, None, :]  # inactive lengthscales fixed at 0 (unused)
+
+        torch_X = torch.as_tensor(Xn, dtype=_DT)
+        torch_y = torch.as_tensor(yn, dtype=_DT)
+        torch_mask = torch.as_tensor(mask, dtype=_DT)
+        opt_gps = np.flatnonzero(~const_y)
+        member_gp = np.repeat(opt_gps, R)
+        member_start = np.tile(np.arange(R), opt_gps.size)
+        x0 = theta0[member_gp, member_start] if opt_gps.size else np.zeros((0, p))
+
+        max_jit = np.zeros(B)
+        n_eval_total = 0
+        rounds = 0
+        screen_nll = np.full((B, R), np.nan)
+        final_theta = theta0[:, 0, :].copy()
+        nll_r = np.full((B, R), np.nan)
+        iter_r = np.zeros((B, R), dtype=np.int64)
+        eval_r = np.zeros((B, R), dtype=np.int64)
+        reason_r = [["not_run"] * R for _ in range(B)]
+
+        def make_fun(tX: torch.Tensor, ty: torch.Tensor, gp_of: np.ndarray):
+            def fun(Th: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                nonlocal n_eval_total, rounds
+                gsel = torch.as_tensor(gp_of[idx])
+                f, g, jit = nll_and_grad(torch.as_tensor(Th, dtype=_DT), tX[gsel], ty[gsel], torch_mask[gsel],
+                                         cfg.kernel, cfg.noise_floor, cfg.jitter_max)
+                jn = jit.numpy()
+                np.maximum.at(max_jit, gp_of[idx], jn)
+                n_eval_total += len(idx)
+                rounds += 1
+                return f.numpy(), g.numpy()
+            return fun
+
+        def make_prune(gp_of: np.ndarray):
+            if cfg.drop_after is None:
+                return None
+
+            def prune(states: list[MemberState], rnd: int) -> np.ndarray | None:
+                f = np.array([s.f for s in states])
+                it = np.array([s.n_iter for s in states])
+                best = np.full(B, np.inf)
+                np.minimum.at(best, gp_of, f)
+                return (it >= cfg.drop_after) & (f > best[gp_of] + cfg.drop_margin) & np.array(
+                    [not s.done for s in states])
+            return prune
+
+        if opt_gps.size:
+            opts = LBFGSOptions(history=cfg.history, max_iter=cfg.max_iter, grad_tol=cfg.grad_tol, rel_tol=cfg.rel_tol)
+            gp_of = member_gp
+            starts = x0
+            start_idx = member_start
+            if cfg.screen_n is not None and n > cfg.screen_n and R > cfg.screen_keep:
+                sub = np.sort(rng.choice(n, size=cfg.screen_n, replace=False))
+                Xs_t = torch_X[:, sub].clone()
+                ys_t = torch_y[:, sub].clone()
+                sopts = LBFGSOptions(history=cfg.history, max_iter=cfg.screen_max_iter, grad_tol=cfg.grad_tol,
+                                     rel_tol=cfg.screen_rel_tol)
+                sst = minimize_batched(make_fun(Xs_t, ys_t, gp_of), starts, sopts, make_prune(gp_of))
+                sf = np.array([s.f for s in sst])
+                keep = []
+                for b in opt_gps:
+                    mem = np.flatnonzero(gp_of == b)
+                    screen_nll[b, member_start[mem]] = sf[mem]
+                    order = mem[np.argsort(sf[mem], kind="stable")]
+                    chosen = list(order[: cfg.screen_keep])
+                    if warm:  # the warm start always continues
+                        w = mem[member_start[mem] == 0]
+                        if w.size and w[0] not in chosen:
+                            chosen.append(int(w[0]))
+                    for m in mem:
+                        if m not in chosen:
+                            reason_r[b][member_start[m]] = "screened_out"
+                            iter_r[b, member_start[m]] = sst[m].n_iter
+                            eval_r[b, member_start[m]] = sst[m].n_eval
+                    keep.extend(sorted(int(c) for c in chosen))
+                keep = np.array(keep, dtype=np.int64)
+                starts = np.stack([sst[m].x if np.isfinite(sst[m].f) else x0[m] for m in keep])
+                pre_iter = np.array([sst[m].n_iter for m in keep])
+                pre_eval = np.array([sst[m].n_eval for m in keep])
+                gp_of = gp_of[keep]
+                start_idx = member_start[keep]
+            else:
+                pre_iter = np.zeros(len(gp_of), dtype=np.int64)
+                pre_eval = np.zeros(len(gp_of), dtype=np.int64)
+            states = minimize_batched(make_fun(torch_X, torch_y, gp_of), starts, opts, make_prune(gp_of))
+            for k, st in enumerate(states):
+                b, r = int(gp_of[k]), int(start_idx[k])
+                nll_r[b, r] = st.f
+                iter_r[b, r] = st.n_iter + pre_iter[k]
+                eval_r[b, r] = st.n_eval + pre_eval[k]
+                reason_r[b][r] = st.reason
+            for b in opt_gps:
+                cand = np.where(np.isfinite(nll_r[b]), nll_r[b], np.inf)
+                r = int(np.argmin(cand))
+                k = int(np.flatnonzero((gp_of == b) & (start_idx == r))[0])
+                final_theta[b] = states[k].x
+        best_r = np.zeros(B, dtype=np.int64)
+        for b in opt_gps:
+            cand = np.where(np.isfinite(nll_r[b]), nll_r[b], np.inf)
+            best_r[b] = int(np.argmin(cand))
+
+        # --- state and cached factors
+        self._dims = dims
+        self._X = Xp
+        self._y = y_arr
+        self._x_mean, self._x_std, self._mask = x_mean, x_std, mask
+        self._y_mean, self._y_std = y_mean, y_std
+        self._theta = final_theta
+        self._const_y = const_y
+        self._compute_factors()
+        self.fit_info = []
+        for b in range(B):
+            self.fit_info.append({
+                "nll": [_num(v) for v in nll_r[b]],
+                "n_iter": [int(v) for v in iter_r[b]],
+                "n_eval": [int(v) for v in eval_r[b]],
+                "reason": list(reason_r[b]),
+                "best": int(best_r[b]),
+                "best_nll": float(self._final_nll[b]),
+                "converged": "constant_target" if const_y[b] else reason_r[b][int(best_r[b])],
+                "jitter": float(self._jitter[b]),
+                "max_jitter_fit": float(max_jit[b]),
+                "constant_target": bool(const_y[b]),
+                "warm_start": warm,
+                "screen_nll": [_num(v) for v in screen_nll[b]],
+            })
+        self.fit_summary = {"time_s": time.perf_counter() - t0, "n_eval": int(n_eval_total), "batch_rounds": rounds}
+        return self
+
+    @staticmethod
+    def _linear_noise(Xa: np.ndarray, yb: np.ndarray) -> float:
+        """Data-driven initial noise: a tenth of the residual variance of a linear least-squares fit (clipped)."""
+        n = yb.shape[0]
+        A = np.hstack([Xa, np.ones((n, 1))])
+        if A.shape[1] >= n:
+            return 0.1
+        coef, *_ = np.linalg.lstsq(A, yb, rcond=None)
+        res = float(np.mean((yb - A @ coef) ** 2))
+        return float(np.clip(0.1 * res, 1e-4, 0.5))
+
+    def _converted_theta(self, x_std_new: np.ndarray, y_std_new: np.ndarray, mask_new: np.ndarray,
+                         D: int) -> np.ndarray:
+        """This bank's hyperparameters expressed in another normalisation (for warm starts)."""
+        B = self._theta.shape[0]
+        out = np.zeros((B, D + 2))
+        Dold = self._theta.shape[1] - 2
+        for b in range(B):
+            d = int(self._dims[b])
+            th = self._theta[b]
+            ll = th[:d] + np.log(self._x_std[b, :d]) - np.log(x_std_new[b, :d])
+            ll = np.where((self._mask[b, :d] > 0) & (mask_new[b, :d] > 0), ll, 0.5 * math.log(max(d, 1)))
+            out[b, :d] = ll
+            scale = math.log(self._y_std[b] ** 2) - math.log(y_std_new[b] ** 2)
+            out[b, D] = th[Dold] + scale
+            sn2 = (self.config.noise_floor + math.exp(th[Dold + 1])) * math.exp(scale)
+            out[b, D + 1] = math.log(max(sn2 - self.config.noise_floor, 1e-8))
+        return out
+
+    def _compute_factors(self) -> None:
+        cfg = self.config
+        Xn = (self._X - self._x_mean[:, None, :]) / self._x_std[:, None, :] * self._mask[:, None, :]
+        yn = (self._y - self._y_mean[:, None]) / self._y_std[:, None]
+        D = self._X.shape[2]
+        th = torch.as_tensor(self._theta, dtype=_DT)
+        tX = torch.as_tensor(Xn, dtype=_DT)
+        ty = torch.as_tensor(yn, dtype=_DT)
+        tm = torch.as_tensor(self._mask, dtype=_DT)
+        inv_l = torch.exp(-th[:, :D]) * tm
+        Z = tX * inv_l[:, None, :]
+        sf2 = torch.exp(th[:, D])
+        sn2 = cfg.noise_floor + torch.exp(th[:, D + 1])
+        K = kernel_of_r2_torch(cfg.kernel, scaled_sqdist(Z)) * sf2[:, None, None]
+        K.diagonal(dim1=-2, dim2=-1).add_(sn2[:, None])
+        L, jitter, failed = _robust_cholesky(K, max(cfg.jitter_max, 1.0))
+        if bool(failed.any()):
+            raise RuntimeError(f"GPBank: Cholesky failed for GPs {failed.nonzero().squeeze(1).tolist()} "
+                               "even with jitter 1.0")
+        alpha = torch.cholesky_solve(ty.unsqueeze(-1), L).squeeze(-1)
+        nll = 0.5 * (ty * alpha).sum(-1) + torch.log(L.diagonal(dim1=-2, dim2=-1)).sum(-1) + 0.5 * Xn.shape[1] * _LOG2PI
+        self._Z = Z
+        self._L = L
+        self._alpha = alpha
+        self._sf2 = sf2
+        self._sn2 = sn2
+        self._jitter = jitter.numpy().copy()
+        self._final_nll = nll.numpy().copy()
+        self._inv_l = inv_l
+        self._fitted = True
+
+    # ------------------------------------------------------------------ prediction
+    def predict(self, X: list[np.ndarray], return_var: bool = True,
+                chunk: int = 4096) -> tuple[np.ndarray, np.ndarray | None]:
+        """Posterior mean and latent variance of every GP.
+
+        Args:
+            X: per GP ``(m, d_b)`` query inputs (the same ``m`` for every GP).
+            return_var: also return the variance of the latent function (no noise).
+            chunk: queries per batched block (memory bound: ``B * chunk * n`` floats).
+
+        Returns:
+            ``mean (m, B)`` and ``var (m, B)`` (or ``None``) in original target units.
+        """
+        self._require_fitted()
+        X = _as_list(X, "X")
+        B = self.n_gps
+        if len(X) != B:
+            raise ValueError(f"X: expected {B} query arrays (one per GP), got {len(X)}")
+        Q0 = _check_matrix(X[0], "X[0]", d=int(self._dims[0]))
+        m = Q0.shape[0]
+        Qs = [Q0] + [_check_matrix(X[b], f"X[{b}]", d=int(self._dims[b]), n=m) for b in range(1, B)]
+        D = self._X.shape[2]
+        Q = np.zeros((B, m, D))
+        for b in range(B):
+            Q[b, :, : self._dims[b]] = Qs[b]
+        Qn = torch.as_tensor((Q - self._x_mean[:, None, :]) / self._x_std[:, None, :], dtype=_DT)
+        means, vars_ = [], []
+        for s in range(0, max(m, 1), chunk):
+            Zq = Qn[:, s : s + chunk] * self._inv_l[:, None, :]
+            Ks = kernel_of_r2_torch(self.config.kernel, scaled_sqdist(Zq, self._Z)) * self._sf2[:, None, None]
+            means.append(torch.matmul(Ks, self._alpha.unsqueeze(-1)).squeeze(-1))
+            if return_var:
+                V = torch.linalg.solve_triangular(self._L, Ks.transpose(-1, -2), upper=False)
+                vars_.append((self._sf2[:, None] - (V * V).sum(-2)).clamp_min_(0.0))
+        mean = torch.cat(means, 1).numpy().T * self._y_std[None, :] + self._y_mean[None, :]
+        if not return_var:
+            return np.ascontiguousarray(mean), None
+        var = torch.cat(vars_, 1).numpy().T * (self._y_std[None, :] ** 2)
+        return np.ascontiguousarray(mean), np.ascontiguousarray(var)
+
+    def posterior(self, b: int) -> GPPosterior:
+        """NumPy factors of GP ``b`` (see :class:`GPPosterior`)."""
+        self._require_fitted()
+        b = self._check_b(b)
+        d = int(self._dims[b])
+        act = self._mask[b, :d] > 0
+        x_scale = np.where(act, self._x_std[b, :d] * np.exp(self._theta[b, :d]), np.inf)
+        return GPPosterior(
+            kernel=self.config.kernel,
+            x_mean=self._x_mean[b, :d].copy(),
+            x_scale=x_scale,
+            Z=self._Z[b, :, :d].numpy().copy(),
+            alpha=self._alpha[b].numpy().copy(),
+            L=self._L[b].numpy().copy(),
+            signal_var=float(self._sf2[b]),
+            noise_var=float(self._sn2[b]),
+            y_mean=float(self._y_mean[b]),
+            y_std=float(self._y_std[b]),
+            jitter=float(self._jitter[b]),
+        )
+
+    # ------------------------------------------------------------------ persistence
+    def state_dict(self) -> dict[str, Any]:
+        """Plain NumPy arrays and scalars that reproduce the fitted bank exactly (see :meth:`from_state_dict`)."""
+        self._require_fitted()
+        return {
+            "format": "cascgp.GPBank",
+            "version": STATE_VERSION,
+            "config_json": json.dumps(asdict(self.config)),
+            "dims": self._dims.copy(),
+            "X": self._X.copy(),
+            "y": self._y.copy(),
+            "x_mean": self._x_mean.copy(),
+            "x_std": self._x_std.copy(),
+            "mask": self._mask.copy(),
+            "y_mean": self._y_mean.copy(),
+            "y_std": self._y_std.copy(),
+            "theta": self._theta.copy(),
+            "constant_target": self._const_y.copy(),
+            "fit_info_json": json.dumps(self.fit_info),
+        }
+
+    @classmethod
+    def from_state_dict(cls, d: dict[str, Any]) -> GPBank:
+        """Rebuild a fitted bank from :meth:`state_dict` output (the Cholesky factors are recomputed)."""
+        if not isinstance(d, dict):
+            raise ValueError(f"state: expected a dict, got {type(d).__name__}")
+        required = ("format", "version", "config_json", "dims", "X", "y", "x_mean", "x_std", "mask", "y_mean",
+                    "y_std", "theta", "constant_target", "fit_info_json")
+        for k in required:
+            if k not in d:
+                raise ValueError(f"state[{k!r}]: missing")
+        if str(np.asarray(d["format"])) != "cascgp.GPBank":
+            raise ValueError(f"state['format']: expected 'cascgp.GPBank', got {d['format']!r}")
+        if int(np.asarray(d["version"])) != STATE_VERSION:
+            raise ValueError(f"state['version']: expected {STATE_VERSION}, got {d['version']!r}")
+        try:
+            cfg_d = json.loads(str(np.asarray(d["config_json"])))
+            names = {f.name for f in fields(GPFitConfig)}
+            config = GPFitConfig(**{k: v for k, v in cfg_d.items() if k in names})
+        except (json.JSONDecodeError, TypeError) as e:
+            raise ValueError(f"state['config_json']: not a valid GPFitConfig ({e})") from None
+        dims = np.asarray(d["dims"], dtype=np.int64)
+        if dims.ndim != 1 or dims.size == 0 or np.any(dims < 1):
+            raise ValueError(f"state['dims']: expected a non-empty 1-D array of positive ints, got {dims!r}")
+        B, D = dims.size, int(dims.max())
+        Xp = np.asarray(d["X"], dtype=np.float64)
+        if Xp.ndim != 3 or Xp.shape[0] != B or Xp.shape[2] != D or Xp.shape[1] < 2:
+            raise ValueError(f"state['X']: expected shape ({B}, n>=2, {D}), got {Xp.shape}")
+        n = Xp.shape[1]
+        shapes = {"y": (B, n), "x_mean": (B, D), "x_std": (B, D), "mask": (B, D), "y_mean": (B,), "y_std": (B,),
+                  "theta": (B, D + 2), "constant_target": (B,)}
+        arrs = {}
+        for k, shp in shapes.items():
+            a = np.asarray(d[k])
+            if a.shape != shp:
+                raise ValueError(f"state[{k!r}]: expected shape {shp}, got {a.shape}")
+            if k != "constant_target":
+                a = a.astype(np.float64)
+                if not np.all(np.isfinite(a)):
+                    raise ValueError(f"state[{k!r}]: contains NaN or inf")
+            arrs[k] = a
+        if not np.all(np.isfinite(Xp)):
+            raise ValueError("state['X']: contains NaN or inf")
+        bank = cls(config)
+        bank._dims = dims
+        bank._X = Xp.copy()
+        bank._y = arrs["y"].copy()
+        bank._x_mean, bank._x_std, bank._mask = arrs["x_mean"].copy(), arrs["x_std"].copy(), arrs["mask"].copy()
+        bank._y_mean, bank._y_std = arrs["y_mean"].copy(), arrs["y_std"].copy()
+        bank._theta = arrs["theta"].copy()
+        bank._const_y = arrs["constant_target"].astype(bool)
+        bank._compute_factors()
+        try:
+            bank.fit_info = json.loads(str(np.asarray(d["fit_info_json"])))
+        except json.JSONDecodeError as e:
+            raise ValueError(f"state['fit_info_json']: not valid JSON ({e})") from None
+        return bank
