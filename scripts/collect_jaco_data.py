@@ -1,0 +1,169 @@
+"""Collect the simulated Jaco data set of the data-efficiency study (the paper's protocol).
+
+Protocol (paper section IV-B-1, simulated):
+
+* ``JacoPayload-v0`` in ``control_mode="velocity"``: the action is a joint velocity command that the
+  emulated Kinova firmware loop turns into torques; the robot carries a fixed rigid payload
+  (``payload_mass``, default 0.8 kg) that the nominal URDF does not contain.
+* Each motion commands every joint rate as a sum of sinusoids with random amplitudes, frequencies
+  and phases (``jaco_env.excitation``), seeded per motion.
+* Training: ``n_subsets`` (10) motions of ``subset_seconds`` (60) s each, i.e. 600 s in 10 subsets,
+  each with its own random parameters (one segment per subset). Test: ``n_test`` (3) motions of
+  ``test_seconds`` (60) s with new random parameters (other seeds).
+* Recorded at ``rate_hz`` (default 100 Hz = the env's control rate here): only the *measured*
+  observation ``[q, qd, tau, t]`` (with the env's default sensor noise) is kept; ``qdd`` comes from
+  numerical differentiation of the measured ``qd`` (:meth:`DynamicsData.from_measurements`, central
+  differences at 100 Hz). The study subsamples to 10 Hz afterwards.
+
+Files: ``<out>/jaco_train.npz`` and ``<out>/jaco_test.npz`` (:meth:`DynamicsData.save`), reused when
+present with the same settings (``meta["collection"]``).
+
+Usage::
+
+    python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+from tqdm import tqdm
+
+from cascgp.data import DynamicsData
+
+ENV_ID = "JacoPayload-v0"
+
+
+@dataclass(frozen=True)
+class CollectConfig:
+    """Settings of one collection (all of it goes into ``meta["collection"]``)."""
+
+    n_subsets: int = 10
+    subset_seconds: float = 60.0
+    n_test: int = 3
+    test_seconds: float = 60.0
+    rate_hz: float = 100.0
+    payload_mass: float = 0.8
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("n_subsets", "n_test"):
+            v = getattr(self, name)
+            if not isinstance(v, int) or v < 1:
+                raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
+        for name in ("subset_seconds", "test_seconds", "rate_hz"):
+            v = getattr(self, name)
+            if not np.isfinite(v) or v <= 0:
+                raise ValueError(f"{name}: expected a positive number, got {v!r}")
+        if not np.isfinite(self.payload_mass) or self.payload_mass < 0:
+            raise ValueError(f"payload_mass: expected a mass >= 0 (kg), got {self.payload_mass!r}")
+
+
+PRESETS: dict[str, CollectConfig] = {
+    "full": CollectConfig(),
+    "quick": CollectConfig(n_subsets=3, subset_seconds=12.0, n_test=2, test_seconds=20.0),
+    "smoke": CollectConfig(n_subsets=2, subset_seconds=3.0, n_test=1, test_seconds=4.0),
+}
+
+
+def motion_seed(cfg: CollectConfig, split: str, k: int) -> int:
+    """Seed of motion ``k`` of ``split`` (``"train"``/``"test"``): distinct for every motion."""
+    return int(cfg.seed) * 100_003 + (0 if split == "train" else 50_000) + int(k)
+
+
+def _command_source(seed: int, duration: float) -> Callable[[float], np.ndarray]:
+    """A seeded sum-of-sinusoids joint velocity command ``v(t) -> (6,)`` from ``jaco_env.excitation``."""
+    from jaco_env import excitation
+
+    return excitation.make_command(seed=seed, duration=duration)
+
+
+def record_motion(seed: int, duration: float, cfg: CollectConfig, *, segment: int = 0,
+                  desc: str = "") -> DynamicsData:
+    """Run one velocity-commanded motion and return its measured record (qdd differentiated)."""
+    import gymnasium as gym
+
+    import jaco_env  # noqa: F401  (registers the environments)
+
+    env = gym.make(ENV_ID, control_mode="velocity", control_freq=float(cfg.rate_hz),
+                   payload_mass=float(cfg.payload_mass), max_episode_steps=10**9)
+    try:
+        obs, info = env.reset(seed=seed)
+        command = _command_source(seed, duration)
+        n_steps = int(round(duration * cfg.rate_hz))
+        dt = env.unwrapped.control_dt
+        rows = np.empty((n_steps, obs.shape[0]))
+        for k in tqdm(range(n_steps), desc=desc or f"motion seed {seed}", unit="step", leave=False,
+                      mininterval=1.0):
+            obs, _, terminated, truncated, info = env.step(np.asarray(command(k * dt), dtype=np.float32))
+            if info.get("unstable", False) or terminated:
+                raise RuntimeError(f"motion seed {seed}: simulation became unstable/terminated at step {k}")
+            rows[k] = obs
+    finally:
+        env.close()
+    n = 6
+    q, qd, tau, t = rows[:, :n], rows[:, n:2 * n], rows[:, 2 * n:3 * n], rows[:, 3 * n]
+    meta = {"robot": "jaco2-sim", "source": ENV_ID, "control_mode": "velocity",
+            "payload_mass": float(cfg.payload_mass), "rate_hz": float(cfg.rate_hz), "seed": int(seed)}
+    return DynamicsData.from_measurements(t, q, qd, tau, meta=meta,
+                                          segment=np.full(t.shape, segment, dtype=np.int64))
+
+
+def _collect_split(cfg: CollectConfig, split: str) -> DynamicsData:
+    count = cfg.n_subsets if split == "train" else cfg.n_test
+    seconds = cfg.subset_seconds if split == "train" else cfg.test_seconds
+    parts = []
+    for k in tqdm(range(count), desc=f"collect {split} ({count} x {seconds:g} s)", unit="motion"):
+        parts.append(record_motion(motion_seed(cfg, split, k), seconds, cfg, segment=k,
+                                   desc=f"{split} {k + 1}/{count}"))
+    meta = {**parts[0].meta, "split": split, "seeds": [p.meta["seed"] for p in parts],
+            "collection": asdict(cfg)}
+    meta.pop("seed", None)
+    return DynamicsData.concat(parts, meta=meta)
+
+
+def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: bool = False
+            ) -> tuple[DynamicsData, DynamicsData, dict]:
+    """Collect (or reuse) ``<out>/jaco_train.npz`` and ``<out>/jaco_test.npz``.
+
+    Returns ``(train, test, info)`` with ``info = {"reused": bool, "wall_s": float}``.
+    """
+    out = Path(out)
+    paths = {s: out / f"jaco_{s}.npz" for s in ("train", "test")}
+    if not force and all(p.exists() for p in paths.values()):
+        loaded = {s: DynamicsData.load(p) for s, p in paths.items()}
+        if all(d.meta.get("collection") == asdict(cfg) for d in loaded.values()):
+            return loaded["train"], loaded["test"], {"reused": True, "wall_s": 0.0}
+    t0 = time.perf_counter()
+    data = {}
+    for split in ("train", "test"):
+        data[split] = _collect_split(cfg, split)
+        data[split].save(paths[split])
+    return data["train"], data["test"], {"reused": False, "wall_s": time.perf_counter() - t0}
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", required=True, help="folder for jaco_train.npz and jaco_test.npz")
+    g = ap.add_mutually_exclusive_group()
+    g.add_argument("--quick", action="store_true", help="3 x 12 s training, 2 x 20 s test")
+    g.add_argument("--smoke", action="store_true", help="2 x 3 s training, 1 x 4 s test")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--payload-mass", type=float, default=None, help="kg (default 0.8)")
+    ap.add_argument("--force", action="store_true", help="collect again even if files exist")
+    a = ap.parse_args(argv)
+    base = PRESETS["quick" if a.quick else "smoke" if a.smoke else "full"]
+    kw = asdict(base) | {"seed": a.seed}
+    if a.payload_mass is not None:
+        kw["payload_mass"] = a.payload_mass
+    train, test, info = collect(a.out, CollectConfig(**kw), force=a.force)
+    print(f"train: {train}\ntest: {test}\n{info}")
+
+
+if __name__ == "__main__":
+    main()

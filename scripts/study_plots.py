@@ -1,0 +1,241 @@
+"""Figures, tables and CSVs of the data-efficiency study, regenerated from ``results.json`` alone.
+
+Reads only the JSON written by :mod:`scripts.data_efficiency` (no data files, no models, no
+``cascgp``/``jaco_env`` import) and writes into ``--out``:
+
+======================  =====================================================================
+file                    content
+======================  =====================================================================
+fig_jaco_np.png         paper Fig. 3: NP inward/outward/standard + RBD, nRMSE vs seconds
+fig_jaco_sp.png         paper Fig. 4: the same for the SP models
+fig_jaco_np_df.png      the derivative-free NP models (not a paper figure)
+fig_jaco_sp_df.png      the derivative-free SP models (not a paper figure)
+fig_sarcos.png          paper Fig. 5: SARCOS NP models (if the JSON has a SARCOS block)
+fig_iterations.png      paper run-time figure: L-BFGS iterations per joint (mean +- std)
+fig_correlation.png     paper correlation figure: |Spearman| of states and torques
+table1.md               paper Table I layout, measured, next to the paper's numbers
+curves_jaco.csv         every curve point (model, T, joint, mean, std)
+curves_sarcos.csv       the same for SARCOS
+iterations.csv          iteration counts per model and joint
+claims.md               which of the paper's claims hold here (:mod:`scripts.study_claims`)
+======================  =====================================================================
+
+Usage::
+
+    python -m scripts.study_plots --json out/study/results.json --out out/study
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from scripts._study_common import RBD, STRUCT_ORDER, label, model_name, read_json
+
+COLORS = {"inward": "tab:blue", "outward": "tab:orange", "standard": "tab:green", RBD: "tab:gray"}
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _struct(m: str) -> str:
+    return RBD if m == RBD else m.split("-")[1]
+
+
+def curve_figure(block: dict[str, Any], models: list[str], title: str, path: Path) -> Path:
+    """nRMSE vs seconds of data (log x), mean +- std over subsets, one panel per joint."""
+    plt = _plt()
+    N = int(block["dof"])
+    ncol = 3 if N <= 6 else 4
+    nrow = int(np.ceil(N / ncol))
+    fig, axes = plt.subplots(nrow, ncol, figsize=(4.2 * ncol, 3.2 * nrow), squeeze=False)
+    grid = np.asarray(block["grid_s"], float)
+    for j in range(nrow * ncol):
+        ax = axes[j // ncol][j % ncol]
+        if j >= N:
+            ax.axis("off")
+            continue
+        for m in models:
+            if m not in block["models"]:
+                continue
+            mu = np.asarray(block["models"][m]["nrmse_mean"], float)[:, j]
+            sd = np.asarray(block["models"][m]["nrmse_std"], float)[:, j]
+            if m == RBD:
+                ax.plot(grid, mu, "--", color=COLORS[RBD], label=label(m))
+            else:
+                ax.errorbar(grid, mu, yerr=sd, marker="o", ms=3, capsize=2, color=COLORS[_struct(m)],
+                            label=label(m))
+        ax.set_xscale("log")
+        ax.set_title(f"Joint {j + 1}")
+        ax.set_xlabel("seconds of training data")
+        ax.set_ylabel("nRMSE")
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0][0].legend(fontsize=7)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
+
+
+def iterations_figure(it: dict[str, Any], path: Path) -> Path:
+    plt = _plt()
+    models = list(it["models"])
+    N = len(it["models"][models[0]]["n_iter_mean"])
+    fig, ax = plt.subplots(figsize=(7, 3.5))
+    w = 0.8 / len(models)
+    for k, m in enumerate(models):
+        mu = np.asarray(it["models"][m]["n_iter_mean"], float)
+        sd = np.asarray(it["models"][m]["n_iter_std"], float)
+        ax.bar(np.arange(N) + (k - (len(models) - 1) / 2) * w, mu, w, yerr=sd, capsize=2,
+               color=COLORS.get(_struct(m)), label=label(m))
+    ax.set_xticks(np.arange(N), [f"Joint {j + 1}" for j in range(N)])
+    ax.set_ylabel("L-BFGS iterations (mean over starts)")
+    ax.set_title(f"Iterations per joint, n = {it['n']}, {it['n_restarts']} restarts")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
+
+
+def correlation_figure(c: dict[str, Any], path: Path) -> Path:
+    plt = _plt()
+    M = np.asarray(c["abs_spearman"], float)
+    labels = c["labels"]
+    fig, ax = plt.subplots(figsize=(7, 6))
+    im = ax.imshow(M, vmin=0, vmax=1, cmap="viridis")
+    ax.set_xticks(range(len(labels)), labels, rotation=90, fontsize=7)
+    ax.set_yticks(range(len(labels)), labels, fontsize=7)
+    fig.colorbar(im, ax=ax, label="|Spearman rho|")
+    ax.set_title(f"|Spearman| of joint states and torques ({c.get('data', '')})", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
+    return path
+
+
+def _fmt(v: float | None) -> str:
+    if v is None or not np.isfinite(v):
+        return "-"
+    return f"{v:.3f}".lstrip("0") if v < 1 else f"{v:.2f}"
+
+
+def table_markdown(table: dict[str, Any], models: list[str], title: str,
+                   marks: bool = True) -> str:
+    """Table I layout: rows = models, columns = joint x interval. Best per category **bold**,
+    within 5 % of the best *italic* (the paper's yellow / light yellow)."""
+    rows = table["rows"]
+    ivs = table["intervals"]
+    N = len(next(iter(rows.values())))
+    head = "| model | " + " | ".join(f"J{j + 1} {int(hi)}s" for j in range(N) for _, hi in ivs) + " |"
+    sep = "|---|" + "---|" * (N * len(ivs))
+    lines = [f"**{title}**", "", head, sep]
+    for m in models:
+        if m not in rows:
+            continue
+        cells = []
+        for j in range(N):
+            for k in range(len(ivs)):
+                s = _fmt(rows[m][j][k])
+                if marks and table.get("best", {}).get(m, [[False]])[j][k]:
+                    s = f"**{s}**"
+                elif marks and table.get("near", {}).get(m, [[False]])[j][k]:
+                    s = f"*{s}*"
+                cells.append(s)
+        lines.append(f"| {label(m)} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _table_order() -> list[str]:
+    return [model_name(p, s, df) for df in (False, True) for p in ("np", "sp") for s in STRUCT_ORDER]
+
+
+def write_csv(block: dict[str, Any], path: Path, dataset: str) -> Path:
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["dataset", "model", "seconds", "joint", "nrmse_mean", "nrmse_std", "n_subsets"])
+        for m, v in block["models"].items():
+            mu, sd = np.asarray(v["nrmse_mean"], float), np.asarray(v["nrmse_std"], float)
+            for g, T in enumerate(block["grid_s"]):
+                for j in range(mu.shape[1]):
+                    w.writerow([dataset, m, T, j + 1, f"{mu[g, j]:.6f}", f"{sd[g, j]:.6f}", block["n_subsets"]])
+    return path
+
+
+def render(json_path: str | Path, out: str | Path) -> list[Path]:
+    """Write every figure/table/CSV above from ``json_path`` into ``out``; returns the paths."""
+    from scripts._study_common import make_table
+    from scripts.study_claims import claims_markdown
+
+    res = read_json(json_path)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    written: list[Path] = []
+    jaco = res.get("jaco")
+    if jaco:
+        for p, df, name in (("np", False, "np"), ("sp", False, "sp"), ("np", True, "np_df"), ("sp", True, "sp_df")):
+            ms = [model_name(p, s, df) for s in STRUCT_ORDER] + [RBD]
+            if any(m in jaco["models"] for m in ms[:-1]):
+                kind = "derivative-free" if df else "derivative-based"
+                written.append(curve_figure(jaco, ms, f"Jaco (simulated): {p.upper()} models, {kind}",
+                                            out / f"fig_jaco_{name}.png"))
+        written.append(write_csv(jaco, out / "curves_jaco.csv", "jaco"))
+        order = [m for m in _table_order() if m in jaco["table"]["rows"]] + [RBD]
+        md = ["# Table I, measured (simulated Jaco)\n",
+              f"nRMSE averaged over the grid points in 1-2 s, 4-5 s, 9-10 s of training data and over "
+              f"{jaco['n_subsets']} subsets. **bold**: lowest in its category (NP or SP, derivative based or "
+              f"free); *italic*: within 5 % of it. RBD: nominal model, not marked.\n",
+              table_markdown(jaco["table"], order, "Measured"), "\n"]
+        if "paper_table" in res:
+            pt = make_table([1.5, 4.5, 9.5], {m: [[r[j][k] for j in range(len(r))] for k in range(3)]
+                                              for m, r in res["paper_table"]["rows"].items()},
+                            intervals=[(1, 2), (4, 5), (9, 10)])
+            md.append(table_markdown(pt, _table_order(), "Paper (Table I), marks recomputed the same way"))
+        (out / "table1.md").write_text("\n".join(md))
+        written.append(out / "table1.md")
+    if res.get("sarcos"):
+        s = res["sarcos"]
+        written.append(curve_figure(s, [model_name("np", st, False) for st in STRUCT_ORDER],
+                                    f"SARCOS: NP models ({s['n_subsets']} subsets, de-duplicated IAS test rows)",
+                                    out / "fig_sarcos.png"))
+        written.append(write_csv(s, out / "curves_sarcos.csv", "sarcos"))
+    if res.get("iterations"):
+        it = res["iterations"]
+        written.append(iterations_figure(it, out / "fig_iterations.png"))
+        with open(out / "iterations.csv", "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["model", "joint", "input_dim", "n_iter_mean", "n_iter_std", "n_iter_per_start", "wall_s"])
+            for m, r in it["models"].items():
+                for j in range(len(r["n_iter_mean"])):
+                    w.writerow([m, j + 1, r["dim"][j], f"{r['n_iter_mean'][j]:.1f}", f"{r['n_iter_std'][j]:.1f}",
+                                " ".join(map(str, r["n_iter"][j])), f"{r['wall_s'][j]:.2f}"])
+        written.append(out / "iterations.csv")
+    if res.get("correlation"):
+        written.append(correlation_figure(res["correlation"], out / "fig_correlation.png"))
+    (out / "claims.md").write_text(claims_markdown(res))
+    written.append(out / "claims.md")
+    return written
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description="Regenerate the study's figures and tables from results.json")
+    ap.add_argument("--json", required=True)
+    ap.add_argument("--out", required=True)
+    a = ap.parse_args(argv)
+    for p in render(a.json, a.out):
+        print(p)
+
+
+if __name__ == "__main__":
+    main()
