@@ -1,0 +1,280 @@
+"""Tests of the data-efficiency study scripts (scripts/data_efficiency.py and friends).
+
+Fast unit tests of the table logic, the curve engine (with a fake model factory), the paper's
+numbers, error paths; one end-to-end ``--smoke`` run (default suite, about 30-60 s) that also
+checks that the figures and tables are regenerated from ``results.json`` alone; the ``--quick``
+run is marked slow.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cascgp.data import DynamicsData
+from scripts._study_common import (PAPER_TABLE, RBD, VARIANTS, category, interval_mean, label, make_table,
+                                   read_json, write_json)
+
+REPO = Path(__file__).resolve().parents[1]
+PAPER = (REPO / ".." / "shared" / "paper" / "cascaded_gp_paper.tex").resolve()
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    env.setdefault("MUJOCO_GL", "egl")
+    return env
+
+
+# --------------------------------------------------------------------------- names and tables
+def test_names_and_labels() -> None:
+    assert len(VARIANTS) == 12 and len(set(VARIANTS)) == 12
+    from cascgp.models import MODEL_NAMES
+
+    assert set(VARIANTS) == set(MODEL_NAMES)
+    assert label("np-inward") == "NP-Inward-Cascaded"
+    assert label("sp-standard-df") == "SP-DF"
+    assert label(RBD) == "RBD"
+    assert category("sp-outward-df") == "df-sp" and category("np-standard") == "db-np"
+
+
+def test_interval_mean_and_table_marks() -> None:
+    grid = [1.0, 1.5, 2.0, 4.0, 5.0, 9.0, 10.0, 50.0]
+    G, N = len(grid), 2
+    base = np.linspace(1.0, 0.2, G)[:, None] * np.ones((G, N))
+    curves = {m: (base * (1.0 + 0.1 * k)).tolist() for k, m in enumerate(VARIANTS)}
+    # within its category (np db), np-outward is 3 % above np-inward -> "near"
+    curves["np-outward"] = (base * 1.03).tolist()
+    curves[RBD] = (0.01 * np.ones((G, N))).tolist()
+    t = make_table(grid, curves)
+    np.testing.assert_allclose(t["rows"]["np-inward"][0][0], base[:3, 0].mean())
+    np.testing.assert_allclose(t["rows"]["np-inward"][1][2], base[5:7, 1].mean())
+    assert interval_mean(grid, base, 20, 30).shape == (N,) and np.isnan(interval_mean(grid, base, 20, 30)).all()
+    for j in range(N):
+        for k in range(3):
+            assert t["best"]["np-inward"][j][k] and not t["best"]["np-standard"][j][k]
+            assert t["near"]["np-outward"][j][k]
+            assert not t["best"][RBD][j][k]  # RBD is never marked though lowest
+            # one best per category
+            for cat in ("db-np", "db-sp", "df-np", "df-sp"):
+                assert sum(t["best"][m][j][k] for m in VARIANTS if category(m) == cat) >= 1
+
+
+@pytest.mark.skipif(not PAPER.exists(), reason="paper .tex not available")
+def test_paper_table_matches_tex() -> None:
+    tex = PAPER.read_text()
+    for m, rows in PAPER_TABLE.items():
+        name = label(m)
+        line = next(ln for ln in tex.splitlines() if re.search(r"\\textbf\{" + re.escape(name) + r"\}\s*&", ln))
+        vals = [float(v) for v in re.findall(r"(?<![\w{])\.\d{3}", line.split(name, 1)[1])]
+        assert vals == [v for r in rows for v in r], m
+
+
+def test_write_json_cleans_nan_and_numpy(tmp_path: Path) -> None:
+    p = write_json(tmp_path / "a.json", {"x": np.array([1.0, np.nan]), "i": np.int64(3), "b": np.bool_(True)})
+    assert read_json(p) == {"x": [1.0, None], "i": 3, "b": True}
+
+
+# --------------------------------------------------------------------------- curve engine (fake model)
+class _LinearModel:
+    """A ridge-regression stand-in for a cascgp model (same fit / predict_data API)."""
+
+    def __init__(self, name: str, dof: int, rbd=None, **kw) -> None:
+        self.name, self.dof, self.rbd = name, dof, rbd
+
+    def fit(self, data: DynamicsData, init=None) -> "_LinearModel":
+        X = np.concatenate([data.q, data.qd, data.qdd, np.ones((data.n_samples, 1))], axis=1)
+        A = X.T @ X + 1e-3 * np.eye(X.shape[1])
+        self.W = np.linalg.solve(A, X.T @ data.tau)
+        self.warm = init is not None
+        return self
+
+    def predict_data(self, data: DynamicsData):
+        X = np.concatenate([data.q, data.qd, data.qdd, np.ones((data.n_samples, 1))], axis=1)
+        m = X @ self.W
+        return m, np.zeros_like(m)
+
+
+def fake_make(name, dof, rbd=None, **kw):
+    return _LinearModel(name, dof, rbd, **kw)
+
+
+def _synthetic(path: Path, n_seg: int, seconds: float, hz: float, seed: int) -> Path:
+    rng = np.random.default_rng(seed)
+    parts = []
+    for s in range(n_seg):
+        t = np.arange(int(seconds * hz)) / hz
+        q = np.sin(np.outer(t, rng.uniform(0.2, 1.0, 3)) + rng.uniform(0, 6, 3))
+        qd = np.gradient(q, t, axis=0)
+        qdd = np.gradient(qd, t, axis=0)
+        tau = 2 * q + 0.5 * qd + 0.1 * qdd + 0.01 * rng.standard_normal(q.shape)
+        parts.append(DynamicsData(q=q, qd=qd, qdd=qdd, tau=tau, t=t, segment=np.full(t.size, s)))
+    DynamicsData.concat(parts).save(path)
+    return path
+
+
+def test_run_curves_with_fake_factory_and_cache(tmp_path: Path) -> None:
+    from scripts._study_curves import CurveSpec, run_curves
+
+    tr = _synthetic(tmp_path / "train.npz", 3, 12.0, 50.0, 0)
+    te = _synthetic(tmp_path / "test.npz", 2, 6.0, 50.0, 1)
+    spec = CurveSpec(train_path=str(tr), test_path=str(te), n_subsets=3, grid=[1.0, 2.0, 10.0],
+                     factory=f"{__name__}:fake_make", urdf=None)
+    models = ["np-standard", "np-inward"]
+    out = run_curves(spec, models, workers=1, cache_dir=tmp_path / "cache")
+    assert out["grid_s"] == [1.0, 2.0, 10.0] and out["n_subsets"] == 3
+    for m in models:
+        r = out["models"][m]
+        allr = np.asarray(r["nrmse_all"])
+        assert allr.shape == (3, 3, 3)
+        np.testing.assert_allclose(r["nrmse_mean"], allr.mean(0))
+        np.testing.assert_allclose(r["nrmse_std"], allr.std(0))
+        assert [list(x) for x in r["n_train"]] == [[10, 20, 100]] * 3  # 10 Hz: 10 rows per second
+    # the (nearly) linear truth is learned: error falls with data
+    mu = np.asarray(out["models"]["np-standard"]["nrmse_mean"])
+    assert np.all(mu[-1] < mu[0]) and np.all(mu[-1] < 0.2)
+    # test rows: 10 Hz, minus the first 0.2 s (2 rows) of each of the 2 segments
+    assert out["n_test_rows"] == 2 * (60 - 2)
+    again = run_curves(spec, models, workers=1, cache_dir=tmp_path / "cache")
+    assert again["n_cached_jobs"] == 6
+    np.testing.assert_array_equal(again["models"]["np-inward"]["nrmse_all"], out["models"]["np-inward"]["nrmse_all"])
+
+
+def test_curve_spec_errors(tmp_path: Path) -> None:
+    from scripts._study_curves import CurveSpec, prepare
+
+    tr = _synthetic(tmp_path / "train.npz", 2, 3.0, 50.0, 0)
+    with pytest.raises(ValueError, match="n_subsets"):
+        prepare(CurveSpec(train_path=str(tr), test_path=str(tr), n_subsets=5, grid=[1.0]))
+    with pytest.raises(ValueError, match="split_by"):
+        prepare(CurveSpec(train_path=str(tr), test_path=str(tr), n_subsets=2, grid=[1.0], split_by="x"))
+
+
+def test_collect_config_errors() -> None:
+    from scripts.collect_jaco_data import CollectConfig, motion_seed
+
+    with pytest.raises(ValueError, match="n_subsets"):
+        CollectConfig(n_subsets=0)
+    with pytest.raises(ValueError, match="rate_hz"):
+        CollectConfig(rate_hz=-1.0)
+    with pytest.raises(ValueError, match="payload_mass"):
+        CollectConfig(payload_mass=float("nan"))
+    cfg = CollectConfig()
+    seeds = {motion_seed(cfg, s, k) for s in ("train", "test") for k in range(10)}
+    assert len(seeds) == 20  # every motion has its own parameters
+
+
+def test_cli_rejects_unknown_model(tmp_path: Path) -> None:
+    from scripts.data_efficiency import main
+
+    with pytest.raises(SystemExit):
+        main(["--out", str(tmp_path), "--models", "np-bogus"])
+
+
+def test_iteration_counts_small() -> None:
+    from scripts.iteration_counts import iteration_counts
+
+    rng = np.random.default_rng(0)
+    t = np.arange(40) / 10.0
+    q = rng.standard_normal((40, 3))
+    d = DynamicsData(q=q, qd=q ** 2, qdd=np.cos(q), tau=q @ rng.standard_normal((3, 3)), t=t)
+    r = iteration_counts(d, n=30, n_restarts=2)
+    assert set(r["models"]) == {"np-standard", "np-inward", "np-outward"}
+    rec = r["models"]["np-inward"]
+    assert rec["dim"] == [4, 7, 9] and len(rec["n_iter"][0]) == 2
+    np.testing.assert_allclose(rec["n_iter_mean"], np.mean(rec["n_iter"], axis=1))
+    with pytest.raises(ValueError, match="n"):
+        iteration_counts(d, n=100)
+
+
+def test_spearman_block() -> None:
+    from scripts.correlation import spearman_block
+
+    rng = np.random.default_rng(0)
+    q = rng.standard_normal((200, 2))
+    d = DynamicsData(q=q, qd=q ** 3, qdd=-q, tau=np.exp(q), t=np.arange(200) / 10.0)
+    c = spearman_block(d)
+    M = np.asarray(c["abs_spearman"])
+    assert c["labels"][:2] == ["q1", "q2"] and M.shape == (8, 8)
+    # monotone transforms have rank correlation 1
+    i, j = c["labels"].index("q1"), c["labels"].index("tau1")
+    assert M[i, j] == pytest.approx(1.0) and c["labels"].index("qd2") == 3
+    np.testing.assert_allclose(M, M.T)
+
+
+# --------------------------------------------------------------------------- end to end
+def _has_excitation() -> bool:
+    try:
+        import jaco_env.excitation  # noqa: F401
+    except ImportError:
+        return False
+    return True
+
+
+def _check_results(out: Path, res: dict) -> None:
+    jaco = res["jaco"]
+    assert set(jaco["models"]) == set(VARIANTS) | {RBD}
+    G = len(jaco["grid_s"])
+    for m, v in jaco["models"].items():
+        mu = np.asarray(v["nrmse_mean"], float)
+        assert mu.shape == (G, 6) and np.isfinite(mu).all() and (mu > 0).all()
+    # the table in the JSON is the interval mean of the curves in the JSON
+    t = make_table(jaco["grid_s"], {m: v["nrmse_mean"] for m, v in jaco["models"].items()})
+    assert json.loads(json.dumps(t["rows"]).replace("NaN", "null")) == jaco["table"]["rows"]
+    assert "iterations" in res and "correlation" in res
+    assert res["meta"]["collection"]["payload_mass"] > 0
+
+
+def _regenerate_from_json_alone(out: Path, tmp_path: Path) -> None:
+    """Copy only results.json to a fresh folder and rebuild every figure/table there, in a process
+    that must not import cascgp or jaco_env."""
+    fresh = tmp_path / "fresh"
+    fresh.mkdir()
+    shutil.copy(out / "results.json", fresh / "results.json")
+    code = ("import sys; from scripts import study_plots; study_plots.render(sys.argv[1], sys.argv[2]); "
+            "bad = [m for m in sys.modules if m.split('.')[0] in ('cascgp', 'jaco_env', 'torch')]; "
+            "assert not bad, bad")
+    subprocess.run([sys.executable, "-c", code, str(fresh / "results.json"), str(fresh)], check=True,
+                   env=_env(), cwd=REPO, timeout=120)
+    made = {p.name for p in out.iterdir() if p.is_file() and p.suffix in (".png", ".md", ".csv")}
+    remade = {p.name for p in fresh.iterdir() if p.suffix in (".png", ".md", ".csv")}
+    assert made and made == remade
+    for name in ("table1.md", "claims.md", "curves_jaco.csv"):
+        assert (fresh / name).read_text() == (out / name).read_text()
+
+
+@pytest.mark.skipif(not _has_excitation(), reason="jaco_env.excitation not available yet")
+def test_smoke_end_to_end(tmp_path: Path) -> None:
+    out = tmp_path / "smoke"
+    subprocess.run([sys.executable, "-m", "scripts.data_efficiency", "--out", str(out), "--smoke"],
+                   check=True, env=_env(), cwd=REPO, timeout=600)
+    res = read_json(out / "results.json")
+    _check_results(out, res)
+    assert res["meta"]["settings"]["grid"] == [1.0, 2.0]
+    for name in ("fig_jaco_np.png", "fig_jaco_sp.png", "fig_iterations.png", "fig_correlation.png",
+                 "table1.md", "curves_jaco.csv"):
+        assert (out / name).stat().st_size > 0
+    if "sarcos" in res:
+        assert set(res["sarcos"]["models"]) == {"np-standard", "np-inward", "np-outward"}
+        assert (out / "fig_sarcos.png").exists()
+    _regenerate_from_json_alone(out, tmp_path)
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(not _has_excitation(), reason="jaco_env.excitation not available yet")
+def test_quick_end_to_end(tmp_path: Path) -> None:
+    out = tmp_path / "quick"
+    subprocess.run([sys.executable, "-m", "scripts.data_efficiency", "--out", str(out), "--quick"],
+                   check=True, env=_env(), cwd=REPO, timeout=1200)
+    res = read_json(out / "results.json")
+    _check_results(out, res)
+    assert res["meta"]["settings"]["grid"] == [1.0, 2.0, 5.0, 10.0]
+    _regenerate_from_json_alone(out, tmp_path)
