@@ -1,0 +1,226 @@
+"""API-level tests of JacoPour-v0 / JacoPayload-v0: checker, rendering, determinism, pickling, bad input."""
+
+from __future__ import annotations
+
+import pickle
+
+import gymnasium as gym
+import mujoco
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import jaco_env
+from jaco_env import robot, scene
+from jaco_env.envs import JacoPayloadEnv, JacoPourEnv
+from jaco_env.excitation import JOINT_RANGES, SumOfSinusoids
+from jaco_env.tasks import DEFAULT_TASKS, PouringTask, home_pose
+
+
+@pytest.fixture(scope="module")
+def pour_env():
+    env = gym.make("JacoPour-v0", n_marbles=20)
+    yield env
+    env.close()
+
+
+def test_dm_control_composes_and_mujoco_simulates():
+    assert mujoco.__version__.startswith("3.17")
+    root = scene.build_scene(kind="pour", n_marbles=20, control_mode="torque", timestep=0.002)
+    m = scene.compile_model(root)
+    d = mujoco.MjData(m)
+    names = [m.joint(i).name for i in range(m.njnt)]
+    assert names[:6] == [f"jaco_arm/joint_{i}" for i in range(1, 7)]
+    assert m.nu == 6 and m.opt.timestep <= 0.002
+    assert np.allclose(m.actuator_ctrlrange[:, 1], robot.TORQUE_LIMITS)
+    d.qpos[:6] = home_pose()
+    mujoco.mj_step(m, d, nstep=50)
+    assert np.all(np.isfinite(d.qpos)) and d.time > 0.09
+
+
+@pytest.mark.parametrize("env_id", ["JacoPour-v0", "JacoPayload-v0"])
+def test_check_env(env_id):
+    env = gym.make(env_id)
+    check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+def test_make_with_module_prefix_and_spaces():
+    env = gym.make("jaco_env:JacoPayload-v0", control_mode="velocity")
+    assert env.observation_space.shape == (19,)
+    assert np.allclose(env.action_space.high, robot.VELOCITY_LIMITS)
+    assert env.unwrapped.control_dt == pytest.approx(0.025)
+    assert env.unwrapped.model.opt.timestep <= 0.002
+    env.close()
+
+
+def test_rgb_array_render_headless():
+    env = gym.make("JacoPour-v0", render_mode="rgb_array", width=160, height=120, n_marbles=20)
+    env.reset(seed=0, options={"task": "front"})
+    img = env.render()
+    env.close()
+    assert img.shape == (120, 160, 3) and img.dtype == np.uint8
+    assert img.std() > 5.0  # not blank
+
+
+def _rollout(seed: int, n: int = 25) -> np.ndarray:
+    env = gym.make("JacoPour-v0", n_marbles=20)
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(1)
+    out = [obs]
+    for _ in range(n):
+        obs, *_ = env.step(rng.uniform(-5, 5, 6))
+        out.append(obs)
+    env.close()
+    return np.array(out)
+
+
+def test_same_seed_bit_identical():
+    a, b = _rollout(7), _rollout(7)
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a, _rollout(8))
+
+
+def test_pickle_and_async_vector_env():
+    env = JacoPayloadEnv(payload_mass=0.5)
+    env2 = pickle.loads(pickle.dumps(env))
+    assert env2.default_payload == 0.5
+    o1, _ = env.reset(seed=3)
+    o2, _ = env2.reset(seed=3)
+    assert np.array_equal(o1, o2)
+    venv = gym.make_vec("JacoPour-v0", num_envs=2, vectorization_mode="async", n_marbles=20)
+    obs, info = venv.reset(seed=[0, 1])
+    assert obs.shape == (2, 22)
+    obs, r, term, trunc, info = venv.step(np.zeros((2, 6), dtype=np.float32))
+    assert obs.shape == (2, 22) and np.all(np.isfinite(obs)) and "payload_mass" in info
+    venv.close()
+
+
+def test_info_keys_reward_sum_and_noise(pour_env):
+    obs, info = pour_env.reset(seed=0, options={"task": "left", "payload_mass": 1.0})
+    assert info["payload_mass"] == 1.0 and info["task"] == "left"
+    assert np.allclose(obs[19:22], DEFAULT_TASKS["left"].jar_pos)
+    q0 = DEFAULT_TASKS["left"].reference(0.0)[0]
+    assert 0 < np.max(np.abs(obs[:6] - q0)) < 5e-3  # noisy but close
+    obs, r, term, trunc, info = pour_env.step(np.zeros(6))
+    for k in ("time", "payload_mass", "marbles_in_jar", "marbles_spilled", "n_marbles", "tracking_error",
+              "reward_tracking", "reward_pour", "unstable"):
+        assert k in info
+    assert r == pytest.approx(info["reward_tracking"] + info["reward_pour"])
+    assert info["time"] == pytest.approx(0.025) and obs[18] == pytest.approx(0.025)
+    assert not term and not trunc
+
+
+def test_payload_drawn_within_range(pour_env):
+    masses = {pour_env.reset(seed=s)[1]["payload_mass"] for s in range(4)}
+    assert len(masses) == 4
+    assert all(0.6 <= m <= 1.5 for m in masses)
+
+
+@pytest.mark.parametrize(
+    "action, exc, match",
+    [
+        (np.array([0, 0, np.nan, 0, 0, 0]), ValueError, "finite"),
+        (np.array([0, 0, 0, np.inf, 0, 0]), ValueError, "finite"),
+        (np.zeros(5), ValueError, r"shape \(6,\)"),
+        (np.zeros((2, 6)), ValueError, r"shape \(6,\)"),
+        ("torque", TypeError, "action must be an array"),
+    ],
+)
+def test_bad_action_leaves_state_untouched(pour_env, action, exc, match):
+    pour_env.reset(seed=0, options={"task": "front"})
+    u = pour_env.unwrapped
+    qpos, qvel, t = u.data.qpos.copy(), u.data.qvel.copy(), u.data.time
+    with pytest.raises(exc, match=match):
+        pour_env.step(action)
+    assert np.array_equal(qpos, u.data.qpos) and np.array_equal(qvel, u.data.qvel) and t == u.data.time
+
+
+def test_out_of_range_action_is_clipped():
+    env = gym.make("JacoPour-v0", n_marbles=20, sensor_noise=None)
+    env.reset(seed=0, options={"task": "front"})
+    obs, *_ = env.step(np.full(6, 1e3))
+    assert np.allclose(obs[12:18], robot.TORQUE_LIMITS)
+    env.close()
+
+
+@pytest.mark.parametrize(
+    "options, exc, match",
+    [
+        ({"task": "moon"}, ValueError, "unknown task 'moon'"),
+        ({"task": 3}, TypeError, "task must be"),
+        ({"payload_mass": 2.5}, ValueError, "payload_mass"),
+        ({"payload_mass": "heavy"}, TypeError, "payload_mass"),
+        ({"colour": "red"}, ValueError, "unknown reset option"),
+    ],
+)
+def test_bad_reset_options(pour_env, options, exc, match):
+    with pytest.raises(exc, match=match):
+        pour_env.reset(seed=0, options=options)
+
+
+def test_bad_constructor_arguments():
+    with pytest.raises(ValueError, match="control_mode"):
+        JacoPayloadEnv(control_mode="position")
+    with pytest.raises(ValueError, match="control_freq"):
+        JacoPayloadEnv(control_freq=0.0)
+    with pytest.raises(ValueError, match="payload_mass"):
+        JacoPayloadEnv(payload_mass=1.7)
+    with pytest.raises(ValueError, match="jar_pos"):
+        PouringTask("x", jar_pos=[0.5, 0.0])
+
+
+def test_unstable_simulation_truncates_without_nan(pour_env):
+    obs0, _ = pour_env.reset(seed=0, options={"task": "front"})
+    u = pour_env.unwrapped
+    u.data.qvel[u._arm_dof] = 1e6
+    obs, r, term, trunc, info = pour_env.step(np.zeros(6))
+    assert trunc and info["unstable"] and np.all(np.isfinite(obs)) and np.isfinite(r)
+
+
+def test_velocity_mode_tracks_command():
+    env = gym.make("JacoPayload-v0", control_mode="velocity", sensor_noise=None)
+    env.reset(seed=0)
+    cmd = np.array([0.2, -0.2, 0.2, 0.3, -0.3, 0.3])
+    for _ in range(40):
+        obs, *_ = env.step(cmd)
+    assert np.allclose(obs[6:12], cmd, atol=0.03)
+    assert np.all(np.abs(obs[12:18]) <= robot.TORQUE_LIMITS + 1e-9)
+    env.close()
+
+
+def test_reference_properties():
+    dt = 1e-3
+    for task in DEFAULT_TASKS.values():
+        t = np.arange(0.0, task.duration + 1.0, dt)
+        q, qd, qdd = task.reference(t)
+        assert q.shape == (len(t), 6)
+        assert np.all(np.abs(qd) <= robot.VELOCITY_LIMITS + 1e-9)
+        # qd is the derivative of q, qdd the derivative of qd (finite differences)
+        assert np.allclose(np.gradient(q, dt, axis=0)[1:-1], qd[1:-1], atol=2e-3)
+        assert np.allclose(np.gradient(qd, dt, axis=0)[1:-1], qdd[1:-1], atol=2e-2)
+        assert np.array_equal(task.reference(-1.0)[0], task.reference(0.0)[0])
+        assert np.allclose(task.reference(task.duration + 5)[1], 0.0)
+    q, qd, qdd = DEFAULT_TASKS["front"].reference(1.0)
+    assert q.shape == qd.shape == qdd.shape == (6,)
+
+
+def test_default_tasks_spread_over_workspace():
+    pos = np.array([t.jar_pos[:2] for t in DEFAULT_TASKS.values()])
+    assert len(pos) >= 5
+    dists = np.linalg.norm(pos[:, None] - pos[None], axis=2)
+    assert np.min(dists[np.triu_indices(len(pos), 1)]) > 0.1
+
+
+def test_excitation_within_limits():
+    q0 = home_pose()
+    gen = SumOfSinusoids(q0, seed=4)
+    t = np.linspace(0, 600, 60001)
+    q, qd = gen.position(t), gen.velocity(t)
+    assert np.allclose(q[0], q0)
+    assert np.all(np.abs(qd) <= 0.8 * robot.VELOCITY_LIMITS + 1e-12)
+    for j, r in enumerate(JOINT_RANGES):
+        if r is not None:
+            assert r[0] < q[:, j].min() and q[:, j].max() < r[1]
+    assert np.allclose(np.gradient(q, t, axis=0)[1:-1], qd[1:-1], atol=1e-3)
+    assert not np.allclose(SumOfSinusoids(q0, seed=5).amplitudes, gen.amplitudes)
