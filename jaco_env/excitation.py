@@ -94,3 +94,19 @@ class SumOfSinusoids:
         w = 2 * np.pi * self.freqs[None]
         qd = np.sum(self.amplitudes[None] * w * np.cos(w * tt[:, None, None] + self.phases[None]), axis=2)
         return qd[0] if np.ndim(t) == 0 else qd
+
+
+def make_command(seed: int = 0, duration: float | None = None, q0: np.ndarray | None = None,
+                 **kwargs) -> "callable":
+    """A seeded velocity command ``v(t) -> (6,)`` starting at ``q0`` (default: the home pose).
+
+    ``duration`` is accepted for interface symmetry; the command is valid (within the position
+    and velocity limits) for every t >= 0. Further keyword arguments go to :class:`SumOfSinusoids`.
+    """
+    if duration is not None and not duration > 0:
+        raise ValueError(f"duration must be > 0 s, got {duration!r}")
+    if q0 is None:
+        from jaco_env.tasks import home_pose
+
+        q0 = home_pose()
+    return SumOfSinusoids(q0, seed=seed, **kwargs).velocity

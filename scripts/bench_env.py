@@ -1,0 +1,95 @@
+"""Benchmark: env steps per second vs raw MuJoCo stepping of the same model.
+
+    python -m scripts.bench_env --out out/bench_env [--steps 400] [--env JacoPour-v0]
+
+Both run the same compiled model from the same state for the same number of control
+periods (``frame_skip`` physics steps each) with the same torque: the raw loop only calls
+``mujoco.mj_step(model, data, nstep=frame_skip)``; the env loop calls ``env.step`` (action
+checks, sensors, reference, marble bookkeeping, info). One run; BLAS/OpenMP limited to one
+thread. Prints a table and writes ``bench_env.json`` into ``--out``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import gymnasium as gym  # noqa: E402
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+import jaco_env  # noqa: E402,F401
+from jaco_env.tasks import DEFAULT_TASKS  # noqa: E402
+
+
+def bench(env_id: str, steps: int) -> dict:
+    kwargs = {} if env_id == "JacoPayload-v0" else {"task": "front"}
+    env = gym.make(env_id, **kwargs)
+    env.reset(seed=0, options={"payload_mass": 1.0})
+    u = env.unwrapped
+    # A gravity-holding torque keeps both runs in the same regime (arm still, marbles in the bottle).
+    from jaco_env.oracle import rigid_scene_model  # noqa: PLC0415
+
+    m_id = rigid_scene_model(u.payload_mass, getattr(u, "n_marbles", 0))
+    d_id = mujoco.MjData(m_id)
+    d_id.qpos[:6] = u.data.qpos[u._arm_qpos]
+    mujoco.mj_inverse(m_id, d_id)
+    tau = np.clip(d_id.qfrc_inverse[:6], -u.torque_limits, u.torque_limits).astype(np.float32)
+
+    state0 = np.empty(mujoco.mj_stateSize(u.model, mujoco.mjtState.mjSTATE_FULLPHYSICS))
+    mujoco.mj_getState(u.model, u.data, state0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        env.step(tau)
+    t_env = time.perf_counter() - t0
+
+    d = mujoco.MjData(u.model)
+    mujoco.mj_setState(u.model, d, state0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    d.ctrl[:6] = tau
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        mujoco.mj_step(u.model, d, nstep=u.frame_skip)
+    t_raw = time.perf_counter() - t0
+    env.close()
+    return {
+        "env_id": env_id,
+        "control_steps": steps,
+        "physics_steps_per_control_step": u.frame_skip,
+        "physics_timestep_s": float(u.model.opt.timestep),
+        "env_steps_per_s": steps / t_env,
+        "raw_steps_per_s": steps / t_raw,
+        "ratio_env_over_raw": t_raw / t_env,
+    }
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", required=True, help="output folder for bench_env.json")
+    p.add_argument("--steps", type=int, default=400, help="control steps per measurement")
+    p.add_argument("--env", nargs="+", default=["JacoPour-v0", "JacoPayload-v0"])
+    args = p.parse_args(argv)
+    if args.steps < 1:
+        p.error("--steps must be >= 1")
+    rows = [bench(e, args.steps) for e in args.env]
+    print(f"{'env':16s} {'env steps/s':>12s} {'raw steps/s':>12s} {'ratio':>7s}")
+    for r in rows:
+        print(f"{r['env_id']:16s} {r['env_steps_per_s']:12.1f} {r['raw_steps_per_s']:12.1f} "
+              f"{r['ratio_env_over_raw']:7.3f}")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    meta = {"mujoco": mujoco.__version__, "python": platform.python_version(), "machine": platform.machine(),
+            "note": "one run; ratio = raw time / env time for the same control steps (1 = no overhead)"}
+    (out / "bench_env.json").write_text(json.dumps({"meta": meta, "results": rows}, indent=2))
+    print(f"wrote {out / 'bench_env.json'}")
+
+
+if __name__ == "__main__":
+    main()
