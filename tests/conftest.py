@@ -2,14 +2,20 @@
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from cascgp.data import DynamicsData
+
+# One torch thread for the whole suite: on the 2-core CI machine, and whenever other
+# processes share the cores, torch's second (spinning) thread made GP fits 10-30x slower
+# (n=100, 3 GPs: 0.37 s with 1 thread vs 11.3 s with 2 under load).  Single queries are
+# faster on one thread anyway (DESIGN.md).
+torch.set_num_threads(1)
 
 REPO = Path(__file__).resolve().parents[1]
 SARCOS_DIR = (REPO / ".." / "shared" / "data" / "sarcos").resolve()
