@@ -15,6 +15,7 @@ load_gpml           cascgp.sarcos          GPML SARCOS file -> DynamicsData
 nrmse, rmse         cascgp.metrics         per-joint errors
 MODEL_NAMES         cascgp.models          the twelve model variants
 make_model          cascgp.models          build a model by name
+CascadedGPModel     cascgp.models          the model class (fit, predict, predict_one, save)
 load_model          cascgp.models          read a saved model
 GPBank              cascgp.gp              batched exact GPs
 GPFitConfig         cascgp.gp              GP fit options
@@ -39,6 +40,7 @@ _EXPORTS = {
     "rmse": "cascgp.metrics",
     "MODEL_NAMES": "cascgp.models",
     "make_model": "cascgp.models",
+    "CascadedGPModel": "cascgp.models",
     "load_model": "cascgp.models",
     "GPBank": "cascgp.gp",
     "GPFitConfig": "cascgp.gp",

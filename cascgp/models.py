@@ -55,6 +55,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from dataclasses import asdict, fields
 from pathlib import Path
 from typing import Any
@@ -183,6 +184,10 @@ class CascadedGPModel:
         if data.dof != self.dof:
             raise ValueError(f"data: DOF mismatch: the model has dof={self.dof}, data.dof={data.dof}")
         if self.feature_kind == "df":
+            if np.isfinite(data.dt) and data.dt > self.df_delta * (1 + 1e-9):
+                warnings.warn(f"data: sample period {data.dt:g} s exceeds df_delta={self.df_delta:g} s: the "
+                              "derivative-free history q(t - df_delta) is interpolated between samples",
+                              stacklevel=3)
             q_hist, valid = history_from_data(data, self.df_delta)
         else:
             q_hist, valid = None, np.ones(data.n_samples, dtype=bool)
@@ -403,6 +408,8 @@ class CascadedGPModel:
             qdd = np.asarray(qdd, dtype=np.float64)
             if qd.shape != (N,) or qdd.shape != (N,):
                 raise ValueError(f"qd/qdd: expected shape ({N},), got {qd.shape} and {qdd.shape}")
+            if self.feature_kind == "df" and not (np.isfinite(qd).all() and np.isfinite(qdd).all()):
+                raise ValueError("qd/qdd: non-finite value (NaN or inf) in the query")
         if self.feature_kind == "db":
             buf[1:3 * N:3] = qd
             buf[2:3 * N:3] = qdd

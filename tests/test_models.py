@@ -365,3 +365,18 @@ def test_duplicated_samples_and_constant_targets(interleaved):
     np.testing.assert_allclose(pc[:, 2], 1.5, atol=1e-9)
     assert np.isfinite(pc).all()
     assert mc.fit_info[2]["constant_target"]
+
+
+def test_df_warns_when_data_is_coarser_than_delta(arm3):
+    d = sinusoid_data(arm3, 10.0, 5.0, seed=0, noise=0.01)  # dt = 0.2 s > df_delta = 0.1 s
+    with pytest.warns(UserWarning, match="df_delta"):
+        make_model("np-standard-df", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=5)).fit(d)
+
+
+def test_package_exports():
+    import cascgp
+
+    assert cascgp.make_model is make_model and cascgp.MODEL_NAMES == MODEL_NAMES
+    assert cascgp.DynamicsData is DynamicsData and callable(cascgp.nrmse) and callable(cascgp.load_ias)
+    with pytest.raises(AttributeError):
+        cascgp.nope  # noqa: B018
