@@ -28,8 +28,6 @@ kernel), and the neighbour torque is the LAST column when present.
 
 from __future__ import annotations
 
-from typing import Sequence
-
 import numpy as np
 
 from .data import DynamicsData
@@ -155,6 +153,3 @@ def build_inputs(S: np.ndarray, tau: np.ndarray | None, structure: str) -> list[
         out.append(np.ascontiguousarray(np.concatenate(cols, axis=1)))
     return out
 
-
-def _as_tuple(x: Sequence[int]) -> tuple[int, ...]:
-    return tuple(int(v) for v in x)
