@@ -1,0 +1,84 @@
+"""A data buffer that persists across episodes and tasks.
+
+Every appended record (one episode, typically) is written to its own ``.npz`` file
+in the buffer's folder with :meth:`cascgp.data.DynamicsData.save`, which is atomic,
+so an interrupted run never leaves a half-written buffer: reopening the folder
+gives every episode that was completely saved.
+
+Training-set cap
+----------------
+:meth:`DataBuffer.training_set` subsamples all data to ``rate_hz`` (10 Hz by default,
+as in the paper) and, if more than ``max_samples`` rows remain, keeps
+``max_samples`` rows evenly spaced over the whole buffer (every episode keeps its
+share, so older tasks are not forgotten). Exact GP training is O(n^3), so the cap
+bounds the retraining time between tasks.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+from cascgp.data import DynamicsData
+
+_EPISODE_FILE = re.compile(r"^episode_(\d{5})\.npz$")
+
+
+class DataBuffer:
+    """Episodes of measured robot data, optionally mirrored to a folder on disk.
+
+    Args:
+        folder: where episodes are saved (created if missing); ``None`` keeps the buffer
+            in memory only. Opening an existing folder loads the episodes already in it.
+    """
+
+    def __init__(self, folder: str | os.PathLike[str] | None = None) -> None:
+        self.folder = None if folder is None else Path(folder)
+        self._episodes: list[DynamicsData] = []
+        if self.folder is not None:
+            self.folder.mkdir(parents=True, exist_ok=True)
+            files = sorted(p for p in self.folder.iterdir() if _EPISODE_FILE.match(p.name))
+            self._episodes = [DynamicsData.load(p) for p in files]
+
+    def __len__(self) -> int:
+        return len(self._episodes)
+
+    @property
+    def n_samples(self) -> int:
+        """Total number of samples over all episodes."""
+        return sum(e.n_samples for e in self._episodes)
+
+    @property
+    def episodes(self) -> tuple[DynamicsData, ...]:
+        return tuple(self._episodes)
+
+    def append(self, data: DynamicsData) -> None:
+        """Add one episode (saved to the folder at once, atomically, when there is one)."""
+        if not isinstance(data, DynamicsData):
+            raise TypeError(f"data must be a DynamicsData, got {type(data).__name__}")
+        if self._episodes and data.dof != self._episodes[0].dof:
+            raise ValueError(f"data.dof is {data.dof}, the buffer holds {self._episodes[0].dof}-DOF data")
+        if self.folder is not None:
+            data.save(self.folder / f"episode_{len(self._episodes):05d}.npz")
+        self._episodes.append(data)
+
+    def all_data(self) -> DynamicsData:
+        """Every episode concatenated (each episode its own segment)."""
+        if not self._episodes:
+            raise ValueError("the buffer is empty")
+        return DynamicsData.concat(self._episodes)
+
+    def training_set(self, rate_hz: float = 10.0, max_samples: int = 500) -> DynamicsData:
+        """All data subsampled to ``rate_hz`` and thinned evenly to at most ``max_samples`` rows."""
+        if max_samples < 2:
+            raise ValueError(f"max_samples must be at least 2, got {max_samples}")
+        data = DynamicsData.concat([e.subsample(rate_hz) for e in self._episodes]) if self._episodes else None
+        if data is None:
+            raise ValueError("the buffer is empty")
+        if data.n_samples > max_samples:
+            idx = np.unique(np.linspace(0, data.n_samples - 1, max_samples).round().astype(np.int64))
+            data = data.take(idx)
+        return data

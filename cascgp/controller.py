@@ -1,0 +1,155 @@
+r"""Feedforward torque controller (paper eq. 2).
+
+.. math::
+
+    \tau = f(q_d, \dot q_d, \ddot q_d) + K_p (q_d - q) + K_d (\dot q_d - \dot q)
+
+where :math:`f` is a learned inverse-dynamics model (any of the twelve variants of
+:mod:`cascgp.models`), the nominal rigid-body model alone, or zero (PD only). The
+feedforward term is evaluated on the *reference*, as in the paper, so it depends
+only on the task and never on the noisy measurements; the feedback term uses the
+measured joint positions and velocities.
+
+Safety guarantees (tested): the output is always finite and within
+``[-torque_limits, torque_limits]``. If the model's output is not finite, the
+controller falls back to the rigid-body feedforward (or to zero when no RBD model
+is given) and counts the event in :attr:`FeedforwardController.n_fallbacks`. A
+non-finite measurement contributes no feedback on that joint (counted in
+:attr:`FeedforwardController.n_bad_measurements`).
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, Protocol
+
+import numpy as np
+
+_BIG = 1e300  # stands in for an overflowed feedback term; far beyond any actuator limit
+
+Reference = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+class InverseDynamics(Protocol):
+    """Anything with ``inverse_dynamics(q, qd, qdd) -> tau`` (e.g. :class:`cascgp.rbd.RigidBodyModel`)."""
+
+    dof: int
+
+    def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray: ...
+
+
+def _as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
+    gain = np.broadcast_to(np.asarray(value, dtype=float), (dof,)).copy()
+    if not np.all(np.isfinite(gain)) or np.any(gain < 0):
+        raise ValueError(f"{name} must be finite and non-negative, got {gain}")
+    return gain
+
+
+class FeedforwardController:
+    r"""PD feedback plus a model-based feedforward torque, clipped to the actuator limits.
+
+    Args:
+        model: the feedforward model: a fitted :mod:`cascgp.models` model (uses its lean
+            ``predict_one`` path), an object with ``inverse_dynamics`` (e.g. the nominal
+            :class:`~cascgp.rbd.RigidBodyModel`), or ``None`` for PD only.
+        kp: proportional gains (N m / rad), scalar or per joint.
+        kd: derivative gains (N m s / rad), scalar or per joint.
+        torque_limits: symmetric actuator limits (N m), per joint.
+        fallback: rigid-body model used when ``model`` returns a non-finite torque
+            (defaults to ``model`` itself if that is a rigid-body model, else zero).
+
+    The controller is called every control tick with the time, the measured state and
+    the task's reference ``reference(t) -> (q_d, qd_d, qdd_d)``. Derivative-free models
+    additionally get the reference positions at ``t - delta`` and ``t - 2 delta``.
+    """
+
+    def __init__(
+        self,
+        model: Any | None,
+        kp: float | np.ndarray,
+        kd: float | np.ndarray,
+        torque_limits: np.ndarray,
+        fallback: InverseDynamics | None = None,
+    ) -> None:
+        self.torque_limits = np.asarray(torque_limits, dtype=float).copy()
+        if self.torque_limits.ndim != 1 or not np.all(self.torque_limits > 0):
+            raise ValueError(f"torque_limits must be a 1-D array of positive values, got {torque_limits!r}")
+        self.dof = int(self.torque_limits.shape[0])
+        self.kp = _as_gain(kp, self.dof, "kp")
+        self.kd = _as_gain(kd, self.dof, "kd")
+        self.model = model
+        if model is not None:
+            model_dof = getattr(model, "dof", self.dof)
+            if int(model_dof) != self.dof:
+                raise ValueError(f"model.dof ({model_dof}) does not match torque_limits ({self.dof} joints)")
+        if fallback is None and model is not None and hasattr(model, "inverse_dynamics"):
+            fallback = model
+        self.fallback = fallback
+        self._uses_history = getattr(model, "feature_kind", "db") == "df"
+        self._delta = float(getattr(model, "df_delta", 0.0) or 0.0)
+        self.n_fallbacks = 0
+        self.n_bad_measurements = 0
+
+    @property
+    def name(self) -> str:
+        """Short description of the feedforward source."""
+        if self.model is None:
+            return "pd"
+        return str(getattr(self.model, "name", type(self.model).__name__))
+
+    def feedforward(self, t: float, reference: Reference) -> np.ndarray:
+        """The feedforward torque at time ``t`` (finite, not yet clipped)."""
+        q_d, qd_d, qdd_d = reference(t)
+        if self.model is None:
+            return np.zeros(self.dof)
+        tau = self._model_torque(t, q_d, qd_d, qdd_d, reference)
+        if tau is not None and tau.shape == (self.dof,) and np.all(np.isfinite(tau)):
+            return tau
+        self.n_fallbacks += 1
+        if self.fallback is not None and self.fallback is not self.model:
+            try:
+                tau = np.asarray(self.fallback.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
+            except (ValueError, FloatingPointError):
+                tau = None
+            if tau is not None and tau.shape == (self.dof,) and np.all(np.isfinite(tau)):
+                return tau
+        return np.zeros(self.dof)
+
+    def _model_torque(
+        self, t: float, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, reference: Reference
+    ) -> np.ndarray | None:
+        model = self.model
+        try:
+            if hasattr(model, "predict_one"):
+                q_hist = None
+                if self._uses_history:
+                    q_hist = np.stack([reference(t - self._delta)[0], reference(t - 2.0 * self._delta)[0]])
+                return np.asarray(model.predict_one(q_d, qd_d, qdd_d, q_hist=q_hist), dtype=float)
+            return np.asarray(model.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
+        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
+            # A model that rejects its input (e.g. a reference outside what it accepts) is a
+            # fallback event, never a crash of the control loop.
+            return None
+
+    def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, reference: Reference) -> np.ndarray:
+        """Joint torques for the measured state ``(q, qd)`` at time ``t``; always finite and within limits."""
+        q = np.asarray(q, dtype=float)
+        qd = np.asarray(qd, dtype=float)
+        if q.shape != (self.dof,) or qd.shape != (self.dof,):
+            raise ValueError(f"q and qd must have shape ({self.dof},), got {q.shape} and {qd.shape}")
+        q_d, qd_d, _ = reference(t)
+        bad = ~(np.isfinite(q) & np.isfinite(qd) & np.isfinite(q_d) & np.isfinite(qd_d))
+        if np.any(bad):
+            self.n_bad_measurements += 1
+        with np.errstate(over="ignore", invalid="ignore"):
+            # A finite but absurd error saturates with its sign (overflow to +-inf is capped
+            # before the sum so that P and D terms of opposite sign cannot make inf - inf).
+            p_term = np.nan_to_num(self.kp * (q_d - q), nan=0.0, posinf=_BIG, neginf=-_BIG)
+            d_term = np.nan_to_num(self.kd * (qd_d - qd), nan=0.0, posinf=_BIG, neginf=-_BIG)
+        feedback = np.where(bad, 0.0, p_term + d_term)
+        tau = self.feedforward(t, reference) + feedback
+        return np.clip(tau, -self.torque_limits, self.torque_limits)
+
+    def reset_counters(self) -> None:
+        """Zero the fallback and bad-measurement counters (e.g. at the start of an episode)."""
+        self.n_fallbacks = 0
+        self.n_bad_measurements = 0

@@ -1,0 +1,138 @@
+"""Run a :class:`~cascgp.controller.FeedforwardController` in an episode and record what the robot measured.
+
+This is the one piece of glue between the learning library and a simulated (or real)
+robot. It does not import any environment package: it works with any Gymnasium
+environment whose observation starts with the measured ``[q, qd, tau, t]`` of an
+N-DOF arm and whose unwrapped environment exposes ``task.reference(t)`` (e.g.
+``JacoPour-v0``). The recorded data contain measurements only, as on a real robot:
+
+==================  ===========================================================
+recorded            source
+==================  ===========================================================
+``t, q, qd``        the observation at each control tick (noisy sensors)
+``tau``             the measured joint torque during the period that started at that tick
+                    (reported by the next observation)
+``qdd``             central differences of the measured ``qd``
+                    (:meth:`cascgp.data.DynamicsData.from_measurements`)
+==================  ===========================================================
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from cascgp.controller import FeedforwardController
+from cascgp.data import DynamicsData
+
+
+@dataclass
+class EpisodeResult:
+    """What one episode measured and how well it went.
+
+    Attributes:
+        data: the measured record at the control rate (one segment).
+        tracking_rmse: RMSE of the true joint-position error over the episode (rad), from
+            ``info["tracking_error"]`` when the environment reports it, else from the measured q.
+        joint_rmse: per-joint RMSE of ``q_d - q_measured`` (rad), shape (N,).
+        in_jar: fraction of marbles in the jar at the end (NaN when the env has no marbles).
+        spilled: fraction of marbles spilled at the end (NaN when the env has no marbles).
+        episode_return: sum of rewards.
+        steps: control ticks run.
+        unstable: the environment flagged an unstable simulation.
+        n_fallbacks: ticks on which the model's output was not finite and the controller fell back.
+        info: the final ``info`` dict.
+    """
+
+    data: DynamicsData
+    tracking_rmse: float
+    joint_rmse: np.ndarray
+    in_jar: float
+    spilled: float
+    episode_return: float
+    steps: int
+    unstable: bool
+    n_fallbacks: int
+    info: dict[str, Any] = field(default_factory=dict)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-serialisable metrics (no arrays but ``joint_rmse`` as a list)."""
+        return {
+            "tracking_rmse": self.tracking_rmse,
+            "joint_rmse": self.joint_rmse.tolist(),
+            "in_jar": self.in_jar,
+            "spilled": self.spilled,
+            "return": self.episode_return,
+            "steps": self.steps,
+            "unstable": self.unstable,
+            "n_fallbacks": self.n_fallbacks,
+            "payload_mass": self.info.get("payload_mass"),
+        }
+
+
+def _split_obs(obs: np.ndarray, dof: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    obs = np.asarray(obs, dtype=float)
+    if obs.ndim != 1 or obs.shape[0] < 3 * dof + 1:
+        raise ValueError(f"observation must be a flat vector starting with [q, qd, tau, t] of {dof} joints, "
+                         f"got shape {obs.shape}")
+    return obs[:dof], obs[dof:2 * dof], obs[2 * dof:3 * dof], float(obs[3 * dof])
+
+
+def run_episode(
+    env: Any,
+    controller: FeedforwardController,
+    *,
+    seed: int | None = None,
+    options: dict[str, Any] | None = None,
+    smoothing: int | None = None,
+    meta: dict[str, Any] | None = None,
+) -> EpisodeResult:
+    """Run ``controller`` on ``env`` from ``reset(seed, options)`` until the episode ends.
+
+    Args:
+        env: a Gymnasium environment (see the module docstring for what it must offer).
+        controller: the controller; its counters are reset at the start.
+        seed, options: passed to ``env.reset`` (e.g. ``options={"task": "front", "payload_mass": 1.0}``).
+        smoothing: optional smoothing window for the numerical differentiation of ``qd``.
+        meta: extra metadata stored in the record.
+    """
+    dof = controller.dof
+    obs, info = env.reset(seed=seed, options=options)
+    task = env.unwrapped.task
+    reference = task.reference
+    controller.reset_counters()
+    ts, qs, qds, taus, errors = [], [], [], [], []
+    total, steps, unstable = 0.0, 0, False
+    while True:
+        q, qd, _, t = _split_obs(obs, dof)
+        action = controller(t, q, qd, reference)
+        obs, reward, terminated, truncated, info = env.step(action.astype(np.float32))
+        ts.append(t)
+        qs.append(q)
+        qds.append(qd)
+        taus.append(_split_obs(obs, dof)[2])
+        if "tracking_error" in info:
+            errors.append(float(info["tracking_error"]))
+        total += float(reward)
+        steps += 1
+        unstable = unstable or bool(info.get("unstable", False))
+        if terminated or truncated:
+            break
+    t_arr, q_arr = np.asarray(ts), np.asarray(qs)
+    record_meta = {"source": "episode", "task": getattr(task, "name", None),
+                   "controller": controller.name, "payload_mass": info.get("payload_mass")}
+    record_meta.update(meta or {})
+    data = DynamicsData.from_measurements(t_arr, q_arr, np.asarray(qds), np.asarray(taus),
+                                          smoothing=smoothing, meta=record_meta)
+    err_meas = reference(t_arr)[0] - q_arr
+    joint_rmse = np.sqrt(np.mean(err_meas**2, axis=0))
+    tracking = float(np.sqrt(np.mean(np.square(errors)))) if errors else float(np.sqrt(np.mean(err_meas**2) * dof))
+    n_marbles = info.get("n_marbles", 0) or 0
+    in_jar = info["marbles_in_jar"] / n_marbles if n_marbles else float("nan")
+    spilled = info["marbles_spilled"] / n_marbles if n_marbles else float("nan")
+    return EpisodeResult(
+        data=data, tracking_rmse=tracking, joint_rmse=joint_rmse, in_jar=float(in_jar), spilled=float(spilled),
+        episode_return=total, steps=steps, unstable=unstable, n_fallbacks=controller.n_fallbacks, info=dict(info),
+    )

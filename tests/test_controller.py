@@ -1,0 +1,171 @@
+"""FeedforwardController: eq. 2 of the paper, safety (finite, within limits), fallbacks."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from cascgp.controller import FeedforwardController
+
+LIMITS = np.array([30.5, 30.5, 30.5, 6.8, 6.8, 6.8])
+KP = np.array([120.0, 120, 120, 40, 40, 40])
+KD = np.array([30.0, 30, 30, 9, 9, 9])
+
+
+def reference(t: float):
+    q_d = np.array([0.1, 2.5, 1.5, -0.2, 0.3, 0.0]) + 0.1 * np.sin(t)
+    return q_d, 0.1 * np.cos(t) * np.ones(6), -0.1 * np.sin(t) * np.ones(6)
+
+
+class AffineRBD:
+    """A stand-in rigid-body model: tau = A q + B qd + C qdd + g (finite for finite input)."""
+
+    dof = 6
+
+    def __init__(self, seed: int = 0):
+        rng = np.random.default_rng(seed)
+        self.A, self.B, self.C = (rng.normal(size=(6, 6)) for _ in range(3))
+        self.g = rng.normal(size=6)
+
+    def inverse_dynamics(self, q, qd, qdd):
+        return self.A @ q + self.B @ qd + self.C @ qdd + self.g
+
+
+class NaNModel:
+    """A learned model whose output is not finite."""
+
+    dof = 6
+    feature_kind = "db"
+    name = "nan-model"
+
+    def __init__(self):
+        self.calls = 0
+
+    def predict_one(self, q, qd=None, qdd=None, q_hist=None):
+        self.calls += 1
+        return np.full(6, np.nan)
+
+
+class HistoryModel:
+    """A derivative-free model stand-in that records the history it is given."""
+
+    dof = 6
+    feature_kind = "df"
+    df_delta = 0.1
+    name = "df-model"
+
+    def __init__(self):
+        self.q_hist = None
+
+    def predict_one(self, q, qd=None, qdd=None, q_hist=None):
+        self.q_hist = q_hist
+        return np.zeros(6)
+
+
+def test_pd_only_is_eq2_without_feedforward():
+    ctrl = FeedforwardController(None, KP, KD, LIMITS)
+    q_d, qd_d, _ = reference(0.3)
+    q, qd = q_d - 0.01, qd_d + 0.02
+    np.testing.assert_allclose(ctrl(0.3, q, qd, reference), KP * 0.01 - KD * 0.02)
+
+
+def test_rbd_feedforward_is_evaluated_on_the_reference():
+    rbd = AffineRBD()
+    ctrl = FeedforwardController(rbd, KP, KD, np.full(6, 1e6))
+    q_d, qd_d, qdd_d = reference(1.1)
+    q, qd = q_d + 0.02, qd_d - 0.01
+    expected = rbd.inverse_dynamics(q_d, qd_d, qdd_d) + KP * (q_d - q) + KD * (qd_d - qd)
+    np.testing.assert_allclose(ctrl(1.1, q, qd, reference), expected, rtol=1e-12)
+
+
+def test_output_is_clipped_to_the_limits():
+    ctrl = FeedforwardController(None, KP, KD, LIMITS)
+    q_d, qd_d, _ = reference(0.0)
+    tau = ctrl(0.0, q_d - 10.0, qd_d, reference)
+    np.testing.assert_array_equal(tau, LIMITS)
+
+
+def test_non_finite_model_output_falls_back_to_rbd_and_is_counted():
+    rbd, model = AffineRBD(), NaNModel()
+    ctrl = FeedforwardController(model, KP, KD, np.full(6, 1e6), fallback=rbd)
+    q_d, qd_d, qdd_d = reference(0.5)
+    tau = ctrl(0.5, q_d, qd_d, reference)
+    np.testing.assert_allclose(tau, rbd.inverse_dynamics(q_d, qd_d, qdd_d))
+    assert ctrl.n_fallbacks == 1 and model.calls == 1
+    ctrl.reset_counters()
+    assert ctrl.n_fallbacks == 0
+
+
+def test_non_finite_model_output_without_rbd_gives_pd_only():
+    ctrl = FeedforwardController(NaNModel(), KP, KD, LIMITS)
+    q_d, qd_d, _ = reference(0.5)
+    np.testing.assert_array_equal(ctrl(0.5, q_d, qd_d, reference), np.zeros(6))
+    assert ctrl.n_fallbacks == 1
+
+
+def test_derivative_free_model_gets_reference_history():
+    model = HistoryModel()
+    ctrl = FeedforwardController(model, KP, KD, LIMITS)
+    ctrl(2.0, *reference(2.0)[:2], reference)
+    np.testing.assert_allclose(model.q_hist, np.stack([reference(1.9)[0], reference(1.8)[0]]))
+
+
+def test_bad_arguments_name_the_field():
+    with pytest.raises(ValueError, match="kp"):
+        FeedforwardController(None, -1.0, KD, LIMITS)
+    with pytest.raises(ValueError, match="torque_limits"):
+        FeedforwardController(None, KP, KD, np.array([1.0, -2.0]))
+    with pytest.raises(ValueError, match="model.dof"):
+        FeedforwardController(AffineRBD(), 1.0, 1.0, np.ones(7))
+    ctrl = FeedforwardController(None, KP, KD, LIMITS)
+    with pytest.raises(ValueError, match="shape"):
+        ctrl(0.0, np.zeros(5), np.zeros(6), reference)
+
+
+_any_float = st.one_of(
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.floats(min_value=-1e6, max_value=1e6),
+)
+
+
+@settings(max_examples=300, deadline=None)
+@given(
+    q=st.lists(_any_float, min_size=6, max_size=6),
+    qd=st.lists(_any_float, min_size=6, max_size=6),
+    t=st.floats(min_value=-1e3, max_value=1e3),
+    which=st.sampled_from(["pd", "rbd", "nan", "df"]),
+)
+def test_output_is_always_finite_and_within_limits(q, qd, t, which):
+    """Property: random and far out-of-range (even non-finite) measurements never give NaN or excess torque."""
+    model = {"pd": None, "rbd": AffineRBD(), "nan": NaNModel(), "df": HistoryModel()}[which]
+    ctrl = FeedforwardController(model, KP, KD, LIMITS, fallback=AffineRBD(1))
+    tau = ctrl(t, np.array(q), np.array(qd), reference)
+    assert tau.shape == (6,)
+    assert np.all(np.isfinite(tau))
+    assert np.all(np.abs(tau) <= LIMITS)
+
+
+@settings(max_examples=50, deadline=None)
+@given(scale=st.floats(min_value=1.0, max_value=1e8))
+def test_far_out_of_range_states_with_a_fitted_gp_model(scale, fitted_planar_model):
+    """A real fitted cascade queried far outside its training data stays finite and clipped."""
+    model = fitted_planar_model
+    limits = np.full(model.dof, 5.0)
+    ctrl = FeedforwardController(model, 10.0, 1.0, limits)
+
+    def far_reference(t):
+        return np.full(model.dof, scale), np.full(model.dof, -scale), np.full(model.dof, scale)
+
+    tau = ctrl(0.0, np.full(model.dof, -scale), np.full(model.dof, scale), far_reference)
+    assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= limits)
+
+
+@pytest.fixture(scope="module")
+def fitted_planar_model(arm3_train):
+    from cascgp.gp import GPFitConfig
+    from cascgp.models import make_model
+
+    data = arm3_train.take(np.arange(min(80, arm3_train.n_samples)))
+    return make_model("np-inward", data.dof, gp_config=GPFitConfig(n_restarts=2, max_iter=200)).fit(data)
