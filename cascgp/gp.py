@@ -513,6 +513,7 @@ class GPBank:
         max_jit = np.zeros(B)
         n_eval_total = 0
         rounds = 0
+        stage_evals = {"screen": 0, "full": 0}
         screen_nll = np.full((B, R), np.nan)
         final_theta = theta0[:, 0, :].copy()
         nll_r = np.full((B, R), np.nan)
@@ -520,7 +521,7 @@ class GPBank:
         eval_r = np.zeros((B, R), dtype=np.int64)
         reason_r = [["not_run"] * R for _ in range(B)]
 
-        def make_fun(tX: torch.Tensor, ty: torch.Tensor, gp_of: np.ndarray):
+        def make_fun(tX: torch.Tensor, ty: torch.Tensor, gp_of: np.ndarray, stage: str):
             def fun(Th: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
                 nonlocal n_eval_total, rounds
                 gsel = torch.as_tensor(gp_of[idx])
@@ -529,6 +530,7 @@ class GPBank:
                 jn = jit.numpy()
                 np.maximum.at(max_jit, gp_of[idx], jn)
                 n_eval_total += len(idx)
+                stage_evals[stage] += len(idx)
                 rounds += 1
                 return f.numpy(), g.numpy()
             return fun
@@ -557,7 +559,7 @@ class GPBank:
                 ys_t = torch_y[:, sub].clone()
                 sopts = LBFGSOptions(history=cfg.history, max_iter=cfg.screen_max_iter, grad_tol=cfg.grad_tol,
                                      rel_tol=cfg.screen_rel_tol)
-                sst = minimize_batched(make_fun(Xs_t, ys_t, gp_of), starts, sopts, make_prune(gp_of))
+                sst = minimize_batched(make_fun(Xs_t, ys_t, gp_of, "screen"), starts, sopts, make_prune(gp_of))
                 sf = np.array([s.f for s in sst])
                 keep = []
                 for b in opt_gps:
@@ -584,7 +586,7 @@ class GPBank:
             else:
                 pre_iter = np.zeros(len(gp_of), dtype=np.int64)
                 pre_eval = np.zeros(len(gp_of), dtype=np.int64)
-            states = minimize_batched(make_fun(torch_X, torch_y, gp_of), starts, opts, make_prune(gp_of))
+            states = minimize_batched(make_fun(torch_X, torch_y, gp_of, "full"), starts, opts, make_prune(gp_of))
             for k, st in enumerate(states):
                 b, r = int(gp_of[k]), int(start_idx[k])
                 nll_r[b, r] = st.f
@@ -626,7 +628,8 @@ class GPBank:
                 "warm_start": warm,
                 "screen_nll": [_num(v) for v in screen_nll[b]],
             })
-        self.fit_summary = {"time_s": time.perf_counter() - t0, "n_eval": int(n_eval_total), "batch_rounds": rounds}
+        self.fit_summary = {"time_s": time.perf_counter() - t0, "n_eval": int(n_eval_total), "batch_rounds": rounds,
+                            "n_eval_screen": stage_evals["screen"], "n_eval_full": stage_evals["full"]}
         return self
 
     @staticmethod
