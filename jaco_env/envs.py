@@ -146,11 +146,14 @@ class _JacoBase(MujocoEnv):
         else:
             d.ctrl[:6] = a
             d.ctrl[6:12] = a
-            acc = np.zeros(6)
-            for _ in range(self.frame_skip):
-                mujoco.mj_step(m, d)
-                acc += d.qfrc_actuator[self._arm_dof]
-            self._tau_meas_true = acc / self.frame_skip
+            mujoco.mj_step(m, d, nstep=self.frame_skip)
+            # The firmware torque at the sample instant (same instant as q, qd): mj_step left
+            # qfrc_actuator of the *start* of the last physics step, so evaluate the position and
+            # velocity stages and the actuators at the current state (the command of the period
+            # just ended is still in effect: a sampled sensor reads before the next command).
+            mujoco.mj_step1(m, d)
+            mujoco.mj_fwdActuation(m, d)
+            self._tau_meas_true = d.qfrc_actuator[self._arm_dof].copy()
         warn = np.array([w.number for w in d.warning], dtype=np.int64)
         new_warning = bool(np.any(warn > self._warn_counts))
         self._warn_counts = warn
@@ -239,13 +242,21 @@ class JacoPourEnv(_JacoBase, EzPickle):
     ## Observation Space
     ``Box(-inf, inf, (22,), float64)``; measurements carry Gaussian noise
     (:class:`jaco_env.sensors.SensorNoise`, default q 5e-4 rad, qd 5e-3 rad/s, tau 0.1 N m).
-    Joint accelerations are not observed.
+    Joint accelerations are not observed. All measurements are **instantaneous samples at the
+    same instant** (the end of the control period), as the Jaco 2's sampled joint sensors:
+    the measured torque is the actuator torque at that instant, with the command of the
+    period just ended still in effect (torque mode: the applied torque ``clip(action)``;
+    velocity mode: the firmware loop's torque ``clip(KV (v - qd) + KI (q_ref - q))`` at the
+    sampled ``q, qd``). Hence ``(q, qd, tau)`` of one observation satisfy the robot's inverse
+    dynamics at that instant (with the acceleration at that instant, which a data set
+    estimates by differentiating ``qd``). The measured torque is the actuator torque: joint
+    friction, damping and armature are part of the dynamics that a model has to learn.
 
     | Num   | Observation                                                         | Unit  |
     |-------|---------------------------------------------------------------------|-------|
     | 0-5   | measured joint positions q (dm_control convention, see robot.py)   | rad   |
     | 6-11  | measured joint velocities qd                                        | rad/s |
-    | 12-17 | measured joint torque: mean actuator torque of the last period + noise | N m |
+    | 12-17 | measured joint torque at the sample instant + noise (see below)     | N m   |
     | 18    | time since reset                                                    | s     |
     | 19-21 | jar position (bottom centre, world frame)                          | m     |
 
@@ -281,7 +292,8 @@ class JacoPourEnv(_JacoBase, EzPickle):
     when no display is found) or ``osmesa``; ``human`` needs a display.
 
     ## Version History
-    - v0: initial version.
+    - v0: initial version. (Pre-release revision: jar inner radius 25 mm, shorter tasks, CG
+      solver, the measured torque is an instantaneous sample instead of the period mean.)
     """
 
     _kind = "pour"
@@ -327,6 +339,16 @@ class JacoPourEnv(_JacoBase, EzPickle):
         idx = self._marble_qpos[:, None] + np.arange(3)
         return self.data.qpos[idx].copy()
 
+    def marbles_in_bottle_frame(self) -> tuple[np.ndarray, np.ndarray]:
+        """Marble positions in the bottle frame (n_marbles, 3) and which are inside the bottle (bool)."""
+        p = self.marble_positions()
+        xb = self.data.xpos[self._bottle_body]
+        Rb = self.data.xmat[self._bottle_body].reshape(3, 3)
+        loc = (p - xb) @ Rb
+        in_bottle = (np.linalg.norm(loc[:, :2], axis=1) < scene.BOTTLE_INNER_RADIUS + 0.003) & (
+            loc[:, 2] > scene.BOTTLE_BOTTOM - 0.003) & (loc[:, 2] < scene.BOTTLE_TOP)
+        return loc, in_bottle
+
     def marble_counts(self) -> tuple[int, int, int]:
         """(in jar, in bottle, spilled). Spilled: outside both and below the jar rim height."""
         p = self.marble_positions()
@@ -334,11 +356,7 @@ class JacoPourEnv(_JacoBase, EzPickle):
         r = np.linalg.norm(p[:, :2] - jar[:2], axis=1)
         z = p[:, 2] - jar[2]
         in_jar = (r < scene.JAR_INNER_RADIUS) & (z > -0.01) & (z < scene.JAR_HEIGHT)
-        xb = self.data.xpos[self._bottle_body]
-        Rb = self.data.xmat[self._bottle_body].reshape(3, 3)
-        loc = (p - xb) @ Rb
-        in_bottle = (np.linalg.norm(loc[:, :2], axis=1) < scene.BOTTLE_INNER_RADIUS + 0.003) & (
-            loc[:, 2] > scene.BOTTLE_BOTTOM - 0.003) & (loc[:, 2] < scene.BOTTLE_TOP)
+        _, in_bottle = self.marbles_in_bottle_frame()
         spilled = ~in_jar & ~in_bottle & (z < scene.JAR_HEIGHT)
         return int(in_jar.sum()), int(in_bottle.sum()), int(spilled.sum())
 

@@ -20,11 +20,13 @@ settle      the home pose is held for ``settle`` seconds (marbles land and come 
 The poses are computed once by inverse kinematics (damped least squares on MuJoCo's
 site Jacobians of the arm + bottle model, 6-D pose error: mouth position and bottle
 orientation). The tip phase is solved at ``N_TIP_POINTS`` tilt angles (warm-started
-one from the next) and interpolated by a cubic spline in the path parameter s; the
-other phases are straight lines in joint space. Every phase is time-scaled by a
-quintic s(t) (zero velocity and acceleration at both ends) whose duration is the
-shortest for which no joint exceeds ``speed`` times its velocity limit
-(:data:`jaco_env.robot.VELOCITY_LIMITS`).
+one from the next) and interpolated by a cubic spline, re-parametrised by the
+velocity-limit-weighted arc length (the limiting joint moves at a uniform fraction of
+its limit along the path); the other phases are straight lines in joint space. Every
+phase is time-scaled by a quintic s(t) (zero velocity and acceleration at both ends)
+whose duration is the shortest for which no joint exceeds ``speed`` (``tip_speed``
+while tipping) times its velocity limit (:data:`jaco_env.robot.VELOCITY_LIMITS`).
+Default tasks last 15-20 s (the tip, ~5 s each way, is limited by the wrist roll).
 
 Why hand-written IK: MuJoCo offers Jacobians but no IK solver; a 6-DOF DLS loop is
 a dozen lines and needs no further dependency.
@@ -183,9 +185,20 @@ def _spline(qs: np.ndarray, reverse: bool = False):
     qs = qs[::-1] if reverse else qs
     sgrid = np.linspace(0.0, 1.0, len(qs))
     cs = CubicSpline(sgrid, qs, axis=0, bc_type="clamped")
-    fine = np.linspace(0, 1, 401)
-    # Peak |dq/ds| (clamped ends make dq/ds = 0 there; the quintic also has zero speed).
-    return (lambda s, nu: cs(s, nu)), np.max(np.abs(cs(fine, 1)), axis=0)
+    # Re-parametrise by the velocity-limit-weighted arc length sigma(s) = int max_j |dq_j/ds| /
+    # vlim_j ds, so that the limiting joint moves at a uniform fraction of its limit along the
+    # path (with a uniform s, the peak |dq/ds| of the tip sets the time scale of the whole tip
+    # and the rest of it crawls). Small floor: no division by zero where the path pauses.
+    fine = np.linspace(0.0, 1.0, 2001)
+    g = np.max(np.abs(cs(fine, 1)) / robot.VELOCITY_LIMITS, axis=1)
+    g = np.maximum(g, 0.05 * g.max())
+    sigma = np.concatenate([[0.0], np.cumsum(0.5 * (g[1:] + g[:-1]) * np.diff(fine))])
+    sigma /= sigma[-1]
+    grid = np.linspace(0.0, 1.0, 61)
+    cs2 = CubicSpline(grid, cs(np.interp(grid, sigma, fine)), axis=0, bc_type="not-a-knot")
+    fine2 = np.linspace(0, 1, 2001)
+    # Peak |dq/dsigma| (the quintic time scaling has zero speed at both ends).
+    return (lambda s, nu: cs2(s, nu)), np.max(np.abs(cs2(fine2, 1)), axis=0)
 
 
 def _duration(max_dqds: np.ndarray, speed: float) -> float:
@@ -217,12 +230,12 @@ class PouringTask:
     jar_pos: np.ndarray
     payload_mass: float | None = None
     tilt: float = np.deg2rad(125.0)
-    pour_height: float = 0.06
+    pour_height: float = 0.05
     pre_height: float = 0.12
     pour_offset: float = 0.02
-    hold: float = 1.5
-    settle: float = 1.0
-    speed: float = 0.6
+    hold: float = 1.0
+    settle: float = 0.5
+    speed: float = 0.8
     tip_speed: float = 0.9
     _segments: list = field(default=None, init=False, repr=False, compare=False)
     _bounds: np.ndarray = field(default=None, init=False, repr=False, compare=False)
@@ -364,7 +377,7 @@ DEFAULT_TASKS: dict[str, PouringTask] = {
     "right": _task("right", 0.35, -0.42),
     "front_left": _task("front_left", 0.50, 0.28),
     "front_right": _task("front_right", 0.50, -0.28),
-    "near": _task("near", 0.42, 0.10),
+    "near": _task("near", 0.44, 0.13),
     "far": _task("far", 0.62, -0.10),
 }
 

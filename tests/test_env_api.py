@@ -189,6 +189,28 @@ def test_velocity_mode_tracks_command():
     env.close()
 
 
+def test_velocity_mode_torque_is_instantaneous_sample():
+    """tau of an observation is the firmware torque at the same instant as its q, qd (noiseless)."""
+    env = gym.make("JacoPayload-v0", control_mode="velocity", sensor_noise=None)
+    env.reset(seed=0)
+    u = env.unwrapped
+    for k in range(12):
+        cmd = 0.5 * robot.VELOCITY_LIMITS * np.sin(0.3 * k + np.arange(6))
+        obs, *_ = env.step(cmd)
+        q, qd, tau = obs[0:6], obs[6:12], obs[12:18]
+        q_ref = u.data.act[u._int_act]
+        law = scene.FIRMWARE_KV * (cmd - qd) + scene.FIRMWARE_KI * (q_ref - q)
+        assert np.allclose(tau, np.clip(law, -robot.TORQUE_LIMITS, robot.TORQUE_LIMITS), atol=1e-9)
+        # ... and equals MuJoCo's actuator force evaluated afresh at that state and command.
+        d = mujoco.MjData(u.model)
+        mujoco.mj_setState(u.model, d, np.concatenate([[u.data.time], u.data.qpos, u.data.qvel, u.data.act]),
+                           mujoco.mjtState.mjSTATE_PHYSICS | mujoco.mjtState.mjSTATE_TIME)
+        d.ctrl[:] = u.data.ctrl
+        mujoco.mj_forward(u.model, d)
+        assert np.allclose(d.qfrc_actuator[u._arm_dof], tau, atol=1e-9)
+    env.close()
+
+
 def test_reference_properties():
     dt = 1e-3
     for task in DEFAULT_TASKS.values():
