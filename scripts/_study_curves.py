@@ -3,8 +3,9 @@
 One *job* is (model, subset): the model is trained on the first ``T`` seconds of the subset for
 every ``T`` of the grid (ascending) and evaluated on the test set after each fit. Each fit after
 the first warm-starts from the previous grid point's hyperparameters (``init=``: start 0 of every
-GP) next to ``n_restarts - 1`` seeded random starts, so a job costs little more than its largest
-fit. Jobs run in a process pool (``workers``), each process with one torch/BLAS thread.
+GP) next to ``n_restarts - 1`` seeded random starts (the first fit uses the data-driven default
+start instead of the warm one). With the default ``n_restarts=1`` every later fit is that single
+warm start, which converges in few iterations. Jobs run in a process pool (``workers``), each process with one torch/BLAS thread.
 
 The RBD baseline is not trained: its test prediction is the nominal RNEA torque, the same for
 every subset and ``T``.
@@ -38,7 +39,7 @@ class CurveSpec:
     test_hz: float | None = 10.0  # test data subsampled to this rate (None: as recorded)
     split_by: str = "segment"  # "segment" (one subset per segment) or "rows" (split(n_subsets))
     urdf: str | None = None    # nominal URDF for SP models and the RBD baseline
-    n_restarts: int = 2
+    n_restarts: int = 1
     warm_start: bool = True
     seed: int = 0
     df_delta: float = 0.1

@@ -46,7 +46,7 @@ def prepare_files(sarcos_path: str | Path, out: str | Path) -> tuple[Path, Path,
 
 
 def run_sarcos(sarcos_path: str | Path, out: str | Path, *, grid=SARCOS_FULL_GRID, n_subsets: int = 9,
-               n_restarts: int = 2, workers: int | None = None, seed: int = 0,
+               n_restarts: int = 1, workers: int | None = None, seed: int = 0,
                gp_overrides: dict | None = None) -> dict[str, Any]:
     """The SARCOS block of the results JSON (curves of NP standard / inward / outward)."""
     t0 = time.perf_counter()
@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--sarcos", default=str(DEFAULT_SARCOS), help="path of ias_sarcos_data.mat")
     ap.add_argument("--out", required=True)
     ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--restarts", type=int, default=2)
+    ap.add_argument("--restarts", type=int, default=1)
     ap.add_argument("--workers", type=int, default=None)
     a = ap.parse_args(argv)
     limit_threads(1)
