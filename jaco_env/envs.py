@@ -213,7 +213,8 @@ class JacoPourEnv(_JacoBase, EzPickle):
     at run time with ``dm_control.mjcf`` (see :mod:`jaco_env.scene`); MuJoCo simulates them.
     The fingers are welded closed and the **bottle is rigidly attached to the hand** (a
     perfect grasp, no slip). ``n_marbles`` free marbles (default 30, 20-40 recommended) are
-    placed inside the bottle at reset. A jar stands on the table at the task's position. The
+    placed inside the bottle at reset. A jar (inner radius 27 mm, 12 cm tall; marbles 15 mm)
+    stands on the table at the task's position. The
     simulated "true" robot has joint friction, damping and rotor inertia (armature), see
     :mod:`jaco_env.robot`. The hand carries an **unknown payload** = bottle + marbles + an
     extra rigid mass in the bottle's bottom; its total (``info["payload_mass"]``) is drawn
@@ -292,7 +293,7 @@ class JacoPourEnv(_JacoBase, EzPickle):
     when no display is found) or ``osmesa``; ``human`` needs a display.
 
     ## Version History
-    - v0: initial version. (Pre-release revision: jar inner radius 25 mm, shorter tasks, CG
+    - v0: initial version. (Pre-release revision: jar inner radius 27 mm, pour 5 cm above it, shorter tasks, CG
       solver, the measured torque is an instantaneous sample instead of the period mean.)
     """
 

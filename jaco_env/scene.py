@@ -39,11 +39,12 @@ BOTTLE_MASS = 0.20  # glass bottle
 BOTTLE_N_WALLS = 12
 MARBLE_RADIUS = 0.0075
 MARBLE_MASS = 0.005  # a 15 mm glass marble weighs about 4.5-5 g
-#: Jar inner radius: sized so that tracking accuracy decides the pour (payload 1.2 kg, see
-#: ``scripts/pour_separation.py``): the oracle's mouth error while pouring (~0.2-0.5 cm mean)
-#: lands every marble, the nominal rigid-body feedforward's (~1-1.7 cm) loses part of them and
-#: PD only (~1.5-3.3 cm) nearly all. With 35 mm the nominal feedforward poured 100% on most tasks.
-JAR_INNER_RADIUS = 0.026
+#: Jar inner radius: sized so that tracking accuracy decides the pour (payload 1.2 kg, mouth
+#: ``pour_height`` 5 cm above the rim, see ``scripts/pour_separation.py``): with the oracle's mouth
+#: error while pouring (~0.2-0.5 cm mean) every marble lands, with the nominal rigid-body
+#: feedforward's (~1-1.7 cm) most miss on 6 of 7 tasks, with PD only (~1.6-3.4 cm) nearly all.
+#: (35 mm: the nominal feedforward poured 100% on most tasks; 25-26 mm: the oracle lost a few.)
+JAR_INNER_RADIUS = 0.027
 JAR_HEIGHT = 0.12
 JAR_WALL = 0.006
 JAR_N_WALLS = 16
