@@ -5,8 +5,10 @@
 Both run the same compiled model from the same state for the same number of control
 periods (``frame_skip`` physics steps each) with the same torque: the raw loop only calls
 ``mujoco.mj_step(model, data, nstep=frame_skip)``; the env loop calls ``env.step`` (action
-checks, sensors, reference, marble bookkeeping, info). One run; BLAS/OpenMP limited to one
-thread. Prints a table and writes ``bench_env.json`` into ``--out``.
+checks, sensors, reference, marble bookkeeping, info). Also compares raw stepping with the
+env's CG solver against MuJoCo's default Newton solver (speed, and the largest difference of
+the arm joints and marble positions after the same steps). One run; BLAS/OpenMP limited to
+one thread. Prints a table and writes ``bench_env.json`` into ``--out``.
 """
 
 from __future__ import annotations
@@ -58,8 +60,32 @@ def bench(env_id: str, steps: int) -> dict:
     for _ in range(steps):
         mujoco.mj_step(u.model, d, nstep=u.frame_skip)
     t_raw = time.perf_counter() - t0
+
+    # The env uses MuJoCo's CG solver (scene.py); compare with the default Newton solver: time,
+    # and how far the arm and the marbles drift apart over the same steps (physics unchanged
+    # up to solver tolerance if both are small).
+    solver_cmp = {}
+    for name, solver in (("newton", mujoco.mjtSolver.mjSOL_NEWTON), ("cg", mujoco.mjtSolver.mjSOL_CG)):
+        m2 = u.model.__copy__()
+        m2.opt.solver = solver
+        d2 = mujoco.MjData(m2)
+        mujoco.mj_setState(m2, d2, state0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+        d2.ctrl[:6] = tau
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            mujoco.mj_step(m2, d2, nstep=u.frame_skip)
+        solver_cmp[name] = (time.perf_counter() - t0, d2.qpos.copy())
+    q_n, q_c = solver_cmp["newton"][1], solver_cmp["cg"][1]
+    arm = u._arm_qpos
+    marb = getattr(u, "_marble_qpos", np.zeros(0, int))
     env.close()
     return {
+        "newton_raw_steps_per_s": steps / solver_cmp["newton"][0],
+        "cg_raw_steps_per_s": steps / solver_cmp["cg"][0],
+        "cg_vs_newton_arm_max_diff_rad": float(np.max(np.abs(q_n[arm] - q_c[arm]))),
+        "cg_vs_newton_marble_max_diff_m": float(np.max(np.abs(q_n[marb[:, None] + np.arange(3)]
+                                                             - q_c[marb[:, None] + np.arange(3)]))) if len(marb)
+        else 0.0,
         "env_id": env_id,
         "control_steps": steps,
         "physics_steps_per_control_step": u.frame_skip,
@@ -79,10 +105,12 @@ def main(argv: list[str] | None = None) -> None:
     if args.steps < 1:
         p.error("--steps must be >= 1")
     rows = [bench(e, args.steps) for e in args.env]
-    print(f"{'env':16s} {'env steps/s':>12s} {'raw steps/s':>12s} {'ratio':>7s}")
+    print(f"{'env':16s} {'env steps/s':>12s} {'raw steps/s':>12s} {'ratio':>7s} {'raw Newton':>11s} "
+          f"{'raw CG':>8s} {'CG-Newton arm rad / marbles m':>30s}")
     for r in rows:
         print(f"{r['env_id']:16s} {r['env_steps_per_s']:12.1f} {r['raw_steps_per_s']:12.1f} "
-              f"{r['ratio_env_over_raw']:7.3f}")
+              f"{r['ratio_env_over_raw']:7.3f} {r['newton_raw_steps_per_s']:11.1f} {r['cg_raw_steps_per_s']:8.1f} "
+              f"{r['cg_vs_newton_arm_max_diff_rad']:15.2e} / {r['cg_vs_newton_marble_max_diff_m']:.2e}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     meta = {"mujoco": mujoco.__version__, "python": platform.python_version(), "machine": platform.machine(),
