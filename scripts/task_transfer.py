@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import sys
 import time
 from dataclasses import dataclass, field
@@ -226,7 +227,7 @@ def write_outputs(runs: list[ControllerRun], cfg: TransferConfig, out: Path, wal
     return results
 
 
-def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path]:
+def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, bool]:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, required=True, help="output folder (created; should be new or empty)")
     p.add_argument("--quick", action="store_true",
@@ -240,6 +241,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path]:
     p.add_argument("--rate", type=float, default=10.0, help="training data rate (Hz)")
     p.add_argument("--cap", type=int, default=500, help="maximum training-set size")
     p.add_argument("--restarts", type=int, default=3, help="GP optimiser restarts per retraining")
+    p.add_argument("--overwrite", action="store_true", help="delete the data buffers of an earlier run in --out")
     a = p.parse_args(argv)
     cfg = TransferConfig(
         controllers=tuple(a.controllers.split(",")) if a.controllers else
@@ -250,13 +252,16 @@ def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path]:
         restarts=a.restarts)
     if cfg.attempts < 1:
         p.error("--attempts must be at least 1")
-    return cfg, a.out
+    return cfg, a.out, a.overwrite
 
 
 def main(argv: list[str] | None = None) -> None:
-    cfg, out = parse_args(argv)
-    if (out / "buffers").exists() and any((out / "buffers").iterdir()):
-        sys.exit(f"error: {out}/buffers already holds data from an earlier run; choose a new --out folder")
+    cfg, out, overwrite = parse_args(argv)
+    buffers = out / "buffers"
+    if buffers.exists() and any(buffers.iterdir()):
+        if not overwrite:
+            sys.exit(f"error: {buffers} holds data from an earlier run; choose a new --out folder or pass --overwrite")
+        shutil.rmtree(buffers)
     t0 = time.perf_counter()
     runs = run_transfer(cfg, out)
     write_outputs(runs, cfg, out, time.perf_counter() - t0)

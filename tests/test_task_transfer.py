@@ -1,0 +1,80 @@
+"""Policy evaluation of the task-transfer loop on JacoPour-v0 (seeded; one shared run for all assertions).
+
+Two tasks in different parts of the workspace, payload unknown to every controller:
+- PD only and the nominal RBD feedforward attempt each task once;
+- the SP inward cascade attempts task A four times (retrained after each attempt on all data so
+  far), then task B four times, then revisits A once.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from scripts.task_transfer import TransferConfig, make_controller, run_controller
+
+TASK_A, TASK_B = "front", "left"
+#: Revisit tolerance: the first attempt back on task A may be at most this much worse (relative)
+#: than the last attempt there before, although the buffer now also holds task B and is thinned to the cap.
+REVISIT_TOLERANCE = 0.15
+
+
+@pytest.fixture(scope="module")
+def runs():
+    import gymnasium as gym
+
+    from cascgp.rbd import load_nominal
+    from scripts.task_transfer import NOMINAL_URDF
+
+    cfg = TransferConfig(controllers=("pd", "rbd", "sp-inward"), tasks=(TASK_A, TASK_B), attempts=4,
+                         payload_mass=1.2, seed=0, restarts=2, cap=400)
+    rbd = load_nominal(NOMINAL_URDF)
+    env = gym.make("JacoPour-v0", n_marbles=cfg.n_marbles)
+    once = [(TASK_A, 0, "eval"), (TASK_B, 0, "eval")]
+    learn = ([(TASK_A, k, "train") for k in range(4)] + [(TASK_B, k, "train") for k in range(4)]
+             + [(TASK_A, 4, "revisit")])
+    out = {name: run_controller(name, cfg, env, rbd, plan=once) for name in ("pd", "rbd")}
+    out["sp-inward"] = run_controller("sp-inward", cfg, env, rbd, plan=learn)
+    env.close()
+    return {name: run.attempts for name, run in out.items()}
+
+
+def _rmse(attempts, task, k=None, phase=None):
+    sel = [a for a in attempts if a["task"] == task and (k is None or a["task_attempt"] == k)
+           and (phase is None or a["phase"] == phase)]
+    assert len(sel) == 1
+    return sel[0]["tracking_rmse"]
+
+
+@pytest.mark.parametrize("task", [TASK_A, TASK_B])
+def test_rbd_feedforward_tracks_better_than_pd(runs, task):
+    assert _rmse(runs["rbd"], task) < 0.8 * _rmse(runs["pd"], task)
+
+
+@pytest.mark.parametrize("task", [TASK_A, TASK_B])
+def test_sp_inward_after_three_retrainings_beats_rbd(runs, task):
+    # Attempt index 3 on a task runs the model retrained after that task's three earlier attempts.
+    assert _rmse(runs["sp-inward"], task, k=3, phase="train") < _rmse(runs["rbd"], task)
+
+
+def test_learning_improves_over_the_first_attempt(runs):
+    first = _rmse(runs["sp-inward"], TASK_A, k=0)
+    assert _rmse(runs["sp-inward"], TASK_A, k=3) < 0.8 * first
+
+
+def test_revisit_is_as_good_as_the_last_attempt_before(runs):
+    last = _rmse(runs["sp-inward"], TASK_A, k=3, phase="train")
+    revisit = _rmse(runs["sp-inward"], TASK_A, phase="revisit")
+    assert revisit <= (1.0 + REVISIT_TOLERANCE) * last
+
+
+def test_no_fallbacks_or_instability(runs):
+    for attempts in runs.values():
+        for a in attempts:
+            assert a["n_fallbacks"] == 0 and not a["unstable"]
+            assert np.isfinite(a["tracking_rmse"])
+
+
+def test_unknown_controller_name_is_a_clear_error():
+    with pytest.raises(ValueError, match="unknown controller 'sp-sideways'"):
+        make_controller("sp-sideways", rbd=None, model=None)
