@@ -5,7 +5,8 @@ every ``T`` of the grid (ascending) and evaluated on the test set after each fit
 the first warm-starts from the previous grid point's hyperparameters (``init=``: start 0 of every
 GP) next to ``n_restarts - 1`` seeded random starts (the first fit uses the data-driven default
 start instead of the warm one). With the default ``n_restarts=1`` every later fit is that single
-warm start, which converges in few iterations. Jobs run in a process pool (``workers``), each process with one torch/BLAS thread.
+warm start, which converges in few iterations. Jobs run in a process pool (``workers``), each
+process with one torch/BLAS thread.
 
 The RBD baseline is not trained: its test prediction is the nominal RNEA torque, the same for
 every subset and ``T``.

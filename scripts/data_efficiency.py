@@ -134,7 +134,7 @@ def run_study(out: str | Path, settings: Settings, *, models: list[str] | None =
     timings["collect_s"] = cinfo["wall_s"]
     results["meta"]["collection"] = {**asdict(ccfg), "reused": cinfo["reused"],
                                      "train_rows": train.n_samples, "test_rows": test.n_samples,
-                                     "train_seconds": train.duration, "test_seconds": test.duration,
+                                     "train_total_seconds": train.duration, "test_total_seconds": test.duration,
                                      "qdd": train.meta.get("qdd_source")}
 
     # 2. curves (12 variants + RBD)

@@ -1,7 +1,8 @@
 """SARCOS part of the data-efficiency study (the paper's Fig. 5).
 
 Data: the IAS SARCOS file (``ias_sarcos_data.mat``, path argument), the real 7-DOF SARCOS arm.
-Training: the IAS training rows subsampled to 10 Hz (every 5th row of the nominal 50 Hz) and
+Training: the IAS training rows subsampled to 10 Hz (every 5th row of the nominal 50 Hz, restarting
+at each recording boundary that :mod:`cascgp.sarcos` detects: 2803 rows) and
 split into 9 time-contiguous subsets of equal row counts (about 31 s each). Test: the IAS test
 rows whose inputs do NOT also stand in the training rows (to 8 decimals: 2785 of 5569 are
 removed, :func:`cascgp.sarcos.load_ias` with ``dedup=True``), all 2784 kept rows, not
