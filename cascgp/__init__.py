@@ -20,6 +20,10 @@ load_model          cascgp.models          read a saved model
 GPBank              cascgp.gp              batched exact GPs
 GPFitConfig         cascgp.gp              GP fit options
 RigidBodyModel      cascgp.rbd             Pinocchio RNEA wrapper
+load_nominal        cascgp.rbd             RBD model from a URDF + its sidecar JSON
+FeedforwardController cascgp.controller    tau = f(q_d, qd_d, qdd_d) + Kp e + Kd e_dot (eq. 2)
+DataBuffer          cascgp.buffer          episodes persisted across tasks
+run_episode         cascgp.episodes        run a controller in a Gymnasium env, record data
 ==================  =====================  =================================================
 """
 
@@ -45,6 +49,10 @@ _EXPORTS = {
     "GPBank": "cascgp.gp",
     "GPFitConfig": "cascgp.gp",
     "RigidBodyModel": "cascgp.rbd",
+    "load_nominal": "cascgp.rbd",
+    "FeedforwardController": "cascgp.controller",
+    "DataBuffer": "cascgp.buffer",
+    "run_episode": "cascgp.episodes",
 }
 
 __all__ = sorted(_EXPORTS)
