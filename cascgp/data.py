@@ -93,6 +93,17 @@ def read_npz(path: str | os.PathLike, what: str) -> dict[str, np.ndarray]:
 
 
 # --------------------------------------------------------------------------- validation
+def check_format_header(z: dict[str, np.ndarray], path: str | os.PathLike, kind: str, version: int) -> None:
+    """Raise ``ValueError`` naming the file and field unless ``z`` holds ``format_kind == kind``
+    and ``format_version == version`` (shared by every cascgp file format)."""
+    got_kind = str(z["format_kind"]) if "format_kind" in z else None
+    if got_kind != kind:
+        raise ValueError(f"{path}: format_kind: expected {kind!r}, got {got_kind!r}")
+    got_version = int(z["format_version"]) if "format_version" in z else None
+    if got_version != version:
+        raise ValueError(f"{path}: format_version: expected {version}, got {got_version}")
+
+
 def _first_bad_row(mask: np.ndarray) -> int:
     return int(np.flatnonzero(mask)[0])
 
@@ -430,12 +441,7 @@ class DynamicsData:
         ``FileNotFoundError``; a corrupt/truncated archive, a missing field, another format
         version or invalid contents raise ``ValueError`` naming the file and the field."""
         z = read_npz(path, "DynamicsData")
-        kind = str(z["format_kind"]) if "format_kind" in z else None
-        if kind != _KIND:
-            raise ValueError(f"{path}: format_kind: expected {_KIND!r}, got {kind!r}")
-        version = int(z["format_version"]) if "format_version" in z else None
-        if version != FORMAT_VERSION:
-            raise ValueError(f"{path}: format_version: expected {FORMAT_VERSION}, got {version}")
+        check_format_header(z, path, _KIND, FORMAT_VERSION)
         missing = [k for k in (*_ARRAY_FIELDS, "t", "segment", "meta_json") if k not in z]
         if missing:
             raise ValueError(f"{path}: missing field(s) {missing}")

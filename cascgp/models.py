@@ -62,7 +62,7 @@ from typing import Any
 
 import numpy as np
 
-from .data import DynamicsData, atomic_savez, read_npz
+from .data import DynamicsData, atomic_savez, check_format_header, read_npz
 from .features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
 
 __all__ = ["MODEL_NAMES", "FORMAT_VERSION", "CascadedGPModel", "make_model", "load_model", "parse_name"]
@@ -548,12 +548,7 @@ def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
     from .gp import GPBank, GPFitConfig
 
     z = read_npz(path, "cascgp model")
-    kind = str(z["format_kind"]) if "format_kind" in z else None
-    if kind != _KIND:
-        raise ValueError(f"{path}: format_kind: expected {_KIND!r}, got {kind!r}")
-    version = int(z["format_version"]) if "format_version" in z else None
-    if version != FORMAT_VERSION:
-        raise ValueError(f"{path}: format_version: expected {FORMAT_VERSION}, got {version}")
+    check_format_header(z, path, _KIND, FORMAT_VERSION)
     try:
         cfg = json.loads(str(z["config_json"]))
         names = {f.name for f in fields(GPFitConfig)}
