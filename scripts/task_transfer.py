@@ -231,10 +231,10 @@ def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, boo
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, required=True, help="output folder (created; should be new or empty)")
     p.add_argument("--quick", action="store_true",
-                   help=f"short demo: controllers {QUICK_CONTROLLERS}, tasks {QUICK_TASKS}, 2 attempts each")
+                   help=f"short demo: controllers {QUICK_CONTROLLERS}, tasks {QUICK_TASKS}, 3 attempts each")
     p.add_argument("--controllers", type=str, default=None, help="comma-separated controller names")
     p.add_argument("--tasks", type=str, default=None, help="comma-separated task names (JacoPour-v0 defaults)")
-    p.add_argument("--attempts", type=int, default=None, help="attempts per task (default 3, quick 2)")
+    p.add_argument("--attempts", type=int, default=3, help="attempts per task")
     p.add_argument("--no-revisit", action="store_true", help="do not revisit the first task at the end")
     p.add_argument("--payload", type=float, default=1.2, help="unknown payload mass in the hand (kg)")
     p.add_argument("--seed", type=int, default=0)
@@ -247,7 +247,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, boo
         controllers=tuple(a.controllers.split(",")) if a.controllers else
         (QUICK_CONTROLLERS if a.quick else FULL_CONTROLLERS),
         tasks=tuple(a.tasks.split(",")) if a.tasks else (QUICK_TASKS if a.quick else FULL_TASKS),
-        attempts=a.attempts if a.attempts is not None else (2 if a.quick else 3),
+        attempts=a.attempts,
         revisit=not a.no_revisit, payload_mass=a.payload, seed=a.seed, rate_hz=a.rate, cap=a.cap,
         restarts=a.restarts)
     if cfg.attempts < 1:
