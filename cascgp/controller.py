@@ -98,7 +98,11 @@ class FeedforwardController:
 
     def feedforward(self, t: float, reference: Reference) -> np.ndarray:
         """The feedforward torque at time ``t`` (finite, not yet clipped)."""
-        q_d, qd_d, qdd_d = reference(t)
+        return self._feedforward(t, *reference(t), reference)
+
+    def _feedforward(
+        self, t: float, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, reference: Reference
+    ) -> np.ndarray:
         if self.model is None:
             return np.zeros(self.dof)
         tau = self._model_torque(t, q_d, qd_d, qdd_d, reference)
@@ -136,7 +140,7 @@ class FeedforwardController:
         qd = np.asarray(qd, dtype=float)
         if q.shape != (self.dof,) or qd.shape != (self.dof,):
             raise ValueError(f"q and qd must have shape ({self.dof},), got {q.shape} and {qd.shape}")
-        q_d, qd_d, _ = reference(t)
+        q_d, qd_d, qdd_d = reference(t)  # once per tick; shared with the feedforward
         bad = ~(np.isfinite(q) & np.isfinite(qd) & np.isfinite(q_d) & np.isfinite(qd_d))
         if np.any(bad):
             self.n_bad_measurements += 1
@@ -146,7 +150,7 @@ class FeedforwardController:
             p_term = np.nan_to_num(self.kp * (q_d - q), nan=0.0, posinf=_BIG, neginf=-_BIG)
             d_term = np.nan_to_num(self.kd * (qd_d - qd), nan=0.0, posinf=_BIG, neginf=-_BIG)
         feedback = np.where(bad, 0.0, p_term + d_term)
-        tau = self.feedforward(t, reference) + feedback
+        tau = self._feedforward(t, q_d, qd_d, qdd_d, reference) + feedback
         return np.clip(tau, -self.torque_limits, self.torque_limits)
 
     def reset_counters(self) -> None:
