@@ -89,6 +89,7 @@ class _JacoBase(MujocoEnv):
         self._arm_dof = np.array([m.jnt_dofadr[m.joint(_P + n).id] for n in robot.JOINT_NAMES])
         self._payload_body = m.body(_P + "jaco_hand/payload").id
         self._bottle_body = m.body(_P + "jaco_hand/bottle").id
+        self._tau_sensor = np.array([m.sensor_adr[m.sensor(_P + n).id] + 2 for n in robot.TORQUE_SENSOR_NAMES])
         self._int_act = np.array([m.actuator_actadr[m.actuator(f"int_{i + 1}").id] for i in range(6)]) if (
             control_mode == "velocity") else np.zeros(0, int)
         self._warn_counts = np.zeros(len(self.data.warning), dtype=np.int64)
@@ -139,21 +140,15 @@ class _JacoBase(MujocoEnv):
     def _simulate(self, a: np.ndarray) -> bool:
         """Advance one control period; return True when the simulation went unstable."""
         m, d = self.model, self.data
-        if self.control_mode == "torque":
-            d.ctrl[:] = a
-            mujoco.mj_step(m, d, nstep=self.frame_skip)
-            self._tau_meas_true = d.qfrc_actuator[self._arm_dof].copy()
-        else:
-            d.ctrl[:6] = a
+        d.ctrl[:6] = a
+        if self.control_mode == "velocity":
             d.ctrl[6:12] = a
-            mujoco.mj_step(m, d, nstep=self.frame_skip)
-            # The firmware torque at the sample instant (same instant as q, qd): mj_step left
-            # qfrc_actuator of the *start* of the last physics step, so evaluate the position and
-            # velocity stages and the actuators at the current state (the command of the period
-            # just ended is still in effect: a sampled sensor reads before the next command).
-            mujoco.mj_step1(m, d)
-            mujoco.mj_fwdActuation(m, d)
-            self._tau_meas_true = d.qfrc_actuator[self._arm_dof].copy()
+        mujoco.mj_step(m, d, nstep=self.frame_skip)
+        # The joint torque sensors sample at the same instant as q and qd (the end of the period),
+        # with the command of the period just ended still in effect: mj_step left the sensors of
+        # the *start* of its last physics step, so evaluate the model at the current state.
+        mujoco.mj_forward(m, d)
+        self._tau_meas_true = d.sensordata[self._tau_sensor].copy()
         warn = np.array([w.number for w in d.warning], dtype=np.int64)
         new_warning = bool(np.any(warn > self._warn_counts))
         self._warn_counts = warn
@@ -215,8 +210,10 @@ class JacoPourEnv(_JacoBase, EzPickle):
     perfect grasp, no slip). ``n_marbles`` free marbles (default 30, 20-40 recommended) are
     placed inside the bottle at reset. A jar (inner radius 27 mm, 12 cm tall; marbles 15 mm)
     stands on the table at the task's position. The
-    simulated "true" robot has joint friction, damping and rotor inertia (armature), see
-    :mod:`jaco_env.robot`. The hand carries an **unknown payload** = bottle + marbles + an
+    actuators emulate the Jaco 2's firmware torque loop, closed on link-side joint torque
+    sensors: the link torque follows the command up to the residual rotor inertia and gear
+    friction the loop does not remove and a 5 ms lag (:mod:`jaco_env.robot` gives the figures
+    and their derivation). The hand carries an **unknown payload** = bottle + marbles + an
     extra rigid mass in the bottle's bottom; its total (``info["payload_mass"]``) is drawn
     uniformly from ``PAYLOAD_RANGE`` = (0.6, 1.5) kg per episode unless the task or
     ``reset(options={"payload_mass": m})`` fixes it (at most 1.6 kg, the Jaco 2 datasheet
@@ -235,23 +232,25 @@ class JacoPourEnv(_JacoBase, EzPickle):
     | 0-2 | joints 1-3, limit 30.5                     | joints 1-3, limit 0.628 (36 deg/s)            |
     | 3-5 | joints 4-6, limit 6.8                      | joints 4-6, limit 0.838 (48 deg/s)            |
 
-    Torque mode: the torque is held for one control period. Velocity mode emulates the Kinova
+    Torque mode: the commanded torque is held for one control period and reaches the links
+    through the firmware torque loop (residual rotor inertia 0.067 / 0.0096 kg m^2 and dry
+    friction 0.3 / 0.068 N m on joints 1-3 / 4-6, 5 ms lag). Velocity mode emulates the Kinova
     firmware's joint velocity loop at the physics rate (PI loop ``tau = KV (v - qd) + KI
-    (q_ref - q)``, ``q_ref`` the integral of ``v``; gains ``scene.FIRMWARE_KV/KI``), its torque
-    clipped to the torque limits. The paper collected its training data this way.
+    (q_ref - q)``, ``q_ref`` the integral of ``v``; gains ``scene.FIRMWARE_KV/KI``) on the same
+    torque loop, its torque clipped to the torque limits. The paper collected its training data
+    this way.
 
     ## Observation Space
     ``Box(-inf, inf, (22,), float64)``; measurements carry Gaussian noise
     (:class:`jaco_env.sensors.SensorNoise`, default q 5e-4 rad, qd 5e-3 rad/s, tau 0.1 N m).
     Joint accelerations are not observed. All measurements are **instantaneous samples at the
-    same instant** (the end of the control period), as the Jaco 2's sampled joint sensors:
-    the measured torque is the actuator torque at that instant, with the command of the
-    period just ended still in effect (torque mode: the applied torque ``clip(action)``;
-    velocity mode: the firmware loop's torque ``clip(KV (v - qd) + KI (q_ref - q))`` at the
-    sampled ``q, qd``). Hence ``(q, qd, tau)`` of one observation satisfy the robot's inverse
-    dynamics at that instant (with the acceleration at that instant, which a data set
-    estimates by differentiating ``qd``). The measured torque is the actuator torque: joint
-    friction, damping and armature are part of the dynamics that a model has to learn.
+    same instant** (the end of the control period), as the Jaco 2's sampled joint sensors. The
+    measured joint torque is the **link-side** torque of the strain-gauge joint torque sensors,
+    read from MuJoCo ``torque`` sensors on the child links and projected on the joint axes: the
+    torque passed to the links, without rotor inertia or gear friction. Hence ``(q, qd, tau)`` of
+    one observation (noise off) satisfy the rigid-body inverse dynamics of the links and the
+    payload at that instant, with the acceleration at that instant (which a data set estimates by
+    differentiating ``qd``); contact forces of the marbles on the bottle are part of it.
 
     | Num   | Observation                                                         | Unit  |
     |-------|---------------------------------------------------------------------|-------|
@@ -293,8 +292,10 @@ class JacoPourEnv(_JacoBase, EzPickle):
     when no display is found) or ``osmesa``; ``human`` needs a display.
 
     ## Version History
-    - v0: initial version. (Pre-release revision: jar inner radius 27 mm, pour 5 cm above it, shorter tasks, CG
-      solver, the measured torque is an instantaneous sample instead of the period mean.)
+    - v0: initial version. (Pre-release revisions: jar inner radius 27 mm, pour 5 cm above it, shorter tasks, CG
+      solver, the measured torque is an instantaneous sample instead of the period mean; then link-side torque
+      sensors, the firmware torque loop with datasheet-derived rotor inertia and friction instead of dm_control's
+      4 / 2 kg m^2 armature, and gains derived for the new inertia.)
     """
 
     _kind = "pour"
@@ -498,6 +499,11 @@ class JacoPayloadEnv(_JacoBase, EzPickle):
     ## Starting State
     At rest at the home pose ``jaco_env.tasks.home_pose()`` or ``options["q0"]`` (6 angles).
 
+    ## Info
+    ``time, payload_mass, unstable`` and ``qacc``: the true joint accelerations at the sample
+    instant (privileged, for analysis only: e.g. to measure the error of differentiated
+    accelerations; never part of the observation).
+
     ## Episode End
     Never terminates; truncated by the time limit (``max_episode_steps=2400``, 60 s at 40 Hz;
     pass ``max_episode_steps`` to ``gym.make`` for longer runs) or on an unstable simulation
@@ -557,7 +563,8 @@ class JacoPayloadEnv(_JacoBase, EzPickle):
         return np.zeros(self.observation_space.shape)
 
     def _info(self) -> dict[str, Any]:
-        return {"time": self.time, "payload_mass": self.payload_mass, "unstable": self._unstable}
+        return {"time": self.time, "payload_mass": self.payload_mass, "unstable": self._unstable,
+                "qacc": self.data.qacc[self._arm_dof].copy()}
 
     def step(self, action):
         a = self._validate_action(action)

@@ -9,6 +9,13 @@ The velocity command is its derivative. Amplitudes are scaled so that, for every
 * the commanded speed ``sum_k 2 pi f_jk |a_jk|`` stays below ``speed`` times the joint's
   velocity limit (a bound that holds for every t, not only on a sampled grid).
 
+Frequencies are drawn from 0.1-1 Hz (default): the slow components carry the arm across the
+workspace, the fast ones excite the inertia (a commanded speed near the velocity limit at 1 Hz
+means accelerations of a few rad/s^2; the firmware velocity loop's 15 rad/s bandwidth tracks
+them). The earlier 0.02-0.25 Hz motions were quasi-static (true accelerations of 0.1-0.24 rad/s^2
+spread): a model trained on them never saw the inertial terms. ``scripts.collect_jaco_data``
+reports the true acceleration spread reached.
+
 Use it with ``JacoPayload-v0`` in velocity mode: ``action = gen.velocity(t)``.
 """
 
@@ -43,7 +50,7 @@ class SumOfSinusoids:
     q0: np.ndarray
     seed: int = 0
     n_sines: int = 4
-    freq_range: tuple[float, float] = (0.02, 0.25)
+    freq_range: tuple[float, float] = (0.1, 1.0)
     speed: float = 0.8
     max_excursion: float = 0.8
     margin: float = 0.15

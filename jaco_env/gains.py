@@ -2,17 +2,23 @@
 
 ``tau = feedforward + DEFAULT_KP * (q_d - q) + DEFAULT_KD * (qd_d - qd)`` (N m/rad, N m s/rad).
 
-Chosen for the true robot's joint inertia, dominated by the rotor armature (about
-4.5 kg m^2 on joints 1-3, 2.1 kg m^2 on joints 4-6): natural frequencies of about 6-7
-rad/s (joints 1-3) and 5 rad/s (joints 4-6), damping ratios 0.6-0.7, and
-``KD * dt / I`` about 0.2, well inside the stability region of a 40 Hz zero-order-hold
-loop with the measurement noise of ``SensorNoise()`` (Kd * qd noise = 0.2 N m).
-Stiffer gains would hide the payload; weaker ones would not hold the arm up.
+Derived from the inertia each joint sees with the firmware torque loop closed
+(``robot.DESIGN_INERTIA``: links at the home pose with a 1 kg payload plus the residual rotor
+inertia, 0.69 / 0.66 / 0.27 / 0.12 / 0.056 / 0.017 kg m^2): a natural frequency of 10 rad/s and
+a damping ratio of 0.7 per joint, ``KP = I 10^2``, ``KD = 2 * 0.7 * I * 10``. Then
+``KD * dt / I = 0.35`` at 40 Hz, well inside the stability region of a zero-order-hold loop,
+and the velocity noise of ``SensorNoise()`` costs at most ``KD * 5e-3`` = 0.05 N m.
+PD alone leaves a steady gravity error of about 13 N m / 66 N m/rad = 0.2 rad on joint 2.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-DEFAULT_KP = np.array([120.0, 120.0, 120.0, 40.0, 40.0, 40.0])
-DEFAULT_KD = np.array([30.0, 30.0, 30.0, 9.0, 9.0, 9.0])
+from jaco_env.robot import DESIGN_INERTIA
+
+#: Closed-loop natural frequency (rad/s) and damping ratio of the recommended PD.
+NATURAL_FREQUENCY = 10.0
+DAMPING_RATIO = 0.7
+DEFAULT_KP = NATURAL_FREQUENCY**2 * DESIGN_INERTIA
+DEFAULT_KD = 2.0 * DAMPING_RATIO * NATURAL_FREQUENCY * DESIGN_INERTIA

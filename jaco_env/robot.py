@@ -1,4 +1,4 @@
-"""The simulated Kinova Jaco 2 arm: constants and the bare-arm MJCF.
+r"""The simulated Kinova Jaco 2 arm: constants and the bare-arm MJCF.
 
 The arm and the three-finger hand come from the Kinova assets that ship with
 ``dm_control`` (``dm_control/third_party/kinova``); they are composed at run time
@@ -7,19 +7,64 @@ with :mod:`dm_control.mjcf` and never copied into this repository.
 The fingers are welded in a closed grip (their hinge joints are removed), so the
 arm has exactly six degrees of freedom, as the paper's torque controller assumes.
 
-Passive joint properties of the simulated "true" robot
+Actuators, torque sensors and the firmware torque loop
 ------------------------------------------------------
-==========  ==========  ============  ===========  ==========================================
-joints      armature    frictionloss  damping      source
-==========  ==========  ============  ===========  ==========================================
-1-3 (large) 4.0 kg m^2  2.0 N m       0.01 N m s   dm_control Kinova model (``jaco_arm.xml``,
-                                                   classes ``large_joint`` / default joint)
-4-6 (small) 2.0 kg m^2  1.0 N m       0.01 N m s   dm_control Kinova model (``small_joint``)
-==========  ==========  ============  ===========  ==========================================
+Each Jaco 2 actuator is a brushless motor behind a harmonic drive, with a strain-gauge
+joint torque sensor at the drive's output. The sensor reads the **link-side** torque: the
+torque passed to the outward links, *after* the rotor inertia and the gear friction. The
+firmware closes a torque loop on that sensor. The parameters below were fixed from the
+figures and derivation given here, and frozen before the data-efficiency study was run
+with them; they are not tuned toward any study outcome.
 
-The armature values model the reflected rotor inertia of the geared actuators;
-the dry friction (``frictionloss``) and viscous damping are *not* part of the
-nominal rigid-body model, so a learned model has to capture them.
+==================================  ===============  ===============  =============================================
+quantity                            joints 1-3       joints 4-6       derivation / source
+                                    (KA-75+)         (KA-58)
+==================================  ===============  ===============  =============================================
+gear ratio ``GEAR_RATIO``           160              110              Kinova Gen2 actuator specification
+rotor + wave generator inertia      1.3e-5 kg m^2    4.0e-6 kg m^2    estimate for the motor class (about 45 mm /
+(motor side, ``MOTOR_INERTIA``)                                       32 mm frameless BLDC + wave generator); Kinova
+                                                                      publishes no rotor inertia
+reflected rotor inertia             0.333 kg m^2     0.048 kg m^2     ``MOTOR_INERTIA * GEAR_RATIO**2``
+(``ROTOR_INERTIA``, open loop)
+gear dry friction (output side)     1.5 N m          0.34 N m         5 % of the peak torque (harmonic-drive no-load
+(``GEAR_FRICTION``, open loop)                                        starting torque class)
+gear viscous friction (output)      0.5 N m s/rad    0.1 N m s/rad    about 1 % of peak torque per 0.6 rad/s
+(``GEAR_DAMPING``, open loop)
+torque-loop gain ``TORQUE_LOOP_GAIN`` 4              4                P loop on the torque-sensor error
+torque-loop time constant           5 ms             5 ms             about 30 Hz closed-loop bandwidth
+(``TORQUE_LOOP_TAU``)
+==================================  ===============  ===============  =============================================
+
+Closed torque loop (what the simulation integrates)
+^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^^
+Per joint, with motor torque :math:`\tau_m`, link-side (sensed) torque :math:`\tau_s`,
+commanded torque :math:`\tau_c`, reflected rotor inertia :math:`J_r` and gear friction
+:math:`f(\dot q)`:
+
+.. math::
+
+    J_r \ddot q = \tau_m - f(\dot q) - \tau_s, \qquad
+    \tau_m = \tau_c + K (\tau_c - \tau_s)
+    \;\Longrightarrow\;
+    \tau_s = \tau_c - \frac{J_r \ddot q + f(\dot q)}{1 + K}.
+
+So the link sees the command through a joint whose rotor inertia and friction are divided by
+:math:`1 + K`. The simulation integrates exactly this closed loop: each arm joint carries the
+**residual** armature ``ARMATURE = ROTOR_INERTIA / (1 + K)``, dry friction ``FRICTIONLOSS =
+GEAR_FRICTION / (1 + K)`` and damping ``DAMPING = GEAR_DAMPING / (1 + K)``, and in torque mode
+the command reaches the joint through a first-order lag of time constant ``TORQUE_LOOP_TAU``
+(the loop's bandwidth; MuJoCo ``filterexact`` actuator dynamics). The residual
+:math:`\tau_c - \tau_s = J_{r} \ddot q / (1+K) + f / (1+K)` (plus the lag) is what the loop
+does not remove: 0.067 / 0.0096 kg m^2, 0.3 / 0.068 N m and 0.1 / 0.02 N m s/rad.
+
+The measured joint torque is read by MuJoCo ``torque`` sensors at a site on each child link
+(at the joint anchor, z along the joint axis; :func:`add_torque_sensors`), projected on the
+joint axis: the interaction torque between a link and its parent, i.e. the link-side torque.
+It contains neither rotor inertia nor gear friction, and equals the rigid-body inverse
+dynamics of the links and payload (contact forces of marbles included).
+
+(Before this revision the arm used dm_control's 4 / 2 kg m^2 armature and 2 / 1 N m friction,
+meant for its velocity actuators, and the "measured" torque was the motor-side actuator force.)
 
 Actuator limits (Kinova Jaco 2 datasheet): 30.5 N m peak torque for the KA-75+
 actuators of joints 1-3, 6.8 N m for the KA-58 actuators of joints 4-6; maximum
@@ -37,12 +82,33 @@ N_JOINTS = 6
 JOINT_NAMES: tuple[str, ...] = tuple(f"joint_{i}" for i in range(1, N_JOINTS + 1))
 TORQUE_LIMITS = np.array([30.5, 30.5, 30.5, 6.8, 6.8, 6.8])
 VELOCITY_LIMITS = np.deg2rad([36.0, 36.0, 36.0, 48.0, 48.0, 48.0])
-ARMATURE = np.array([4.0, 4.0, 4.0, 2.0, 2.0, 2.0])
-FRICTIONLOSS = np.array([2.0, 2.0, 2.0, 1.0, 1.0, 1.0])
-DAMPING = np.full(N_JOINTS, 0.01)
+
+GEAR_RATIO = np.array([160.0, 160.0, 160.0, 110.0, 110.0, 110.0])
+MOTOR_INERTIA = np.array([1.3e-5, 1.3e-5, 1.3e-5, 4.0e-6, 4.0e-6, 4.0e-6])
+#: Reflected rotor inertia (kg m^2), open loop: MOTOR_INERTIA * GEAR_RATIO**2.
+ROTOR_INERTIA = MOTOR_INERTIA * GEAR_RATIO**2
+#: Gear friction referred to the output, open loop: dry (N m) and viscous (N m s/rad).
+GEAR_FRICTION = 0.05 * TORQUE_LIMITS
+GEAR_DAMPING = np.array([0.5, 0.5, 0.5, 0.1, 0.1, 0.1])
+#: Proportional gain of the firmware torque loop on the torque-sensor error (dimensionless).
+TORQUE_LOOP_GAIN = 4.0
+#: Time constant of the closed torque loop (s): about 30 Hz bandwidth.
+TORQUE_LOOP_TAU = 0.005
+#: Residual joint properties seen by the links with the torque loop closed (module docstring).
+ARMATURE = ROTOR_INERTIA / (1.0 + TORQUE_LOOP_GAIN)
+FRICTIONLOSS = GEAR_FRICTION / (1.0 + TORQUE_LOOP_GAIN)
+DAMPING = GEAR_DAMPING / (1.0 + TORQUE_LOOP_GAIN)
+#: Diagonal of the links' joint-space inertia (kg m^2) at the home pose with a 1 kg payload in the
+#: hand (MuJoCo ``mj_fullM``), plus the residual armature: the inertia each joint's feedback loops
+#: (``scene.FIRMWARE_KV/KI``, ``gains.DEFAULT_KP/KD``) are designed for.
+DESIGN_INERTIA = np.array([0.62, 0.59, 0.20, 0.11, 0.046, 0.0074]) + ARMATURE
 
 #: Closing angle of the welded finger hinges (rad, within the asset's 0.15-1.35 range).
 FINGER_CLOSED_ANGLE = 0.9
+
+
+#: Names of the link-side joint torque sensors (MuJoCo ``torque`` sensors, 3 values each).
+TORQUE_SENSOR_NAMES: tuple[str, ...] = tuple(f"joint_torque_{i}" for i in range(1, N_JOINTS + 1))
 
 
 def kinova_asset_dir() -> str:
@@ -112,3 +178,29 @@ def build_arm_mjcf(
         joint.frictionloss = float(frictionloss[i])
         joint.damping = float(damping[i])
     return arm
+
+
+def add_torque_sensors(arm: mjcf.RootElement) -> None:
+    """Add the link-side joint torque sensors of the six arm joints.
+
+    One site per joint on the joint's child link, at the joint anchor with its z axis along the
+    joint axis, and a MuJoCo ``torque`` sensor at it: the sensor's z component is the torque
+    that the parent link exerts on the child about the joint axis (the Jaco 2's strain-gauge
+    joint torque sensor at the actuator output). Rotor inertia and gear friction act on the
+    joint degree of freedom, not between the bodies, so they are not part of it.
+    """
+    for i, name in enumerate(JOINT_NAMES):
+        joint = arm.find("joint", name)
+        axis = np.array(joint.axis if joint.axis is not None else [0.0, 0.0, 1.0], float)
+        axis = axis / np.linalg.norm(axis)
+        z = np.array([0.0, 0.0, 1.0])
+        c = float(np.clip(z @ axis, -1.0, 1.0))
+        rot_axis = np.cross(z, axis)
+        if np.linalg.norm(rot_axis) < 1e-12:
+            quat = np.array([1.0, 0.0, 0.0, 0.0]) if c > 0 else np.array([0.0, 1.0, 0.0, 0.0])
+        else:
+            quat = _axis_angle_quat(rot_axis, float(np.arccos(c)))
+        pos = joint.pos if joint.pos is not None else [0.0, 0.0, 0.0]
+        site = joint.parent.add("site", name=f"torque_site_{i + 1}", pos=pos, quat=quat, size=[0.005],
+                                group=5)
+        arm.sensor.add("torque", name=TORQUE_SENSOR_NAMES[i], site=site)

@@ -51,11 +51,14 @@ JAR_N_WALLS = 16
 #: Total payload held in the hand (bottle + marbles + extra), Jaco 2 datasheet maximum.
 MAX_PAYLOAD = 1.6
 
-#: Gains of the emulated firmware velocity loop (per joint): tau = KV (v - qd) + KI (q_ref - q),
-#: q_ref the integral of the command v. Chosen for a well damped loop at physics rate with the
-#: armature of the true robot (about 4.5 kg m^2 on joints 1-3, 2.1 on joints 4-6).
-FIRMWARE_KV = np.array([60.0, 60.0, 60.0, 15.0, 15.0, 15.0])
-FIRMWARE_KI = np.array([400.0, 400.0, 400.0, 100.0, 100.0, 100.0])
+#: Gains of the emulated firmware velocity loop (per joint), which sits on the closed torque loop
+#: (``robot`` docstring): tau_c = KV (v - qd) + KI (q_ref - q), q_ref the integral of the command v.
+#: Derived, not tuned: with the joint inertia I seen by each joint (``robot.DESIGN_INERTIA``: links
+#: at the home pose with a 1 kg payload plus the residual armature), the loop ``I s^2 + KV s + KI``
+#: gets a natural frequency of 15 rad/s and unit damping: KI = I 15^2, KV = 2 I 15. MuJoCo
+#: integrates the velocity term implicitly (``implicitfast``), so it is stable at the physics rate.
+FIRMWARE_KV = 2.0 * 15.0 * robot.DESIGN_INERTIA
+FIRMWARE_KI = 15.0**2 * robot.DESIGN_INERTIA
 
 MARBLE_BIT = 4
 
@@ -102,13 +105,18 @@ def _attach_bottle(arm: mjcf.RootElement, *, with_payload: bool = True) -> mjcf.
 def add_actuators(root: mjcf.RootElement, arm: mjcf.RootElement, control_mode: str) -> None:
     """Add the six joint actuators.
 
-    ``"torque"``: ``motor`` actuators, ctrl = joint torque clipped to ``robot.TORQUE_LIMITS``.
+    ``"torque"``: the closed firmware torque loop: ctrl = commanded joint torque, clipped to
+    ``robot.TORQUE_LIMITS``, reaching the joint through a first-order lag of time constant
+    ``robot.TORQUE_LOOP_TAU`` (MuJoCo ``filterexact`` dynamics; the actuator's activation is the
+    torque the loop delivers). The residual rotor inertia and friction are on the joints.
 
     ``"velocity"``: the emulated Kinova firmware joint-velocity loop, evaluated by MuJoCo at
     the physics rate: per joint a ``velocity`` actuator ``KV (v - qd)`` and an integrating
     position actuator ``KI (q_ref - q)`` whose activation ``q_ref`` integrates the command ``v``
     (a PI velocity loop); both get the same command, and the joint's ``actuatorfrcrange`` clips
-    their sum to the Kinova torque limits.
+    their sum to the Kinova torque limits. This torque command drives the same closed torque
+    loop (residual rotor inertia and friction on the joints); the loop's 5 ms lag is neglected
+    here, being well above the velocity loop's 15 rad/s.
     """
     if control_mode not in ("torque", "velocity"):
         raise ValueError(f"control_mode must be 'torque' or 'velocity', got {control_mode!r}")
@@ -117,8 +125,10 @@ def add_actuators(root: mjcf.RootElement, arm: mjcf.RootElement, control_mode: s
         lim = robot.TORQUE_LIMITS[i]
         joint.actuatorfrcrange = [-lim, lim]
         if control_mode == "torque":
-            root.actuator.add("motor", name=f"tau_{i + 1}", joint=joint, ctrllimited=True,
-                              ctrlrange=[-lim, lim])
+            root.actuator.add("general", name=f"tau_{i + 1}", joint=joint, ctrllimited=True,
+                              ctrlrange=[-lim, lim], dyntype="filterexact",
+                              dynprm=[robot.TORQUE_LOOP_TAU], gaintype="fixed", gainprm=[1.0],
+                              biastype="none")
         else:
             vlim = robot.VELOCITY_LIMITS[i]
             root.actuator.add("velocity", name=f"vel_{i + 1}", joint=joint, kv=FIRMWARE_KV[i],
@@ -179,6 +189,7 @@ def build_scene(
     root.worldbody.add("camera", name="overview", pos=[1.6, -1.3, 1.2], xyaxes=[0.63, 0.77, 0, -0.35, 0.29, 0.89])
 
     arm = robot.build_arm_mjcf()
+    robot.add_torque_sensors(arm)
     _attach_bottle(arm, with_payload=True)
     root.attach(arm)
     if control_mode is not None:

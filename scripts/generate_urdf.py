@@ -26,8 +26,11 @@ rigid-body dynamics only.
 
 What is *not* in the URDF
 -------------------------
-* Armature (rotor inertia): URDF has no field for it; it is in the sidecar JSON
-  (``jaco_env.robot.ARMATURE``) and applied by ``cascgp.rbd.load_nominal``.
+* Armature (rotor inertia): URDF has no field for it; the sidecar JSON has an
+  ``armature`` entry that ``cascgp.rbd.load_nominal`` applies. It is zero: the
+  Jaco 2's joint torque sensors read the link-side torque, after the rotor inertia
+  and the gear friction (``jaco_env.robot``), so the nominal model of the *sensed*
+  torque is the links' rigid-body dynamics alone.
 * Joint friction and damping, and the payload: deliberately absent from the
   nominal model (a learned model must capture them).
 * Joint limits of the unlimited joints (1, 4, 5, 6): written as ``revolute``
@@ -324,7 +327,8 @@ def generate(error: float = 0.1, seed: int = 0, urdf_name: str = DEFAULT_OUT.nam
         "generator": "python -m scripts.generate_urdf",
         "dof": int(m.nv),
         "joint_names": joint_names,
-        "armature": [float(a) for a in robot.ARMATURE],
+        # Link-side torque sensors: the sensed torque holds no rotor inertia (jaco_env.robot).
+        "armature": [0.0] * robot.N_JOINTS,
         "torque_limits": [float(a) for a in robot.TORQUE_LIMITS],
         "velocity_limits": [float(a) for a in robot.VELOCITY_LIMITS],
         "gravity": [float(g) + 0.0 for g in m.opt.gravity],
@@ -335,7 +339,7 @@ def generate(error: float = 0.1, seed: int = 0, urdf_name: str = DEFAULT_OUT.nam
             "u_c = rng.uniform(-1, 1, 3); mass *= 1 + e u_m; inertia about CoM *= 1 + e u_m; "
             "com += e ||com|| u_c (body frame)"
         ),
-        "excluded": ["joint frictionloss", "joint damping", "payload"],
+        "excluded": ["rotor inertia (link-side torque sensors)", "joint frictionloss", "joint damping", "payload"],
     }
     return text, sidecar
 

@@ -49,8 +49,9 @@ def exact(exact_urdf) -> RigidBodyModel:
 
 @pytest.fixture(scope="module")
 def mj():
-    """Bare arm with armature, no friction, no damping, constraints off."""
-    arm = robot.build_arm_mjcf(armature=robot.ARMATURE, frictionloss=None, damping=None)
+    """Bare arm as the link-side torque sensors see it (the nominal sidecar's armature is zero): no
+    armature, no friction, no damping, constraints off."""
+    arm = robot.build_arm_mjcf(armature=None, frictionloss=None, damping=None)
     m = mujoco.MjModel.from_xml_string(arm.to_xml_string(), arm.get_assets())
     m.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONSTRAINT
     return m, mujoco.MjData(m)
@@ -216,7 +217,8 @@ def test_committed_asset_equals_regeneration(suffix):
 def test_committed_asset_loads():
     rbd = load_nominal(ASSET, dof=6)
     assert rbd.dof == 6 and rbd.joint_names == robot.JOINT_NAMES
-    np.testing.assert_array_equal(rbd.armature, robot.ARMATURE)
+    # Link-side torque sensors: the nominal model of the sensed torque has no rotor inertia.
+    np.testing.assert_array_equal(rbd.armature, np.zeros(robot.N_JOINTS))
     assert rbd.meta["calibration_error"] == 0.1 and rbd.meta["seed"] == 0
     meta = json.loads(ASSET.with_suffix(".json").read_text())
     assert meta == rbd.meta
