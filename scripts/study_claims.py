@@ -9,6 +9,8 @@ from __future__ import annotations
 
 from typing import Any
 
+import math
+
 import numpy as np
 
 from scripts._study_common import PAPER_TABLE, RBD, make_table, model_name
@@ -54,6 +56,83 @@ def df_vs_db(rows: dict) -> np.ndarray:
             wins += (_a(rows, model_name(p, s, True)) < _a(rows, model_name(p, s, False))).sum(axis=0)
             total += _a(rows, model_name(p, s, False)).shape[0]
     return wins / total
+
+
+def sign_test_p(wins: int, losses: int) -> float:
+    """Two-sided exact sign test (binomial, p = 1/2) of ``wins`` against ``losses`` (ties dropped)."""
+    n = wins + losses
+    if n == 0:
+        return 1.0
+    k = min(wins, losses)
+    tail = sum(math.comb(n, i) for i in range(k + 1)) / 2.0**n
+    return float(min(1.0, 2.0 * tail))
+
+
+def subset_interval_means(block: dict, m: str, lo: float, hi: float) -> np.ndarray:
+    """(S, N): per subset, the mean nRMSE of model ``m`` over the grid points in ``[lo, hi]``."""
+    g = np.asarray(block["grid_s"], float)
+    sel = (g >= lo - 1e-9) & (g <= hi + 1e-9)
+    a = np.asarray(block["models"][m]["nrmse_all"], float)  # (S, G, N)
+    return a[:, sel].mean(axis=1) if sel.any() else np.full((a.shape[0], a.shape[2]), np.nan)
+
+
+def paired(block: dict, a: str, b: str, intervals=((1, 2), (4, 5), (9, 10))) -> dict[str, Any]:
+    """Paired per-subset comparison of ``a`` against ``b``: per (joint, interval) the number of
+    subsets where ``a`` has the lower nRMSE, where ``b`` has, and the sign-test p-value."""
+    wins, losses, p = [], [], []
+    for lo, hi in intervals:
+        A, B = subset_interval_means(block, a, lo, hi), subset_interval_means(block, b, lo, hi)
+        w, l_ = (A < B).sum(0), (A > B).sum(0)
+        wins.append(w.tolist())
+        losses.append(l_.tolist())
+        p.append([sign_test_p(int(x), int(y)) for x, y in zip(w, l_)])
+    # transpose to [joint][interval]
+    T = lambda x: np.asarray(x).T.tolist()  # noqa: E731
+    return {"a": a, "b": b, "wins": T(wins), "losses": T(losses), "p": T(p),
+            "n_subsets": int(np.asarray(block["models"][a]["nrmse_all"]).shape[0])}
+
+
+def paired_verdict(cmp: dict, alpha: float = 0.05) -> tuple[int, int, int]:
+    """(cells where a is significantly better, significantly worse, neither) at level ``alpha``."""
+    w, l_, p = (np.asarray(cmp[k], float) for k in ("wins", "losses", "p"))
+    better = int(((p < alpha) & (w > l_)).sum())
+    worse = int(((p < alpha) & (w < l_)).sum())
+    return better, worse, int(p.size - better - worse)
+
+
+def paired_markdown(block: dict, title: str) -> list[str]:
+    """Markdown lines of the paired claim checks on one curves block (models present only)."""
+    L = [f"\n### Paired per-subset comparisons: {title}\n",
+         f"Per (joint, interval): subsets where the first model has the lower interval-mean nRMSE "
+         f"(wins/losses of {block['n_subsets']}) and the two-sided sign-test p-value. A cell counts as "
+         "significant at p < 0.05 (with 10 subsets: 9 or 10 wins of 10).\n"]
+    ms = block["models"]
+    pairs = []
+    for p in ("np", "sp"):
+        for df in (False, True):
+            st = model_name(p, "standard", df)
+            for c in ("inward", "outward"):
+                pairs.append((model_name(p, c, df), st, f"{p.upper()}{'-DF' if df else ''}: {c} vs standard"))
+        pairs.append((model_name(p, "inward", False), model_name(p, "outward", False),
+                      f"{p.upper()}: inward vs outward"))
+    for s_ in ("inward", "outward", "standard"):
+        for p in ("np", "sp"):
+            pairs.append((model_name(p, s_, True), model_name(p, s_, False), f"{p.upper()} {s_}: DF vs DB"))
+        pairs.append((model_name("sp", s_, False), model_name("np", s_, False), f"{s_}: SP vs NP"))
+    for a, b, what in pairs:
+        if a not in ms or b not in ms:
+            continue
+        c = paired(block, a, b)
+        bt, wo, ne = paired_verdict(c)
+        cells = "; ".join(f"J{j + 1} " + " ".join(f"{c['wins'][j][k]}/{c['losses'][j][k]} (p={c['p'][j][k]:.2g})"
+                                                 for k in range(3)) for j in range(len(c["wins"])))
+        L.append(f"- **{what}**: better in {bt}, worse in {wo}, no significant difference in {ne} of "
+                 f"{bt + wo + ne} cells. {cells}.")
+    L.append("\nIdentical by construction (their curves coincide; not evidence either way): NP-Outward J1 = NP "
+             "and NP-Inward J{N} = NP (joint 1's outward GP and the last joint's inward GP take the standard "
+             "GP's inputs: every joint's state, no torque); likewise for SP and -DF.\n"
+             .replace("{N}", str(len(next(iter(ms.values()))["nrmse_all"][0][0]))))
+    return L
 
 
 def _have(rows: dict, names: list[str]) -> bool:
@@ -106,6 +185,8 @@ def claims_markdown(res: dict[str, Any]) -> str:
             L.append(f"- **Derivative-free features help in the first seconds, not later**: the -df twin wins "
                      f"{'/'.join(f'{100 * x:.0f}%' for x in f)} of cells ({', '.join(IV)}); paper: "
                      f"{'/'.join(f'{100 * x:.0f}%' for x in fp)}.")
+    if jaco and all("nrmse_all" in v for v in jaco["models"].values()):
+        L += paired_markdown(jaco, "simulated Jaco")
     s = res.get("sarcos")
     if s and all(m in s["models"] for m in ("np-inward", "np-outward", "np-standard")):
         grid = s["grid_s"]
