@@ -95,6 +95,10 @@ class _LinearModel:
         A = X.T @ X + 1e-3 * np.eye(X.shape[1])
         self.W = np.linalg.solve(A, X.T @ data.tau)
         self.warm = init is not None
+        # An "NLL" per joint that the audit can compare: the residual sum of squares, plus a
+        # penalty on a warm start so that the audit gap is known (warm fits are 0.5 worse).
+        r = data.tau - X @ self.W
+        self.fit_info = [{"best_nll": float(v) + (0.5 if self.warm else 0.0)} for v in (r**2).sum(0)]
         return self
 
     def predict_data(self, data: DynamicsData):
@@ -127,9 +131,21 @@ def test_run_curves_with_fake_factory_and_cache(tmp_path: Path) -> None:
     tr = _synthetic(tmp_path / "train.npz", 3, 12.0, 50.0, 0)
     te = _synthetic(tmp_path / "test.npz", 2, 6.0, 50.0, 1)
     spec = CurveSpec(train_path=str(tr), test_path=str(te), n_subsets=3, grid=[1.0, 2.0, 10.0],
-                     factory=f"{__name__}:fake_make", urdf=None)
+                     factory=f"{__name__}:fake_make", urdf=None, audit_fraction=0.5)
     models = ["np-standard", "np-inward"]
     out = run_curves(spec, models, workers=1, cache_dir=tmp_path / "cache")
+    # Audit: the seeded sample of fits, each refitted cold; gap = protocol - cold NLL (0.5 for a
+    # warm-started fit of the fake model, 0 for the first grid point).
+    from scripts._study_curves import audited
+
+    a = out["audit"]
+    expect = sorted((m, s, gi) for m in models for s in range(3) for gi in range(3) if audited(spec, m, s, gi))
+    assert 0 < len(expect) < 18 and a["n_audited_fits"] == len(expect) and a["n_fits"] == 18
+    got = sorted((r["model"], r["subset"], [1.0, 2.0, 10.0].index(r["seconds"])) for r in a["records"])
+    assert got == expect
+    for r in a["records"]:
+        want = 0.0 if r["seconds"] == 1.0 else 0.5
+        np.testing.assert_allclose(r["gap"], want, atol=1e-9)
     assert out["grid_s"] == [1.0, 2.0, 10.0] and out["n_subsets"] == 3
     for m in models:
         r = out["models"][m]
@@ -137,7 +153,11 @@ def test_run_curves_with_fake_factory_and_cache(tmp_path: Path) -> None:
         assert allr.shape == (3, 3, 3)
         np.testing.assert_allclose(r["nrmse_mean"], allr.mean(0))
         np.testing.assert_allclose(r["nrmse_std"], allr.std(0))
-        assert [list(x) for x in r["n_train"]] == [[10, 20, 100]] * 3  # 10 Hz: 10 rows per second
+        np.testing.assert_allclose(r["nrmse_median"], np.median(allr, 0))
+        np.testing.assert_allclose(r["nrmse_q25"], np.percentile(allr, 25, axis=0))
+        # 10 Hz: 10 rows per second, minus the first 2 * df_delta = 0.2 s (2 rows) that a -df
+        # model cannot use: every variant trains on the same rows.
+        assert [list(x) for x in r["n_train"]] == [[8, 18, 98]] * 3
     # the (nearly) linear truth is learned: error falls with data
     mu = np.asarray(out["models"]["np-standard"]["nrmse_mean"])
     assert np.all(mu[-1] < mu[0]) and np.all(mu[-1] < 0.2)
@@ -226,9 +246,13 @@ def _check_results(out: Path, res: dict) -> None:
     for m, v in jaco["models"].items():
         mu = np.asarray(v["nrmse_mean"], float)
         assert mu.shape == (G, 6) and np.isfinite(mu).all() and (mu > 0).all()
-    # the table in the JSON is the interval mean of the curves in the JSON
-    t = make_table(jaco["grid_s"], {m: v["nrmse_mean"] for m, v in jaco["models"].items()})
+        np.testing.assert_allclose(v["nrmse_median"], np.median(np.asarray(v["nrmse_all"], float), 0))
+    # the table in the JSON is the interval mean of the median curves in the JSON
+    t = make_table(jaco["grid_s"], {m: v["nrmse_median"] for m, v in jaco["models"].items()})
     assert json.loads(json.dumps(t["rows"]).replace("NaN", "null")) == jaco["table"]["rows"]
+    a = jaco["audit"]
+    assert a["n_fits"] == len(VARIANTS) * jaco["n_subsets"] * G and a["n_audited_fits"] >= 1
+    assert a["n_gps"] == 6 * a["n_audited_fits"] and 0.0 <= a["within_tol"] <= 1.0
     assert "iterations" in res and "correlation" in res
     assert res["meta"]["collection"]["payload_mass"] > 0
 
@@ -277,3 +301,22 @@ def test_quick_end_to_end(tmp_path: Path) -> None:
     _check_results(out, res)
     assert res["meta"]["settings"]["grid"] == [1.0, 2.0, 5.0, 10.0]
     _regenerate_from_json_alone(out, tmp_path)
+
+
+def test_sign_test_and_paired_comparison() -> None:
+    from scripts.study_claims import paired, paired_verdict, sign_test_p
+
+    assert sign_test_p(10, 0) == pytest.approx(2 / 1024)
+    assert sign_test_p(9, 1) == pytest.approx(2 * 11 / 1024)
+    assert sign_test_p(5, 5) == 1.0 and sign_test_p(0, 0) == 1.0
+    assert sign_test_p(3, 7) == sign_test_p(7, 3)
+    # a beats b on every subset for joint 1, loses on every subset for joint 2, ties on joint 3
+    S, G = 10, 3
+    b = np.full((S, G, 3), 0.5)
+    a = b.copy()
+    a[:, :, 0] -= 0.1
+    a[:, :, 1] += 0.1
+    block = {"grid_s": [1.5, 4.5, 9.5], "models": {"x": {"nrmse_all": a.tolist()}, "y": {"nrmse_all": b.tolist()}}}
+    c = paired(block, "x", "y")
+    assert c["wins"][0] == [10, 10, 10] and c["losses"][1] == [10, 10, 10] and c["wins"][2] == [0, 0, 0]
+    assert paired_verdict(c) == (3, 3, 3)
