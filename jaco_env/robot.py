@@ -14,7 +14,9 @@ joint torque sensor at the drive's output. The sensor reads the **link-side** to
 torque passed to the outward links, *after* the rotor inertia and the gear friction. The
 firmware closes a torque loop on that sensor. The parameters below were fixed from the
 figures and derivation given here, and frozen before the data-efficiency study was run
-with them; they are not tuned toward any study outcome.
+with them; they are not tuned toward any study outcome. The motor inertias are estimates
+(say +-50 %); the reflected inertia scales with the square of the gear ratio, so the figure to
+check against a real unit is ``ROTOR_INERTIA`` itself.
 
 ==================================  ===============  ===============  =============================================
 quantity                            joints 1-3       joints 4-6       derivation / source
@@ -30,8 +32,9 @@ gear dry friction (output side)     1.5 N m          0.34 N m         5 % of the
 (``GEAR_FRICTION``, open loop)                                        starting torque class)
 gear viscous friction (output)      0.5 N m s/rad    0.1 N m s/rad    about 1 % of peak torque per 0.6 rad/s
 (``GEAR_DAMPING``, open loop)
-torque-loop gain ``TORQUE_LOOP_GAIN`` 4              4                P loop on the torque-sensor error
-torque-loop time constant           5 ms             5 ms             about 30 Hz closed-loop bandwidth
+torque-loop gain                    4                4                P loop on the torque-sensor error; the
+(``TORQUE_LOOP_GAIN``)                                                residual is 1 / (1 + 4) = 20 % (assumed)
+torque-loop time constant           5 ms             5 ms             about 30 Hz closed-loop bandwidth (assumed)
 (``TORQUE_LOOP_TAU``)
 ==================================  ===============  ===============  =============================================
 
