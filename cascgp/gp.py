@@ -80,14 +80,17 @@ Edge cases (documented behaviour)
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 import numpy as np
 import torch
+from scipy.linalg.lapack import dpotrf as _dpotrf, dpotri as _dpotri, dpotrs as _dpotrs
 
 from cascgp.kernels import check_kernel, kernel_and_grad_r2, kernel_of_r2, kernel_of_r2_torch, scaled_sqdist
 from cascgp.lbfgs import LBFGSOptions, MemberState, minimize_batched
@@ -134,6 +137,11 @@ class GPFitConfig:
     init_spread: float = 1.0
     drop_after: int | None = None
     drop_margin: float = 20.0
+    stall_window: int | None = 5
+    stall_tol: float = 0.01
+    catch_up_windows: float = 2.0
+    race_at: int | None = 10
+    race_keep: int = 5
     screen_n: int | None = None
     screen_keep: int = 2
     screen_max_iter: int = 200
@@ -141,17 +149,23 @@ class GPFitConfig:
 
     def __post_init__(self) -> None:
         check_kernel(self.kernel)
-        for name in ("n_restarts", "max_iter", "history", "screen_keep", "screen_max_iter"):
+        for name in ("n_restarts", "max_iter", "history", "screen_keep", "screen_max_iter", "race_keep"):
             v = getattr(self, name)
             if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
                 raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
-        for name in ("grad_tol", "rel_tol", "noise_floor", "jitter_max", "init_spread", "drop_margin",
+        for name in ("grad_tol", "rel_tol", "noise_floor", "jitter_max", "init_spread", "drop_margin", "stall_tol",
                      "screen_rel_tol"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
         if self.drop_after is not None and (not isinstance(self.drop_after, int) or self.drop_after < 1):
             raise ValueError(f"drop_after: expected None or an integer >= 1, got {self.drop_after!r}")
+        for name in ("stall_window", "race_at"):
+            v = getattr(self, name)
+            if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1):
+                raise ValueError(f"{name}: expected None or an integer >= 1, got {v!r}")
+        if not isinstance(self.catch_up_windows, (int, float)) or not self.catch_up_windows > 0:
+            raise ValueError(f"catch_up_windows: expected a number > 0, got {self.catch_up_windows!r}")
         if self.screen_n is not None and (not isinstance(self.screen_n, int) or self.screen_n < 2):
             raise ValueError(f"screen_n: expected None or an integer >= 2, got {self.screen_n!r}")
 
@@ -231,6 +245,79 @@ def _robust_cholesky(K: torch.Tensor, jitter_max: float) -> tuple[torch.Tensor, 
     return L, jitter, failed
 
 
+@contextlib.contextmanager
+def _blas_threads(k: int) -> Iterator[None]:
+    """Limit the BLAS/LAPACK threads of NumPy/SciPy (OpenBLAS) to ``k`` while fitting.
+
+    The per-member LAPACK calls are small (n x n); OpenBLAS's own threads gained nothing there and, on a shared
+    2-core machine, spun against the other process (measured: 25 ms instead of 8 ms per evaluation at n = 500).
+    Uses ``threadpoolctl`` when installed; otherwise set ``OPENBLAS_NUM_THREADS=1`` yourself.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional
+        yield
+        return
+    with threadpool_limits(limits=k, user_api="blas"):
+        yield
+
+
+# Cache-sized chunks: the elementwise kernel work runs on (c, n, n) blocks of about this many bytes per
+# tensor, so that they stay in the last-level cache (measured: one (60, 500, 500) batch per op was 2.2x slower
+# per evaluation than member-sized blocks, the whole batch being memory-bandwidth bound).
+_CACHE_CHUNK_BYTES = 4 << 20
+
+
+def _kernel_parts(kernel: str, A: torch.Tensor, B: torch.Tensor, C: torch.Tensor) -> float:
+    r"""In place: ``A`` holds :math:`r^2` on entry and the unit kernel :math:`k` on exit; ``B`` receives ``u``
+    with :math:`\partial k / \partial (r^2) = c\, u`; ``C`` is scratch. Returns ``c``.
+
+    Matern 5/2: :math:`u = (1 + \sqrt5 r) e^{-\sqrt5 r}`, :math:`k = (1 + \sqrt5 r + \tfrac53 r^2) e^{-\sqrt5 r}`,
+    :math:`c = -5/6`; RBF: :math:`u = k = e^{-r^2/2}`, :math:`c = -1/2`. No temporaries: fresh large tensors cost
+    page faults that were measured to take longer than the element-wise arithmetic itself.
+    """
+    if kernel == "rbf":
+        A.mul_(-0.5).exp_()
+        B.copy_(A)
+        return -0.5
+    torch.mul(A, 5.0, out=B).sqrt_()  # B = sqrt5 r
+    torch.neg(B, out=C).exp_()  # C = e^{-sqrt5 r}
+    B.add_(1.0)  # 1 + sqrt5 r
+    A.mul_(5.0 / 3.0).add_(B).mul_(C)  # k
+    B.mul_(C)  # u
+    return -5.0 / 6.0
+
+
+def _potrf_jitter(kk: torch.Tensor, K: torch.Tensor, sf2: float, sn2: float,
+                  jitter_max: float) -> tuple[np.ndarray | None, float]:
+    """Cholesky (LAPACK ``dpotrf``) of ``sf2 * kk + sn2 I`` written into the buffer ``K``; jitter only if it fails.
+
+    ``kk`` and ``K`` are C-contiguous ``(n, n)``; ``K``'s memory read as an F-ordered array is the same symmetric
+    matrix, so LAPACK works in place. Returns the F-ordered factor (lower triangle = L, strict upper = junk) and
+    the jitter, or ``(None, jitter)`` when even ``jitter_max`` (relative to the mean diagonal) fails.
+    """
+    jit = 0.0
+    scale = sf2 + sn2  # mean diagonal of K (unit kernel diagonal)
+    j = 1e-8
+    Kf = K.numpy().T
+    while True:
+        torch.mul(kk, sf2, out=K)
+        K.diagonal().add_(sn2 + jit)
+        c, info = _dpotrf(Kf, lower=1, overwrite_a=1, clean=0)
+        if info == 0:
+            return c, jit
+        if j > jitter_max * (1 + 1e-12):
+            return None, jit
+        jit = j * scale
+        j *= 10.0
+
+
+#: When a dict, :func:`nll_and_grad` adds the seconds spent per phase (``kernel``: distances and kernel values,
+#: ``cholesky``: factor, solve and log-determinant, ``inverse``: :math:`K^{-1}` from the factor, ``gradient``:
+#: the rest of the gradient) and counts ``members`` (for the time breakdown of ``scripts.bench_cascgp``).
+PROFILE: dict[str, float] | None = None
+
+
 def nll_and_grad(
     theta: torch.Tensor,
     X: torch.Tensor,
@@ -240,58 +327,129 @@ def nll_and_grad(
     noise_floor: float = 1e-6,
     jitter_max: float = 1e-2,
     need_grad: bool = True,
+    chunk: int | None = None,
+    snr_max: float | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
     r"""Negative log marginal likelihood and its analytic gradient for a batch of GPs.
 
+    The batch is processed in chunks of ``chunk`` members (default: as many as keep one ``(chunk, n, n)`` block
+    near 4 MB, i.e. in cache); three ``(chunk, n, n)`` work buffers are reused for every chunk. Per member: one
+    Cholesky :math:`K = L L^\top` (LAPACK ``dpotrf``), :math:`\alpha` by two triangular solves (``dpotrs``),
+    :math:`K^{-1}` from the factor (``dpotri``), and the ARD gradient from the upper triangle :math:`U` of the
+    symmetric :math:`P` (diagonal included; its terms vanish):
+
+    .. math::
+
+        \sum_{ij} P_{ij} (z_{ik} - z_{jk})^2 = 2 \Big( \sum_i z_{ik}^2 \big[(U\mathbf 1)_i + (U^\top\mathbf 1)_i\big]
+        - 2 \sum_i z_{ik} (U Z)_{ik} \Big),
+
+    one ``(n, n) @ (n, D)`` product and no symmetrisation pass. Peak extra memory: ``3 * chunk * n^2 * 8`` bytes,
+    independent of the batch size.
+
     Args:
-        theta: ``(k, D + 2)`` log hyperparameters ``(log l_1..l_D, log s_f^2, log(s_n^2 - noise_floor))``.
+        theta: ``(k, D + 2)`` log hyperparameters ``(log l_1..l_D, log s_f^2, log(s_n^2 - floor))``.
         X: ``(k, n, D)`` normalised inputs (padded columns must be zero).
         y: ``(k, n)`` normalised targets.
         mask: ``(k, D)`` 1 for active input columns, 0 for padding/ignored columns (default: all active).
         kernel: kernel name.
         noise_floor: :math:`s_{n,\min}^2`.
-        jitter_max: see :func:`_robust_cholesky`.
+        jitter_max: largest jitter (relative to the mean diagonal of K) tried when a Cholesky fails.
         need_grad: compute the gradient.
+        chunk: members per block (``None``: cache-sized).
+        snr_max: if set, the noise floor grows with the signal: ``floor = noise_floor + s_f^2 / snr_max``
+            (see :class:`GPFitConfig`), which bounds :math:`\operatorname{cond}(K) \le 1 + n\,\mathrm{snr\_max}`.
 
     Returns:
         ``(nll (k,), grad (k, D+2) or None, jitter (k,))``; ``nll`` is ``inf`` where the Cholesky failed even with
         jitter or the value is not finite (the gradient there is 0).
     """
     k_, n, D = X.shape
+    theta = theta.to(_DT)
     if mask is None:
         mask = torch.ones(k_, D, dtype=_DT, device=X.device)
-    inv_l = torch.exp(-theta[:, :D]) * mask
-    Z = X * inv_l[:, None, :]
-    r2 = scaled_sqdist(Z)
-    kk, dk = kernel_and_grad_r2(kernel, r2)
-    del r2
-    sf2 = torch.exp(theta[:, D])
-    en = torch.exp(theta[:, D + 1])
-    sn2 = noise_floor + en
-    K = kk * sf2[:, None, None]
-    K.diagonal(dim1=-2, dim2=-1).add_(sn2[:, None])
-    L, jitter, failed = _robust_cholesky(K, jitter_max)
-    del K
-    alpha = torch.cholesky_solve(y.unsqueeze(-1), L).squeeze(-1)
-    nll = 0.5 * (y * alpha).sum(-1) + torch.log(L.diagonal(dim1=-2, dim2=-1)).sum(-1) + 0.5 * n * _LOG2PI
-    bad = failed | ~torch.isfinite(nll)
-    nll = torch.where(bad, torch.full_like(nll, math.inf), nll)
-    if not need_grad:
-        return nll, None, jitter
-    M = torch.cholesky_inverse(L)
-    M.sub_(alpha.unsqueeze(-1) * alpha.unsqueeze(-2))
-    g_sn = 0.5 * en * M.diagonal(dim1=-2, dim2=-1).sum(-1)
-    g_sf = 0.5 * sf2 * (M * kk).sum((-2, -1))
-    del kk
-    P = M.mul_(dk).mul_(sf2[:, None, None])
-    del dk
-    PZ = torch.matmul(P, Z)
-    P1 = P.sum(-1)
-    g_l = -2.0 * ((Z * Z * P1.unsqueeze(-1)).sum(1) - (Z * PZ).sum(1))
-    g_l = g_l * mask
-    grad = torch.cat([g_l, g_sf.unsqueeze(-1), g_sn.unsqueeze(-1)], dim=1)
-    grad = torch.where(bad.unsqueeze(-1) | ~torch.isfinite(grad), torch.zeros_like(grad), grad)
-    return nll, grad, jitter
+    if chunk is None:
+        chunk = max(1, _CACHE_CHUNK_BYTES // (8 * n * n))
+    chunk = min(chunk, max(k_, 1))
+    prof = PROFILE
+    clock = time.perf_counter
+    th_np = theta.detach().cpu().numpy()
+    mask_np = mask.numpy()
+    nll = np.full(k_, math.inf)
+    jitter = np.zeros(k_)
+    grad = np.zeros((k_, D + 2)) if need_grad else None
+    half_n_log2pi = 0.5 * n * _LOG2PI
+    bufA = torch.empty(chunk, n, n, dtype=_DT)
+    bufB = torch.empty(chunk, n, n, dtype=_DT)
+    bufC = torch.empty(chunk, n, n, dtype=_DT)
+    inv_snr = 0.0 if snr_max is None else 1.0 / snr_max
+    for s0 in range(0, k_, chunk):
+        if prof is not None:
+            t0 = clock()
+        c_ = min(chunk, k_ - s0)
+        sl = slice(s0, s0 + c_)
+        A, Bu, C = bufA[:c_], bufB[:c_], bufC[:c_]
+        inv_l = torch.exp(-theta[sl, :D]) * mask[sl]
+        Z = X[sl] * inv_l[:, None, :]
+        sq = (Z * Z).sum(-1)
+        torch.baddbmm(sq.unsqueeze(-1), Z, Z.transpose(-1, -2), alpha=-2.0, out=A)
+        A.add_(sq.unsqueeze(-2)).clamp_min_(0.0)
+        A.diagonal(dim1=-2, dim2=-1).zero_()
+        c_u = _kernel_parts(kernel, A, Bu, C)
+        y_np = y[sl].numpy()
+        if prof is not None:
+            t1 = clock()
+            prof["kernel"] = prof.get("kernel", 0.0) + t1 - t0
+            prof["members"] = prof.get("members", 0) + c_
+        for i in range(c_):
+            if prof is not None:
+                t1 = clock()
+            m = s0 + i
+            sf2 = math.exp(th_np[m, D])
+            en = math.exp(th_np[m, D + 1])
+            sn2 = noise_floor + sf2 * inv_snr + en
+            cf, jit = _potrf_jitter(A[i], C[i], sf2, sn2, jitter_max)
+            jitter[m] = jit
+            if cf is None:
+                continue
+            yi = y_np[i]
+            alpha, _ = _dpotrs(cf, yi, lower=1)
+            f = 0.5 * float(yi @ alpha) + float(np.log(np.diagonal(cf)).sum()) + half_n_log2pi
+            if prof is not None:
+                t2 = clock()
+                prof["cholesky"] = prof.get("cholesky", 0.0) + t2 - t1
+            if not math.isfinite(f):
+                continue
+            nll[m] = f
+            if not need_grad:
+                continue
+            ci, info = _dpotri(cf, lower=1, overwrite_c=1)
+            if prof is not None:
+                t3 = clock()
+                prof["inverse"] = prof.get("inverse", 0.0) + t3 - t2
+            if info != 0:
+                nll[m] = math.inf
+                continue
+            # ci (F order, the memory of C[i]) holds K^-1 in its lower triangle = the upper triangle of C[i].
+            U = C[i]
+            at = torch.from_numpy(alpha)
+            U.addr_(at, at, alpha=-1.0).triu_()  # upper triangle of M = K^-1 - alpha alpha^T
+            trM = float(U.diagonal().sum())
+            Ai = A[i]
+            g_sf = 0.5 * sf2 * (2.0 * float(torch.dot(U.view(-1), Ai.view(-1))) - trM)  # diag(k) = 1
+            U.mul_(Bu[i])  # upper triangle of P / (c_u sf2)
+            Zi = Z[i]
+            UZ = U @ Zi
+            rc = U.sum(1).add_(U.sum(0))
+            g_l = (-2.0 * c_u * sf2) * ((Zi * Zi * rc.unsqueeze(-1)).sum(0) - 2.0 * (Zi * UZ).sum(0))
+            g = grad[m]
+            g[:D] = g_l.numpy() * mask_np[m]
+            g[D] = g_sf + 0.5 * sf2 * inv_snr * trM
+            g[D + 1] = 0.5 * en * trM
+            if not np.all(np.isfinite(g)):
+                g[:] = 0.0
+            if prof is not None:
+                prof["gradient"] = prof.get("gradient", 0.0) + clock() - t3
+    return torch.from_numpy(nll), (torch.from_numpy(grad) if need_grad else None), torch.from_numpy(jitter)
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -341,6 +499,51 @@ def _check_vector(a: Any, field_name: str, n: int) -> np.ndarray:
         row = int(np.argwhere(~np.isfinite(a))[0, 0])
         raise ValueError(f"{field_name}: contains NaN or inf (first at row {row})")
     return a
+
+
+def _prune_rule(cfg: GPFitConfig, states: list[MemberState], gp_of: np.ndarray, B: int,
+                raced: np.ndarray) -> np.ndarray:
+    """Which live starts to stop now (see "Restarts and early stopping" in the module docstring).
+
+    The leader of a GP (lowest current NLL; ties: lowest member index; finished starts included) is never stopped
+    here. ``raced`` (B,) marks GPs whose race has been held (updated in place). Sets ``reason`` of stopped starts.
+    """
+    f = np.array([s.f if math.isfinite(s.f) else math.inf for s in states])
+    live = np.array([not s.done for s in states])
+    it = np.array([s.n_iter for s in states])
+    best = np.full(B, np.inf)
+    np.minimum.at(best, gp_of, f)
+    lead = np.full(B, -1)
+    for m in np.argsort(f, kind="stable")[::-1]:
+        lead[gp_of[m]] = m
+    out = np.zeros(len(states), dtype=bool)
+    reason = [""] * len(states)
+    if cfg.drop_after is not None:
+        hope = live & (it >= cfg.drop_after) & (f > best[gp_of] + cfg.drop_margin)
+        for m in np.flatnonzero(hope):
+            out[m], reason[m] = True, "dropped"
+    if cfg.race_at is not None:
+        for b in np.unique(gp_of):
+            if raced[b]:
+                continue
+            mem = np.flatnonzero(gp_of == b)
+            if np.all((it[mem] >= cfg.race_at) | ~live[mem]):
+                raced[b] = True
+                order = mem[np.argsort(f[mem], kind="stable")]
+                for m in order[cfg.race_keep:]:
+                    if live[m] and not out[m]:
+                        out[m], reason[m] = True, "raced_out"
+    if cfg.stall_window is not None:
+        w = cfg.stall_window
+        for m, s in enumerate(states):
+            if live[m] and not out[m] and lead[gp_of[m]] != m and len(s.trace) > w:
+                gain = s.trace[-1 - w] - s.trace[-1]
+                gap = f[m] - best[gp_of[m]]
+                if gain <= max(cfg.stall_tol, gap / cfg.catch_up_windows):
+                    out[m], reason[m] = True, "stalled"
+    for m in np.flatnonzero(out):
+        states[m].reason = reason[m]
+    return out
 
 
 # ----------------------------------------------------------------------------------------------------------------
@@ -433,6 +636,10 @@ class GPBank:
         Returns:
             ``self``.
         """
+        with _blas_threads(1):
+            return self._fit(X, y, init)
+
+    def _fit(self, X: list[np.ndarray], y: list[np.ndarray], init: GPBank | None) -> GPBank:
         t0 = time.perf_counter()
         cfg = self.config
         X = _as_list(X, "X")
@@ -536,16 +743,12 @@ class GPBank:
             return fun
 
         def make_prune(gp_of: np.ndarray):
-            if cfg.drop_after is None:
+            if cfg.drop_after is None and cfg.stall_window is None and cfg.race_at is None:
                 return None
+            raced = np.zeros(B, dtype=bool)
 
             def prune(states: list[MemberState], rnd: int) -> np.ndarray | None:
-                f = np.array([s.f for s in states])
-                it = np.array([s.n_iter for s in states])
-                best = np.full(B, np.inf)
-                np.minimum.at(best, gp_of, f)
-                return (it >= cfg.drop_after) & (f > best[gp_of] + cfg.drop_margin) & np.array(
-                    [not s.done for s in states])
+                return _prune_rule(cfg, states, gp_of, B, raced)
             return prune
 
         if opt_gps.size:
@@ -553,7 +756,7 @@ class GPBank:
             gp_of = member_gp
             starts = x0
             start_idx = member_start
-            if cfg.screen_n is not None and n > cfg.screen_n and R > cfg.screen_keep:
+            if cfg.screen_n is not None and n > cfg.screen_n:
                 sub = np.sort(rng.choice(n, size=cfg.screen_n, replace=False))
                 Xs_t = torch_X[:, sub].clone()
                 ys_t = torch_y[:, sub].clone()
@@ -587,6 +790,7 @@ class GPBank:
                 pre_iter = np.zeros(len(gp_of), dtype=np.int64)
                 pre_eval = np.zeros(len(gp_of), dtype=np.int64)
             states = minimize_batched(make_fun(torch_X, torch_y, gp_of, "full"), starts, opts, make_prune(gp_of))
+            self._traces = {(int(gp_of[k]), int(start_idx[k])): list(st.trace) for k, st in enumerate(states)}
             for k, st in enumerate(states):
                 b, r = int(gp_of[k]), int(start_idx[k])
                 nll_r[b, r] = st.f
