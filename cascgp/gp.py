@@ -95,7 +95,7 @@ from scipy.linalg.lapack import dpotrf as _dpotrf, dpotri as _dpotri, dpotrs as 
 from cascgp.kernels import check_kernel, kernel_and_grad_r2, kernel_of_r2, kernel_of_r2_torch, scaled_sqdist
 from cascgp.lbfgs import LBFGSOptions, MemberState, minimize_batched
 
-__all__ = ["GPFitConfig", "GPBank", "GPPosterior", "nll_and_grad", "STATE_VERSION"]
+__all__ = ["GPFitConfig", "GPBank", "GPPosterior", "nll_and_grad", "estimate_fit_bytes", "plan_chunk", "STATE_VERSION"]
 
 STATE_VERSION = 1
 _DT = torch.float64
@@ -139,9 +139,11 @@ class GPFitConfig:
     drop_margin: float = 20.0
     stall_window: int | None = 5
     stall_tol: float = 0.01
-    catch_up_windows: float = 2.0
-    race_at: int | None = 10
+    catch_up_windows: float = 10.0
+    race_at: int | None = None
     race_keep: int = 5
+    snr_max: float | None = 1e6
+    max_batch_bytes: int = 2 * 1024**3
     screen_n: int | None = None
     screen_keep: int = 2
     screen_max_iter: int = 200
@@ -164,6 +166,12 @@ class GPFitConfig:
             v = getattr(self, name)
             if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1):
                 raise ValueError(f"{name}: expected None or an integer >= 1, got {v!r}")
+        if self.snr_max is not None and (not isinstance(self.snr_max, (int, float)) or not math.isfinite(self.snr_max)
+                                         or self.snr_max <= 0):
+            raise ValueError(f"snr_max: expected None or a finite number > 0, got {self.snr_max!r}")
+        if not isinstance(self.max_batch_bytes, (int, np.integer)) or isinstance(self.max_batch_bytes, bool) or \
+                self.max_batch_bytes < 1:
+            raise ValueError(f"max_batch_bytes: expected an integer >= 1, got {self.max_batch_bytes!r}")
         if not isinstance(self.catch_up_windows, (int, float)) or not self.catch_up_windows > 0:
             raise ValueError(f"catch_up_windows: expected a number > 0, got {self.catch_up_windows!r}")
         if self.screen_n is not None and (not isinstance(self.screen_n, int) or self.screen_n < 2):
@@ -262,30 +270,35 @@ def _blas_threads(k: int) -> Iterator[None]:
         yield
 
 
-# Cache-sized chunks: the elementwise kernel work runs on (c, n, n) blocks of about this many bytes per
-# tensor, so that they stay in the last-level cache (measured: one (60, 500, 500) batch per op was 2.2x slower
-# per evaluation than member-sized blocks, the whole batch being memory-bandwidth bound).
-_CACHE_CHUNK_BYTES = 4 << 20
+# Cache-sized chunks: the element-wise kernel work runs on (c, n, n) blocks of about this many bytes per tensor
+# (measured, 1 thread: one (60, 500, 500) batch per op was 2.2x slower per evaluation than member-sized blocks, the
+# whole batch being memory-bandwidth bound; at n = 300 and 500 one member per block was 6 % faster than 5).
+_CACHE_CHUNK_BYTES = 1 << 20
 
 
 def _kernel_parts(kernel: str, A: torch.Tensor, B: torch.Tensor, C: torch.Tensor) -> float:
-    r"""In place: ``A`` holds :math:`r^2` on entry and the unit kernel :math:`k` on exit; ``B`` receives ``u``
-    with :math:`\partial k / \partial (r^2) = c\, u`; ``C`` is scratch. Returns ``c``.
+    r"""In place: ``A`` holds :math:`s\,r^2` on entry (``s`` from :func:`_r2_scale`) and the unit kernel :math:`k` on
+    exit; ``B`` receives ``u`` with :math:`\partial k / \partial (r^2) = c\, u`; ``C`` is scratch. Returns ``c``.
 
-    Matern 5/2: :math:`u = (1 + \sqrt5 r) e^{-\sqrt5 r}`, :math:`k = (1 + \sqrt5 r + \tfrac53 r^2) e^{-\sqrt5 r}`,
-    :math:`c = -5/6`; RBF: :math:`u = k = e^{-r^2/2}`, :math:`c = -1/2`. No temporaries: fresh large tensors cost
-    page faults that were measured to take longer than the element-wise arithmetic itself.
+    Matern 5/2 (:math:`s = 5`, :math:`\rho = \sqrt{5 r^2}`): :math:`u = (1 + \rho) e^{-\rho}`,
+    :math:`k = u + \tfrac13 \rho^2 e^{-\rho}`, :math:`c = -5/6`; RBF (:math:`s = 1`): :math:`u = k = e^{-r^2/2}`,
+    :math:`c = -1/2`. No temporaries: fresh large tensors cost page faults that were measured to take longer than
+    the element-wise arithmetic itself.
     """
     if kernel == "rbf":
         A.mul_(-0.5).exp_()
         B.copy_(A)
         return -0.5
-    torch.mul(A, 5.0, out=B).sqrt_()  # B = sqrt5 r
-    torch.neg(B, out=C).exp_()  # C = e^{-sqrt5 r}
-    B.add_(1.0)  # 1 + sqrt5 r
-    A.mul_(5.0 / 3.0).add_(B).mul_(C)  # k
-    B.mul_(C)  # u
+    torch.sqrt(A, out=B)  # rho
+    torch.neg(B, out=C).exp_()  # e^{-rho}
+    B.add_(1.0).mul_(C)  # u
+    torch.addcmul(B, A, C, value=1.0 / 3.0, out=A)  # k = u + rho^2 e^{-rho} / 3
     return -5.0 / 6.0
+
+
+def _r2_scale(kernel: str) -> float:
+    """Factor folded into the squared distances before :func:`_kernel_parts` (saves one pass)."""
+    return 1.0 if kernel == "rbf" else 5.0
 
 
 def _potrf_jitter(kk: torch.Tensor, K: torch.Tensor, sf2: float, sn2: float,
@@ -333,7 +346,7 @@ def nll_and_grad(
     r"""Negative log marginal likelihood and its analytic gradient for a batch of GPs.
 
     The batch is processed in chunks of ``chunk`` members (default: as many as keep one ``(chunk, n, n)`` block
-    near 4 MB, i.e. in cache); three ``(chunk, n, n)`` work buffers are reused for every chunk. Per member: one
+    near 1 MB, i.e. in cache); three ``(chunk, n, n)`` work buffers are reused for every chunk. Per member: one
     Cholesky :math:`K = L L^\top` (LAPACK ``dpotrf``), :math:`\alpha` by two triangular solves (``dpotrs``),
     :math:`K^{-1}` from the factor (``dpotri``), and the ARD gradient from the upper triangle :math:`U` of the
     symmetric :math:`P` (diagonal included; its terms vanish):
@@ -382,6 +395,7 @@ def nll_and_grad(
     bufB = torch.empty(chunk, n, n, dtype=_DT)
     bufC = torch.empty(chunk, n, n, dtype=_DT)
     inv_snr = 0.0 if snr_max is None else 1.0 / snr_max
+    r2s = _r2_scale(kernel)
     for s0 in range(0, k_, chunk):
         if prof is not None:
             t0 = clock()
@@ -390,8 +404,8 @@ def nll_and_grad(
         A, Bu, C = bufA[:c_], bufB[:c_], bufC[:c_]
         inv_l = torch.exp(-theta[sl, :D]) * mask[sl]
         Z = X[sl] * inv_l[:, None, :]
-        sq = (Z * Z).sum(-1)
-        torch.baddbmm(sq.unsqueeze(-1), Z, Z.transpose(-1, -2), alpha=-2.0, out=A)
+        sq = (Z * Z).sum(-1).mul_(r2s)
+        torch.baddbmm(sq.unsqueeze(-1), Z, Z.transpose(-1, -2), alpha=-2.0 * r2s, out=A)
         A.add_(sq.unsqueeze(-2)).clamp_min_(0.0)
         A.diagonal(dim1=-2, dim2=-1).zero_()
         c_u = _kernel_parts(kernel, A, Bu, C)
@@ -499,6 +513,38 @@ def _check_vector(a: Any, field_name: str, n: int) -> np.ndarray:
         row = int(np.argwhere(~np.isfinite(a))[0, 0])
         raise ValueError(f"{field_name}: contains NaN or inf (first at row {row})")
     return a
+
+
+def _noise_var(cfg: GPFitConfig, sf2: float, e: float) -> float:
+    r"""Noise variance (normalised units) from :math:`s_f^2` and :math:`e^{\theta_{d+2}}`:
+    :math:`s_n^2 = s_{n,\min}^2 + s_f^2 / \mathrm{snr\_max} + e^{\theta_{d+2}}`."""
+    return cfg.noise_floor + (sf2 / cfg.snr_max if cfg.snr_max is not None else 0.0) + e
+
+
+def estimate_fit_bytes(n: int, d: int, n_gps: int, n_starts: int, chunk: int = 1) -> int:
+    """Bytes :meth:`GPBank.fit` needs beyond the interpreter, before fitting (an upper estimate).
+
+    ``3 * chunk`` work matrices ``(n, n)`` of the batched evaluation (:func:`nll_and_grad`), the stored factor
+    of every GP ``(n_gps, n, n)`` plus two ``(n, n)`` temporaries while it is computed, and the data copies
+    (normalised inputs of every start, ``(n_gps * n_starts, n, d)``, twice). All float64.
+    """
+    return 8 * (3 * chunk * n * n + (n_gps + 3) * n * n + 2 * n_gps * n_starts * n * d + 6 * n_gps * n * d)
+
+
+def plan_chunk(cfg: GPFitConfig, n: int, d: int, n_gps: int) -> int:
+    """Members per evaluation block: cache-sized, shrunk to keep :func:`estimate_fit_bytes` within
+    ``cfg.max_batch_bytes``; ``ValueError`` naming ``max_batch_bytes`` when even one member does not fit."""
+    chunk = max(1, _CACHE_CHUNK_BYTES // (8 * n * n))
+    need1 = estimate_fit_bytes(n, d, n_gps, cfg.n_restarts, 1)
+    if need1 > cfg.max_batch_bytes:
+        raise ValueError(
+            f"max_batch_bytes: fitting {n_gps} GPs x {cfg.n_restarts} starts on n={n} points (d={d}) needs about "
+            f"{need1 / 2**20:.0f} MiB even one start at a time (3 + {n_gps + 3} matrices of {n}x{n} float64 plus "
+            f"the data), over GPFitConfig.max_batch_bytes = {cfg.max_batch_bytes / 2**20:.0f} MiB; raise "
+            "GPFitConfig.max_batch_bytes, or use fewer training points (memory grows as n^2)")
+    while chunk > 1 and estimate_fit_bytes(n, d, n_gps, cfg.n_restarts, chunk) > cfg.max_batch_bytes:
+        chunk -= 1
+    return chunk
 
 
 def _prune_rule(cfg: GPFitConfig, states: list[MemberState], gp_of: np.ndarray, B: int,
@@ -611,7 +657,7 @@ class GPBank:
         return {
             "lengthscale": ls,
             "signal_var": float(np.exp(th[-2]) * ys2),
-            "noise_var": float((self.config.noise_floor + np.exp(th[-1])) * ys2),
+            "noise_var": float(_noise_var(self.config, math.exp(th[-2]), math.exp(th[-1])) * ys2),
         }
 
     def _require_fitted(self) -> None:
@@ -661,6 +707,8 @@ class GPBank:
                 raise ValueError("init: expected a fitted GPBank or None")
             if init.dims != tuple(int(d) for d in dims):
                 raise ValueError(f"init: input dimensions {init.dims} do not match X's {tuple(int(d) for d in dims)}")
+
+        chunk = plan_chunk(cfg, n, D, B)  # memory guard: before any large allocation
 
         # --- normalisation (constant columns masked, constant targets flagged)
         Xp = np.zeros((B, n, D))
@@ -733,7 +781,8 @@ class GPBank:
                 nonlocal n_eval_total, rounds
                 gsel = torch.as_tensor(gp_of[idx])
                 f, g, jit = nll_and_grad(torch.as_tensor(Th, dtype=_DT), tX[gsel], ty[gsel], torch_mask[gsel],
-                                         cfg.kernel, cfg.noise_floor, cfg.jitter_max)
+                                         cfg.kernel, cfg.noise_floor, cfg.jitter_max, chunk=chunk,
+                                         snr_max=cfg.snr_max)
                 jn = jit.numpy()
                 np.maximum.at(max_jit, gp_of[idx], jn)
                 n_eval_total += len(idx)
@@ -861,15 +910,18 @@ class GPBank:
             out[b, :d] = ll
             scale = math.log(self._y_std[b] ** 2) - math.log(y_std_new[b] ** 2)
             out[b, D] = th[Dold] + scale
-            sn2 = (self.config.noise_floor + math.exp(th[Dold + 1])) * math.exp(scale)
-            out[b, D + 1] = math.log(max(sn2 - self.config.noise_floor, 1e-8))
+            sn2 = _noise_var(self.config, math.exp(th[Dold]), math.exp(th[Dold + 1])) * math.exp(scale)
+            floor = _noise_var(self.config, math.exp(out[b, D]), 0.0)
+            out[b, D + 1] = math.log(max(sn2 - floor, 1e-8))
         return out
 
     def _compute_factors(self) -> None:
+        """Cholesky factor, ``alpha`` and final NLL of every GP at ``self._theta`` (one GP at a time: the
+        temporaries are a few ``(n, n)`` matrices; only the ``(B, n, n)`` factor is kept)."""
         cfg = self.config
         Xn = (self._X - self._x_mean[:, None, :]) / self._x_std[:, None, :] * self._mask[:, None, :]
         yn = (self._y - self._y_mean[:, None]) / self._y_std[:, None]
-        D = self._X.shape[2]
+        B, n, D = self._X.shape
         th = torch.as_tensor(self._theta, dtype=_DT)
         tX = torch.as_tensor(Xn, dtype=_DT)
         ty = torch.as_tensor(yn, dtype=_DT)
@@ -877,22 +929,30 @@ class GPBank:
         inv_l = torch.exp(-th[:, :D]) * tm
         Z = tX * inv_l[:, None, :]
         sf2 = torch.exp(th[:, D])
-        sn2 = cfg.noise_floor + torch.exp(th[:, D + 1])
-        K = kernel_of_r2_torch(cfg.kernel, scaled_sqdist(Z)) * sf2[:, None, None]
-        K.diagonal(dim1=-2, dim2=-1).add_(sn2[:, None])
-        L, jitter, failed = _robust_cholesky(K, max(cfg.jitter_max, 1.0))
-        if bool(failed.any()):
-            raise RuntimeError(f"GPBank: Cholesky failed for GPs {failed.nonzero().squeeze(1).tolist()} "
-                               "even with jitter 1.0")
-        alpha = torch.cholesky_solve(ty.unsqueeze(-1), L).squeeze(-1)
-        nll = 0.5 * (ty * alpha).sum(-1) + torch.log(L.diagonal(dim1=-2, dim2=-1)).sum(-1) + 0.5 * Xn.shape[1] * _LOG2PI
+        sn2 = torch.tensor([_noise_var(cfg, float(sf2[b]), math.exp(float(th[b, D + 1]))) for b in range(B)],
+                           dtype=_DT)
+        L = torch.empty(B, n, n, dtype=_DT)
+        alpha = torch.empty(B, n, dtype=_DT)
+        jitter = np.zeros(B)
+        nll = np.zeros(B)
+        for b in range(B):
+            K = kernel_of_r2_torch(cfg.kernel, scaled_sqdist(Z[b : b + 1])).mul_(sf2[b])
+            K.diagonal(dim1=-2, dim2=-1).add_(sn2[b])
+            Lb, jit, failed = _robust_cholesky(K, max(cfg.jitter_max, 1.0))
+            del K
+            if bool(failed.any()):
+                raise RuntimeError(f"GPBank: Cholesky failed for GP {b} even with jitter 1.0")
+            L[b] = Lb[0]
+            alpha[b] = torch.cholesky_solve(ty[b, :, None], Lb[0])[:, 0]
+            jitter[b] = float(jit[0])
+            nll[b] = float(0.5 * (ty[b] * alpha[b]).sum() + torch.log(Lb[0].diagonal()).sum() + 0.5 * n * _LOG2PI)
         self._Z = Z
         self._L = L
         self._alpha = alpha
         self._sf2 = sf2
         self._sn2 = sn2
-        self._jitter = jitter.numpy().copy()
-        self._final_nll = nll.numpy().copy()
+        self._jitter = jitter
+        self._final_nll = nll
         self._inv_l = inv_l
         self._fitted = True
 
