@@ -82,9 +82,9 @@ current pace needs more than 10 windows to reach the leader's *current* value, a
 with ``python -m scripts.fit_audit``; report in ``docs/bench/fit_audit.md``): on 78 GPs (SARCOS subsets
 n = 100-300, synthetic n = 50-200) the default's best NLL was within 0.03 nat of 10 starts run to convergence on
 all of them. Rules measured and rejected on that audit: keeping the 5 best starts after 10 iterations ("racing",
-option ``race_at``/``race_keep``, off by default: lost up to 3.3 nats on 4 of 36 synthetic GPs) and a shorter
+option ``race_at``/``race_keep``, off by default: lost up to 1.2 nats on 2 of 36 synthetic GPs) and a shorter
 catch-up horizon (``catch_up_windows=2``: lost up to 1.6 nats). On SARCOS (n = 500, 6 GPs x 10 starts) the rule
-cuts the evaluations from 6,554 to about 2,900 (each start: ~107 -> ~48).
+cuts the evaluations from 6,156 to 3,098 (each start: 103 -> 52; ``docs/bench``).
 
 Other options (off by default): ``screen_n`` optimises all starts on a random subset of ``screen_n`` points first
 and continues the ``screen_keep`` best on the full data (all of them if ``screen_keep >= n_restarts``); measured
@@ -579,13 +579,17 @@ def _noise_var(cfg: GPFitConfig, sf2: float, e: float) -> float:
 
 
 def estimate_fit_bytes(n: int, d: int, n_gps: int, n_starts: int, chunk: int = 1) -> int:
-    """Bytes :meth:`GPBank.fit` needs beyond the interpreter, before fitting (an upper estimate).
+    """Bytes :meth:`GPBank.fit` needs beyond the interpreter, before fitting (a deliberately high estimate).
 
-    ``3 * chunk`` work matrices ``(n, n)`` of the batched evaluation (:func:`nll_and_grad`), the stored factor
-    of every GP ``(n_gps, n, n)`` plus two ``(n, n)`` temporaries while it is computed, and the data copies
-    (normalised inputs of every start, ``(n_gps * n_starts, n, d)``, twice). All float64.
+    ``3 * chunk`` work matrices ``(n, n)`` of the batched evaluation (:func:`nll_and_grad`), the stored factor of
+    every GP ``(n_gps, n, n)`` plus twelve ``(n, n)`` for the temporaries of the final factors and for allocator
+    fragmentation (freed ``(n, n)`` blocks are not always returned to the system), the data copies (normalised
+    inputs of every start, ``(n_gps * n_starts, n, d)``, twice), all float64, and 128 MiB of fixed overhead.
+    Measured (``bench_cascgp --scaling``, 6 GPs x 10 starts, d = 18, two runs): peak RSS growth 40 / 68 /
+    161-187 / 565-703 MiB at n = 250 / 500 / 1000 / 2000.
     """
-    return 8 * (3 * chunk * n * n + (n_gps + 3) * n * n + 2 * n_gps * n_starts * n * d + 6 * n_gps * n * d)
+    return 8 * (3 * chunk * n * n + (n_gps + 12) * n * n + 2 * n_gps * n_starts * n * d + 6 * n_gps * n * d) \
+        + (128 << 20)
 
 
 def plan_chunk(cfg: GPFitConfig, n: int, d: int, n_gps: int) -> int:
@@ -596,7 +600,7 @@ def plan_chunk(cfg: GPFitConfig, n: int, d: int, n_gps: int) -> int:
     if need1 > cfg.max_batch_bytes:
         raise ValueError(
             f"max_batch_bytes: fitting {n_gps} GPs x {cfg.n_restarts} starts on n={n} points (d={d}) needs about "
-            f"{need1 / 2**20:.0f} MiB even one start at a time (3 + {n_gps + 3} matrices of {n}x{n} float64 plus "
+            f"{need1 / 2**20:.0f} MiB even one start at a time (3 + {n_gps + 12} matrices of {n}x{n} float64 plus "
             f"the data), over GPFitConfig.max_batch_bytes = {cfg.max_batch_bytes / 2**20:.0f} MiB; raise "
             "GPFitConfig.max_batch_bytes, or use fewer training points (memory grows as n^2)")
     while chunk > 1 and estimate_fit_bytes(n, d, n_gps, cfg.n_restarts, chunk) > cfg.max_batch_bytes:
@@ -896,7 +900,6 @@ class GPBank:
                 pre_iter = np.zeros(len(gp_of), dtype=np.int64)
                 pre_eval = np.zeros(len(gp_of), dtype=np.int64)
             states = minimize_batched(make_fun(torch_X, torch_y, gp_of, "full"), starts, opts, make_prune(gp_of))
-            self._traces = {(int(gp_of[k]), int(start_idx[k])): list(st.trace) for k, st in enumerate(states)}
             for k, st in enumerate(states):
                 b, r = int(gp_of[k]), int(start_idx[k])
                 nll_r[b, r] = st.f

@@ -60,15 +60,19 @@ def test_memory_estimate_and_n2000_target_within_2GB():
     assert need < 2 * 1024**3
     assert plan_chunk(GPFitConfig(), 2000, 21, 7) == 1
     # the estimate grows as n^2 (work matrices and the stored factors)
-    assert 3.5 < estimate_fit_bytes(4000, 21, 7, 10) / estimate_fit_bytes(2000, 21, 7, 10) <= 4.0
+    assert 3.7 < estimate_fit_bytes(8000, 21, 7, 10) / estimate_fit_bytes(4000, 21, 7, 10) <= 4.0
 
 
 def test_memory_guard_refuses_over_limit_with_clear_message():
     rng = np.random.default_rng(0)
     X, Y = _data(rng, 400, 3, 2)
-    cfg = GPFitConfig(n_restarts=2, max_batch_bytes=4 * 1024**2)  # 4 MiB < 3 + 5 matrices of 400 x 400
+    limit = estimate_fit_bytes(400, 3, 2, 2, chunk=1) - 1  # one byte short of one start at a time
+    cfg = GPFitConfig(n_restarts=2, max_batch_bytes=limit)
     with pytest.raises(ValueError, match=r"max_batch_bytes.*GPFitConfig\.max_batch_bytes"):
         GPBank(cfg).fit([X, X], [Y[:, 0], Y[:, 1]])
+    with pytest.raises(ValueError, match=r"n=400"):
+        plan_chunk(cfg, 400, 3, 2)
+    assert plan_chunk(dataclasses.replace(cfg, max_batch_bytes=limit + 1), 400, 3, 2) == 1
     with pytest.raises(ValueError, match="max_batch_bytes"):
         GPFitConfig(max_batch_bytes=0)
 
