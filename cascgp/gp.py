@@ -147,6 +147,10 @@ _DT = torch.float64
 _LOG2PI = math.log(2.0 * math.pi)
 
 
+#: Values of fields added after the first saved format, for configs saved without them (old behaviour).
+_LEGACY_DEFAULTS: dict[str, Any] = {"snr_max": None, "stall_window": None}
+
+
 @dataclass
 class GPFitConfig:
     r"""Hyperparameter optimisation settings.
@@ -205,6 +209,19 @@ class GPFitConfig:
     screen_keep: int = 2
     screen_max_iter: int = 200
     screen_rel_tol: float = 1e-6
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> GPFitConfig:
+        """Config from a saved ``asdict`` (unknown keys ignored). Fields missing from a save that predates them take
+        the value that reproduces the old behaviour (``snr_max=None``, ``stall_window=None``), so that a loaded
+        model predicts exactly as when it was saved."""
+        if not isinstance(d, dict):
+            raise TypeError(f"config: expected a dict, got {type(d).__name__}")
+        names = {f.name for f in fields(cls)}
+        kw = {k: v for k, v in d.items() if k in names}
+        for k, v in _LEGACY_DEFAULTS.items():
+            kw.setdefault(k, v)
+        return cls(**kw)
 
     def __post_init__(self) -> None:
         check_kernel(self.kernel)
@@ -453,6 +470,10 @@ def nll_and_grad(
     bufC = torch.empty(chunk, n, n, dtype=_DT)
     inv_snr = 0.0 if snr_max is None else 1.0 / snr_max
     r2s = _r2_scale(kernel)
+    with np.errstate(over="ignore", invalid="ignore"):
+        sf2_all = np.exp(th_np[:, D])
+        en_all = np.exp(th_np[:, D + 1])
+        row_ok = np.all(np.isfinite(np.exp(-th_np[:, :D])), axis=1) & np.all(np.isfinite(th_np), axis=1)
     for s0 in range(0, k_, chunk):
         if prof is not None:
             t0 = clock()
@@ -475,9 +496,11 @@ def nll_and_grad(
             if prof is not None:
                 t1 = clock()
             m = s0 + i
-            sf2 = math.exp(th_np[m, D])
-            en = math.exp(th_np[m, D + 1])
+            sf2 = float(sf2_all[m])
+            en = float(en_all[m])
             sn2 = noise_floor + sf2 * inv_snr + en
+            if not (row_ok[m] and math.isfinite(sn2) and math.isfinite(sf2)):
+                continue  # a trial point far out (huge step): NLL inf, the line search backs off
             cf, jit = _potrf_jitter(A[i], C[i], sf2, sn2, jitter_max)
             jitter[m] = jit
             if cf is None:
@@ -1113,9 +1136,7 @@ class GPBank:
         if int(np.asarray(d["version"])) != STATE_VERSION:
             raise ValueError(f"state['version']: expected {STATE_VERSION}, got {d['version']!r}")
         try:
-            cfg_d = json.loads(str(np.asarray(d["config_json"])))
-            names = {f.name for f in fields(GPFitConfig)}
-            config = GPFitConfig(**{k: v for k, v in cfg_d.items() if k in names})
+            config = GPFitConfig.from_dict(json.loads(str(np.asarray(d["config_json"]))))
         except (json.JSONDecodeError, TypeError) as e:
             raise ValueError(f"state['config_json']: not a valid GPFitConfig ({e})") from None
         dims = np.asarray(d["dims"], dtype=np.int64)

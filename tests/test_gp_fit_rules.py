@@ -189,3 +189,33 @@ def test_snr_bound_keeps_noise_free_fits_well_conditioned():
     scale = 1 + np.abs(ref).max()
     assert np.abs(mean[:, 0] - ref).max() <= 1e-8 * scale
     assert np.abs(one - ref).max() <= 1e-8 * scale
+
+
+def test_state_saved_before_new_fields_loads_with_old_behaviour():
+    """A state whose config predates ``snr_max``/``stall_window`` loads with both off, and predicts as saved."""
+    import json
+
+    rng = np.random.default_rng(2)
+    X, Y = _data(rng, 40, 2, 1, noise=0.0)
+    bank = GPBank(GPFitConfig(n_restarts=2, snr_max=None, stall_window=None, max_iter=50)).fit([X], [Y[:, 0]])
+    sd = bank.state_dict()
+    cfg = json.loads(sd["config_json"])
+    for k in ("snr_max", "stall_window", "catch_up_windows", "race_at", "race_keep", "max_batch_bytes"):
+        del cfg[k]
+    sd["config_json"] = json.dumps(cfg)
+    old = GPBank.from_state_dict(sd)
+    assert old.config.snr_max is None and old.config.stall_window is None
+    np.testing.assert_array_equal(old.predict([X[:5]])[0], bank.predict([X[:5]])[0])
+    assert old.hyperparameters(0)["noise_var"] == bank.hyperparameters(0)["noise_var"]
+
+
+def test_far_out_trial_points_give_inf_not_an_error():
+    """Line-search trial points with huge log hyperparameters (exp overflows) get NLL inf and gradient 0."""
+    rng = np.random.default_rng(6)
+    X = torch.tensor(rng.normal(size=(4, 20, 2)))
+    y = torch.tensor(rng.normal(size=(4, 20)))
+    theta = torch.tensor([[0.0, 0.0, 0.0, -3.0], [0.0, 0.0, 800.0, -3.0], [0.0, 0.0, 0.0, 900.0],
+                          [-800.0, 0.0, 0.0, -3.0]])
+    f, g, _ = nll_and_grad(theta, X, y, snr_max=1e6)
+    assert math.isfinite(float(f[0])) and bool(torch.isinf(f[1:]).all())
+    assert bool((g[1:] == 0).all()) and bool(torch.isfinite(g).all())
