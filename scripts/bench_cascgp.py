@@ -8,13 +8,18 @@ standardised data, and reports the fit times and the best negative log marginal 
 also measures the latency of one single-query prediction of a 6-joint NP inward cascade (``predict_one``).
 
 Data: the SARCOS IAS file when ``--sarcos`` is given (training rows subsampled to 10 Hz, the first ``n``; joints 1-6;
-torques of joints 1-6 as the 6 outputs), otherwise a smooth synthetic inverse-dynamics-like function.
+torques of joints 1-6 as the 6 outputs; ``--outputs 7``: all 21 inputs and all 7 torques), otherwise a smooth
+synthetic inverse-dynamics-like function. For every cascgp setting it also reports evaluations per start, the cost of
+one NLL+gradient evaluation and its breakdown (kernel, Cholesky, inverse, gradient, optimiser and the rest; from
+``cascgp.gp.PROFILE``). ``--scaling`` instead measures time per evaluation and peak memory against n.
 
 Usage::
 
-    python -m scripts.bench_cascgp --out out/bench --sarcos /work/shared/data/sarcos/ias_sarcos_data.mat
-    python -m scripts.bench_cascgp --out out/bench --skip-gpy          # cascgp only
-    python -m scripts.bench_cascgp --out out/bench --configs fast      # one of the settings in CONFIGS
+    python -m scripts.bench_cascgp --out out/bench --sarcos /work/shared/data/sarcos/ias_sarcos_data.mat --threads 1
+    python -m scripts.bench_cascgp --out out/bench --sarcos ... --n 300 --outputs 7
+    python -m scripts.bench_cascgp --out out/bench --skip-gpy               # cascgp only
+    python -m scripts.bench_cascgp --out out/bench --configs default        # one of the settings in CONFIGS
+    python -m scripts.bench_cascgp --out out/bench --scaling 250,500,1000,2000 --scaling-iter 2
 
 GPy is an optional extra (``pip install -e '.[bench]'``). Threads: torch uses ``--threads`` (default 1) for the
 cascgp fit; GPy's NumPy BLAS is limited to ``--threads`` as well (with threadpoolctl when installed; the script also
