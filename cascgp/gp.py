@@ -130,14 +130,14 @@ import json
 import math
 import time
 from collections.abc import Iterator
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, fields
 from typing import Any
 
 import numpy as np
 import torch
 from scipy.linalg.lapack import dpotrf as _dpotrf, dpotri as _dpotri, dpotrs as _dpotrs
 
-from cascgp.kernels import check_kernel, kernel_and_grad_r2, kernel_of_r2, kernel_of_r2_torch, scaled_sqdist
+from cascgp.kernels import check_kernel, kernel_of_r2, kernel_of_r2_torch, scaled_sqdist
 from cascgp.lbfgs import LBFGSOptions, MemberState, minimize_batched
 
 __all__ = ["GPFitConfig", "GPBank", "GPPosterior", "nll_and_grad", "estimate_fit_bytes", "plan_chunk", "STATE_VERSION"]
