@@ -692,8 +692,8 @@ class GPBank:
         config: the :class:`GPFitConfig`.
         fit_info: per GP a dict (JSON-serialisable): ``nll`` (final NLL per start in normalised units; for a
             dropped start its last NLL, for a start screened out or not run ``None``), ``n_iter``, ``n_eval``,
-            ``reason`` (per start: ``grad_tol``, ``rel_tol``, ``dropped``, ``screened_out``, ...), ``best``
-            (index of the kept start), ``best_nll``, ``converged`` (reason of the kept start), ``jitter``
+            ``reason`` (per start: ``grad_tol``, ``rel_tol``, ``stalled``, ``dropped``, ``screened_out``, ...),
+            ``best`` (index of the kept start), ``best_nll``, ``converged`` (reason of the kept start), ``jitter``
             (jitter in the final factor, normalised units), ``max_jitter_fit`` (largest jitter met during the
             fit), ``constant_target``, ``warm_start`` (start 0 came from ``init``), ``screen_nll`` (subset NLL
             per start when screening was used).
