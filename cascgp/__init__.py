@@ -48,6 +48,8 @@ _EXPORTS = {
     "load_model": "cascgp.models",
     "GPBank": "cascgp.gp",
     "GPFitConfig": "cascgp.gp",
+    "audit_bank": "cascgp.fit_audit",
+    "audit_model": "cascgp.fit_audit",
     "RigidBodyModel": "cascgp.rbd",
     "load_nominal": "cascgp.rbd",
     "FeedforwardController": "cascgp.controller",

@@ -290,7 +290,7 @@ def minimize_batched(
         options: :class:`LBFGSOptions`.
         prune: optional callback ``prune(states, round) -> bool mask (M,)`` called after every batched evaluation
             round; members with ``True`` are stopped now (``reason="dropped"``), keeping their last accepted
-            iterate.
+            iterate. A callback may set ``states[i].reason`` itself (e.g. ``"stalled"``) before returning.
 
     Returns:
         One :class:`MemberState` per member (final ``x``, ``f``, ``g``, ``n_iter``, ``n_eval``, ``reason``).
@@ -329,5 +329,7 @@ def minimize_batched(
                     if mask[i]:
                         gens[i].close()
                         del gens[i], pending[i]
-                        states[i].reason, states[i].done = "dropped", True
+                        if states[i].reason == "running":  # prune may name its own reason
+                            states[i].reason = "dropped"
+                        states[i].done = True
     return states

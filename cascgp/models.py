@@ -56,7 +56,7 @@ import json
 import math
 import os
 import warnings
-from dataclasses import asdict, fields
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -551,8 +551,7 @@ def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
     check_format_header(z, path, _KIND, FORMAT_VERSION)
     try:
         cfg = json.loads(str(z["config_json"]))
-        names = {f.name for f in fields(GPFitConfig)}
-        gp_config = GPFitConfig(**{k: v for k, v in cfg["gp_config"].items() if k in names})
+        gp_config = GPFitConfig.from_dict(cfg["gp_config"])
         name, dof = cfg["name"], int(cfg["dof"])
         where = [tuple(int(v) for v in w) for w in cfg["where"]]
         n_banks = int(cfg["n_banks"])
