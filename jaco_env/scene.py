@@ -13,9 +13,11 @@ assets shipped with ``dm_control``; nothing is copied into this repository) plus
   environment);
 * a table (top at z = 0, the robot base stands on it), a floor, and a jar (open
   cylinder of ``JAR_N_WALLS`` staves) whose position is set from the task;
-* the actuators: in ``"torque"`` mode one ``motor`` per joint, ctrl range the
-  Kinova torque limits; in ``"velocity"`` mode the emulated Kinova firmware joint
-  velocity loop (see :func:`add_actuators`).
+* the actuators: in ``"torque"`` mode the firmware torque loop, one actuator per
+  joint whose command (ctrl range the Kinova torque limits) reaches the joint
+  through the loop's first-order lag; in ``"velocity"`` mode the emulated Kinova
+  firmware joint velocity loop on the same torque loop (see :func:`add_actuators`);
+* the link-side joint torque sensors (:func:`jaco_env.robot.add_torque_sensors`).
 
 Contact filtering (``contype``/``conaffinity`` bit 4): marbles collide with each
 other, the bottle, the jar, the table and the floor; the arm (bits 1-2, from the
