@@ -111,16 +111,13 @@ def _gp_config(spec: CurveSpec, subset: int):
 
 
 def _cold_config(spec: CurveSpec, subset: int):
-    """The audit's reference: ``n_restarts`` cold starts, each run to convergence (every start
-    kept: no screening, no dropping), with other seeds than the protocol's."""
-    import dataclasses
-
-    from cascgp.gp import GPFitConfig
+    """The audit's reference: ``n_restarts`` cold starts, each run to convergence (no screening,
+    dropping or stall stopping: :func:`cascgp.fit_audit.cold_config`), with other seeds than the
+    protocol's."""
+    from cascgp.fit_audit import cold_config
 
     base = _gp_config(spec, subset)
-    names = {f.name for f in dataclasses.fields(GPFitConfig)}
-    off = {k: v for k, v in (("drop_after", None), ("screen_n", None)) if k in names}
-    return dataclasses.replace(base, seed=base.seed + 7919, **off)
+    return cold_config(base, n_cold=spec.n_restarts, seed=base.seed + 7919)
 
 
 def audited(spec: CurveSpec, model: str, subset: int, grid_index: int) -> bool:
