@@ -6,11 +6,11 @@ every ``T`` of the grid (ascending) and evaluated on the test set after each fit
 Protocol (the paper's): every fit has ``n_restarts`` (10) starts; after the first grid point one
 of them is warm-started from the previous grid point's hyperparameters (``init=``), the others are
 seeded random starts around the data-driven default, optimised with the library's default
-:class:`cascgp.gp.GPFitConfig` (its start screening/dropping rules included).
+:class:`cascgp.gp.GPFitConfig` (its stall rule for the non-leading starts included).
 
 Equivalence audit: a seeded random ``audit_fraction`` (default 5 %) of the grid fits is fitted a
 second time with ``n_restarts`` *cold* starts, each run to convergence (no warm start, no
-screening or dropping), and the per-joint gap of the best negative log marginal likelihood
+early stopping: :func:`cascgp.fit_audit.cold_config`), and the per-joint gap of the best negative log marginal likelihood
 (protocol minus cold, nats; <= 0 means the protocol found an equal or better optimum) is recorded.
 
 Same rows for every variant: the derivative-free (-df) models cannot use the first

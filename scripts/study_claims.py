@@ -9,11 +9,9 @@ from __future__ import annotations
 
 from typing import Any
 
-import math
-
 import numpy as np
 
-from scripts._study_common import PAPER_TABLE, RBD, make_table, model_name
+from scripts._study_common import PAPER_TABLE, RBD, interval_mean, make_table, model_name
 
 IV = ("1-2 s", "4-5 s", "9-10 s")
 
@@ -60,20 +58,16 @@ def df_vs_db(rows: dict) -> np.ndarray:
 
 def sign_test_p(wins: int, losses: int) -> float:
     """Two-sided exact sign test (binomial, p = 1/2) of ``wins`` against ``losses`` (ties dropped)."""
+    from scipy.stats import binomtest
+
     n = wins + losses
-    if n == 0:
-        return 1.0
-    k = min(wins, losses)
-    tail = sum(math.comb(n, i) for i in range(k + 1)) / 2.0**n
-    return float(min(1.0, 2.0 * tail))
+    return 1.0 if n == 0 else float(binomtest(int(wins), n, 0.5).pvalue)
 
 
 def subset_interval_means(block: dict, m: str, lo: float, hi: float) -> np.ndarray:
     """(S, N): per subset, the mean nRMSE of model ``m`` over the grid points in ``[lo, hi]``."""
-    g = np.asarray(block["grid_s"], float)
-    sel = (g >= lo - 1e-9) & (g <= hi + 1e-9)
     a = np.asarray(block["models"][m]["nrmse_all"], float)  # (S, G, N)
-    return a[:, sel].mean(axis=1) if sel.any() else np.full((a.shape[0], a.shape[2]), np.nan)
+    return interval_mean(block["grid_s"], a.transpose(1, 0, 2), lo, hi)
 
 
 def paired(block: dict, a: str, b: str, intervals=((1, 2), (4, 5), (9, 10))) -> dict[str, Any]:
