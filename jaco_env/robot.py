@@ -22,7 +22,8 @@ check against a real unit is ``ROTOR_INERTIA`` itself.
 quantity                            joints 1-3       joints 4-6       derivation / source
                                     (KA-75+)         (KA-58)
 ==================================  ===============  ===============  =============================================
-gear ratio ``GEAR_RATIO``           160              110              Kinova Gen2 actuator specification
+gear ratio ``GEAR_RATIO``           160              110              Kinova Gen2 actuator figures as recalled;
+                                                                      not checked against a datasheet here
 rotor + wave generator inertia      1.3e-5 kg m^2    4.0e-6 kg m^2    estimate for the motor class (about 45 mm /
 (motor side, ``MOTOR_INERTIA``)                                       32 mm frameless BLDC + wave generator); Kinova
                                                                       publishes no rotor inertia

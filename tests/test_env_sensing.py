@@ -145,6 +145,19 @@ def test_loop_parameters_follow_their_derivation():
     np.testing.assert_allclose(u.model.dof_armature[u._arm_dof], robot.ARMATURE)
     np.testing.assert_allclose(u.model.dof_frictionloss[u._arm_dof], robot.FRICTIONLOSS)
     env.close()
+    # The design inertia is the links' joint-space inertia at home with a 1 kg payload (two digits).
+    from jaco_env.tasks import home_pose
+
+    m = mujoco.MjModel.from_xml_string(*(lambda r: (r.to_xml_string(), r.get_assets()))(
+        scene.build_scene(kind="payload", control_mode=None)))
+    m.dof_armature[:] = 0.0
+    m.body_mass[m.body("jaco_arm/jaco_hand/payload").id] = 1.0
+    d = mujoco.MjData(m)
+    d.qpos[:6] = home_pose()
+    mujoco.mj_forward(m, d)
+    M = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, M)
+    np.testing.assert_allclose(robot.DESIGN_INERTIA - robot.ARMATURE, np.diag(M)[:6], rtol=0.03)
     # Gains: designed natural frequencies and damping.
     from jaco_env import gains
 
