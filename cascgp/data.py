@@ -30,15 +30,15 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 
-__all__ = ["DynamicsData", "SavGol", "FORMAT_VERSION", "atomic_savez", "read_npz"]
+from .io import atomic_savez, check_format_header, read_npz
+
+__all__ = ["DynamicsData", "SavGol", "FORMAT_VERSION"]
 
 #: Version of the ``.npz`` layout written by :meth:`DynamicsData.save`.
 FORMAT_VERSION = 1
@@ -46,64 +46,7 @@ _KIND = "cascgp.DynamicsData"
 _ARRAY_FIELDS = ("q", "qd", "qdd", "tau")
 
 
-# --------------------------------------------------------------------------- file helpers
-def atomic_savez(path: str | os.PathLike, arrays: dict[str, np.ndarray]) -> Path:
-    """Write ``arrays`` to ``path`` (``.npz``) atomically.
-
-    The archive is written to a temporary file in the destination folder, flushed and
-    fsync'ed, then moved over ``path`` with :func:`os.replace`, so a reader never sees a
-    half-written file.  ``numpy.savez`` would append ``.npz`` to a name without it; we keep
-    the path exactly as given.
-    """
-    path = Path(path)
-    folder = path.parent if str(path.parent) else Path(".")
-    folder.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
-    return path
-
-
-def read_npz(path: str | os.PathLike, what: str) -> dict[str, np.ndarray]:
-    """Read every array of an ``.npz`` file eagerly (no pickle).
-
-    Raises ``FileNotFoundError`` for a missing file and ``ValueError`` naming ``path`` and
-    ``what`` for anything unreadable (truncated or corrupt archive, bad CRC, pickled data).
-    """
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{what} file not found: {path}")
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            return {k: np.asarray(z[k]) for k in z.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as exc:
-        raise ValueError(
-            f"{path}: not a readable {what} .npz file (corrupt or truncated?): "
-            f"{type(exc).__name__}: {exc}") from exc
-
-
 # --------------------------------------------------------------------------- validation
-def check_format_header(z: dict[str, np.ndarray], path: str | os.PathLike, kind: str, version: int) -> None:
-    """Raise ``ValueError`` naming the file and field unless ``z`` holds ``format_kind == kind``
-    and ``format_version == version`` (shared by every cascgp file format)."""
-    got_kind = str(z["format_kind"]) if "format_kind" in z else None
-    if got_kind != kind:
-        raise ValueError(f"{path}: format_kind: expected {kind!r}, got {got_kind!r}")
-    got_version = int(z["format_version"]) if "format_version" in z else None
-    if got_version != version:
-        raise ValueError(f"{path}: format_version: expected {version}, got {got_version}")
-
-
 def _first_bad_row(mask: np.ndarray) -> int:
     return int(np.flatnonzero(mask)[0])
 

@@ -62,7 +62,8 @@ from typing import Any
 
 import numpy as np
 
-from .data import DynamicsData, atomic_savez, check_format_header, read_npz
+from .data import DynamicsData
+from .io import atomic_savez, check_format_header, read_npz
 from .features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
 
 __all__ = ["MODEL_NAMES", "FORMAT_VERSION", "CascadedGPModel", "make_model", "load_model", "parse_name"]

@@ -10,11 +10,12 @@ from __future__ import annotations
 import json
 import math
 import os
-import tempfile
 from pathlib import Path
 from typing import Any, Iterable
 
 import numpy as np
+
+from cascgp.io import json_safe, read_json, write_json  # noqa: F401  (re-exported for the study modules)
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_SARCOS = (REPO / ".." / "shared" / "data" / "sarcos" / "ias_sarcos_data.mat").resolve()
@@ -137,40 +138,6 @@ PAPER_TABLE: dict[str, list[list[float]]] = {
 
 
 # --------------------------------------------------------------------------- I/O
-def _clean(x: Any) -> Any:
-    """JSON-safe copy: numpy to lists/scalars, non-finite floats to None."""
-    if isinstance(x, dict):
-        return {str(k): _clean(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_clean(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _clean(x.tolist())
-    if isinstance(x, (np.floating, float)):
-        f = float(x)
-        return f if math.isfinite(f) else None
-    if isinstance(x, (np.integer,)):
-        return int(x)
-    if isinstance(x, (np.bool_,)):
-        return bool(x)
-    return x
-
-
-def write_json(path: str | os.PathLike, obj: Any) -> Path:
-    """Write ``obj`` as indented JSON atomically (temporary file + rename)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    with os.fdopen(fd, "w") as f:
-        json.dump(_clean(obj), f, indent=1)
-    os.replace(tmp, path)
-    return path
-
-
-def read_json(path: str | os.PathLike) -> Any:
-    with open(path) as f:
-        return json.load(f)
-
-
 def limit_threads(n: int = 1) -> None:
     """Limit torch and BLAS threads (OpenBLAS spinning threads otherwise steal cores from torch)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):

@@ -64,7 +64,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
@@ -72,6 +71,8 @@ from xml.sax.saxutils import quoteattr
 import mujoco
 import numpy as np
 import pinocchio as pin
+
+from cascgp.io import atomic_write_text
 
 #: Position limit written for joints that MuJoCo leaves unlimited (rad).
 UNLIMITED_RAD = 1000.0
@@ -353,19 +354,6 @@ def sidecar_text(sidecar: dict) -> str:
     return json.dumps(sidecar, indent=2) + "\n"
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def write(out: str | os.PathLike = DEFAULT_OUT, error: float = 0.1, seed: int = 0) -> tuple[Path, Path]:
     """Generate and write the URDF and its sidecar JSON; returns both paths."""
     out = Path(out)
@@ -373,8 +361,8 @@ def write(out: str | os.PathLike = DEFAULT_OUT, error: float = 0.1, seed: int = 
         raise ValueError(f"out must end in .urdf, got {str(out)!r}")
     text, sidecar = generate(error=error, seed=seed, urdf_name=out.name)
     json_path = sidecar_path(out)
-    _write_atomic(out, text)
-    _write_atomic(json_path, sidecar_text(sidecar))
+    atomic_write_text(out, text)
+    atomic_write_text(json_path, sidecar_text(sidecar))
     return out, json_path
 
 

@@ -46,6 +46,7 @@ from cascgp.buffer import DataBuffer  # noqa: E402
 from cascgp.controller import FeedforwardController  # noqa: E402
 from cascgp.episodes import EpisodeResult, run_episode  # noqa: E402
 from cascgp.gp import GPFitConfig  # noqa: E402
+from cascgp.io import write_json  # noqa: E402
 from cascgp.models import MODEL_NAMES, make_model  # noqa: E402
 from cascgp.rbd import load_nominal  # noqa: E402
 from jaco_env.gains import DEFAULT_KD, DEFAULT_KP  # noqa: E402
@@ -218,9 +219,7 @@ def write_outputs(runs: list[ControllerRun], cfg: TransferConfig, out: Path, wal
         "controllers": {run.name: run.attempts for run in runs},
     }
     out.mkdir(parents=True, exist_ok=True)
-    tmp = out / "results.json.tmp"
-    tmp.write_text(json.dumps(results, indent=2))
-    os.replace(tmp, out / "results.json")
+    write_json(out / "results.json", results, indent=2)
     table = summary_table(runs)
     (out / "summary.md").write_text(table + "\n")
     plot(results, out / "transfer.png")
