@@ -112,9 +112,7 @@ def audit_bank(X: Any, Y: Any, config: GPFitConfig | None = None, *, n_cold: int
 
 
 def _bank_training_data(bank: GPBank) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    dims = bank.dims
-    return ([bank._X[b, :, : dims[b]].copy() for b in range(len(dims))],
-            [bank._y[b].copy() for b in range(len(dims))])
+    return bank.training_data()
 
 
 def audit_model(model: Any, *, n_cold: int = 10, seed: int = 0, tol: float = 0.1) -> dict[str, Any]:

@@ -10,8 +10,9 @@ import scipy.linalg
 import scipy.optimize
 import torch
 
-from cascgp.gp import GPBank, GPFitConfig, GPPosterior, _robust_cholesky, nll_and_grad
-from cascgp.kernels import kernel_of_r2
+from cascgp.gp import GPBank, GPFitConfig, GPPosterior, nll_and_grad
+from cascgp.gp.posterior import robust_cholesky
+from cascgp.gp.kernels import kernel_of_r2
 
 NOISE_FLOOR = 1e-6
 
@@ -124,7 +125,7 @@ def test_cholesky_jitter_only_for_failing_members():
     good = torch.eye(n, dtype=torch.float64) * 2.0
     v = torch.arange(n, dtype=torch.float64)
     bad = torch.outer(v, v) / n + 0.0  # rank one: not positive definite
-    L, jit, failed = _robust_cholesky(torch.stack([good, bad]), jitter_max=1e-2)
+    L, jit, failed = robust_cholesky(torch.stack([good, bad]), jitter_max=1e-2)
     assert jit[0].item() == 0.0 and jit[1].item() > 0.0
     assert not failed.any()
     torch.testing.assert_close(L[0], torch.linalg.cholesky(good))
@@ -146,7 +147,7 @@ def test_batched_fit_equals_fitting_each_alone_and_is_an_optimum():
         # SciPy L-BFGS-B on the reference NLL, started at our optimum, finds nothing better
         Xn = (X[b] - X[b].mean(0)) / X[b].std(0)
         yn = (y[b] - y[b].mean()) / y[b].std()
-        th = bank._theta[b]
+        th = bank.theta[b]
         # (bounded to +-5 log units around it: an unbounded first step can overflow exp in the reference)
         res = scipy.optimize.minimize(lambda t: ref_nll_grad(t, Xn, yn, np.ones(Xn.shape[1], bool), "matern52"),
                                       th, jac=True, method="L-BFGS-B", bounds=[(t - 5.0, t + 5.0) for t in th])

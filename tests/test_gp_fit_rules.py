@@ -10,9 +10,10 @@ import pytest
 import torch
 
 from cascgp.fit_audit import audit_bank, audit_model, cold_config, summarise_gaps
-from cascgp.gp import (GPBank, GPFitConfig, _prune_rule, estimate_fit_bytes, nll_and_grad, plan_chunk)
-from cascgp.kernels import kernel_of_r2
-from cascgp.lbfgs import MemberState
+from cascgp.gp import GPBank, GPFitConfig, estimate_fit_bytes, nll_and_grad, plan_chunk
+from cascgp.gp.kernels import kernel_of_r2
+from cascgp.gp.lbfgs import MemberState
+from cascgp.gp.restarts import prune_rule
 
 
 def _data(rng: np.random.Generator, n: int, d: int, B: int, noise: float = 0.05):
@@ -87,7 +88,7 @@ def test_chunked_fit_equals_unchunked_to_roundoff():
     assert plan_chunk(tight, n, d, B) == 1
     a = GPBank(big).fit([X] * B, [Y[:, b] for b in range(B)])
     c = GPBank(tight).fit([X] * B, [Y[:, b] for b in range(B)])
-    np.testing.assert_allclose(c._theta, a._theta, rtol=0, atol=1e-8)
+    np.testing.assert_allclose(c.theta, a.theta, rtol=0, atol=1e-8)
     np.testing.assert_allclose([f["best_nll"] for f in c.fit_info], [f["best_nll"] for f in a.fit_info],
                                rtol=0, atol=1e-9)
 
@@ -112,12 +113,12 @@ def test_prune_rule_never_stops_the_leader_and_stops_stalled_followers():
         [3.0, 2.9995, 2.999, 2.9989],  # GP 1's only start (leader): kept
     ]
     st = _states(traces)
-    out = _prune_rule(cfg, st, gp_of, 2, np.zeros(2, dtype=bool))
+    out = prune_rule(cfg, st, gp_of, 2, np.zeros(2, dtype=bool))
     assert out.tolist() == [False, True, False, False]
     assert st[1].reason == "stalled"
     # catch-up: a follower 50 nats behind that gained 1 nat over the window (< 50 / 10) is stopped as well
     st = _states([[10.0, 5.0, 4.9, 4.8], [60.0, 56.0, 55.3, 55.0]])
-    out = _prune_rule(cfg, st, np.array([0, 0]), 1, np.zeros(1, dtype=bool))
+    out = prune_rule(cfg, st, np.array([0, 0]), 1, np.zeros(1, dtype=bool))
     assert out.tolist() == [False, True]
 
 
@@ -156,7 +157,7 @@ def _reference_mean(bank: GPBank, Xq: np.ndarray) -> np.ndarray:
     Z = P.Z
     K = P.signal_var * kernel_of_r2(P.kernel, ((Z[:, None, :] - Z[None, :, :]) ** 2).sum(-1))
     K += (P.noise_var + P.jitter) * np.eye(Z.shape[0])
-    yn = (bank._y[0] - P.y_mean) / P.y_std
+    yn = (bank.training_data()[1][0] - P.y_mean) / P.y_std
     a = np.linalg.solve(K, yn)
     for _ in range(3):
         r = (yn.astype(np.longdouble) - K.astype(np.longdouble) @ a.astype(np.longdouble)).astype(np.float64)
@@ -175,14 +176,14 @@ def test_snr_bound_keeps_noise_free_fits_well_conditioned():
     y = np.sin(2 * X[:, 0]) + (0.5 * X[:, 1:] ** 2).sum(1)
     Xq = rng.uniform(-2, 2, size=(200, 3))
     free = GPBank(GPFitConfig(n_restarts=3, snr_max=None)).fit([X], [y])
-    assert float(free._sn2[0]) < 1.01 * free.config.noise_floor  # noise at its floor
-    assert float(free._sf2[0]) / float(free._sn2[0]) > 1e10
+    assert free.posterior(0).noise_var < 1.01 * free.config.noise_floor  # noise at its floor
+    assert free.posterior(0).signal_var / free.posterior(0).noise_var > 1e10
 
     bank = GPBank(GPFitConfig(n_restarts=3)).fit([X], [y])
     hp = bank.hyperparameters(0)
     assert hp["signal_var"] / hp["noise_var"] <= bank.config.snr_max * (1 + 1e-12)
-    K = bank._L[0] @ bank._L[0].T
-    assert float(torch.linalg.cond(K)) <= 1 + X.shape[0] * bank.config.snr_max
+    L = bank.posterior(0).L
+    assert float(np.linalg.cond(L @ L.T)) <= 1 + X.shape[0] * bank.config.snr_max
     ref = _reference_mean(bank, Xq)
     mean, _ = bank.predict([Xq], return_var=False)
     one, _ = bank.posterior(0).predict(Xq, return_var=False)

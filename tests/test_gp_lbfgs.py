@@ -1,11 +1,11 @@
-"""Batched L-BFGS (cascgp.lbfgs): each member converges on its own, matches SciPy, stops and drops per member."""
+"""Batched L-BFGS (cascgp.gp.lbfgs): each member converges on its own, matches SciPy, stops and drops per member."""
 
 from __future__ import annotations
 
 import numpy as np
 import scipy.optimize
 
-from cascgp.lbfgs import LBFGSOptions, minimize_batched
+from cascgp.gp.lbfgs import LBFGSOptions, minimize_batched
 
 
 def rosen_batch(X: np.ndarray, idx: np.ndarray):

@@ -1,0 +1,54 @@
+"""Input checks of the GP bank: every bad input raises an error naming the field (``X[1]``, ``y[0]``, ...)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["as_list", "check_matrix", "check_vector", "json_num"]
+
+
+def json_num(v: float) -> float | None:
+    """JSON-friendly float: ``None`` for NaN (a start that was not run or not screened)."""
+    return None if not np.isfinite(v) and np.isnan(v) else float(v)
+
+
+def as_list(v: Any, field_name: str) -> list[np.ndarray]:
+    if isinstance(v, np.ndarray):
+        raise TypeError(f"{field_name}: expected a list of arrays (one per GP), got a single ndarray")
+    if not isinstance(v, (list, tuple)) or len(v) == 0:
+        raise ValueError(f"{field_name}: expected a non-empty list of arrays (one per GP), got {type(v).__name__}")
+    return list(v)
+
+
+def check_matrix(a: Any, field_name: str, d: int | None = None, n: int | None = None) -> np.ndarray:
+    try:
+        a = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{field_name}: expected a numeric array ({e})") from None
+    if a.ndim != 2:
+        raise ValueError(f"{field_name}: expected a 2-D array (n, d), got shape {a.shape}")
+    if a.shape[1] < 1:
+        raise ValueError(f"{field_name}: expected at least one input column, got shape {a.shape}")
+    if d is not None and a.shape[1] != d:
+        raise ValueError(f"{field_name}: expected {d} columns, got shape {a.shape}")
+    if n is not None and a.shape[0] != n:
+        raise ValueError(f"{field_name}: expected {n} rows (the same n for every GP), got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        row = int(np.argwhere(~np.isfinite(a))[0, 0])
+        raise ValueError(f"{field_name}: contains NaN or inf (first at row {row})")
+    return a
+
+
+def check_vector(a: Any, field_name: str, n: int) -> np.ndarray:
+    try:
+        a = np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"{field_name}: expected a numeric array ({e})") from None
+    if a.ndim != 1 or a.shape[0] != n:
+        raise ValueError(f"{field_name}: expected shape ({n},), got {a.shape}")
+    if not np.all(np.isfinite(a)):
+        row = int(np.argwhere(~np.isfinite(a))[0, 0])
+        raise ValueError(f"{field_name}: contains NaN or inf (first at row {row})")
+    return a

@@ -1,0 +1,125 @@
+"""Hyperparameter-optimisation settings of :class:`cascgp.gp.GPBank` (:class:`GPFitConfig`), validated on
+construction; :meth:`GPFitConfig.from_dict` reads the ``asdict`` form stored in model files."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Any
+
+import numpy as np
+
+from cascgp.gp.kernels import check_kernel
+
+__all__ = ["GPFitConfig", "noise_var"]
+
+
+#: Values of fields added after the first saved format, for configs saved without them (old behaviour).
+_LEGACY_DEFAULTS: dict[str, Any] = {"snr_max": None, "stall_window": None}
+
+
+@dataclass
+class GPFitConfig:
+    r"""Hyperparameter optimisation settings.
+
+    Attributes:
+        kernel: ``"matern52"`` (paper) or ``"rbf"``.
+        n_restarts: starts per GP (>= 1); the best is kept.
+        max_iter: L-BFGS iterations per start.
+        grad_tol: stop when max |dNLL/dtheta| <= grad_tol.
+        rel_tol: stop when the relative NLL decrease of one iteration <= rel_tol (SciPy's ``factr`` test).
+        seed: seed of the random starts and of the screening subset.
+        history: L-BFGS memory.
+        noise_floor: lower bound of the noise variance in normalised units.
+        jitter_max: largest jitter (relative to the mean diagonal of K) tried when a Cholesky fails.
+        init_spread: half-width (in log units) of the random perturbation of the log lengthscales.
+        drop_after: drop hopeless starts after this many iterations (``None``: never drop).
+        drop_margin: a start is hopeless when its NLL exceeds the best of its GP by more than this (nats).
+        screen_n: if set and ``n > screen_n``, first optimise all starts on ``screen_n`` random training points.
+        screen_keep: starts per GP that continue on the full data after screening.
+        screen_max_iter: iteration cap of the screening stage.
+        screen_rel_tol: relative-change tolerance of the screening stage.
+        stall_window: iterations over which a non-leading start's progress is measured (``None``: every start runs
+            to convergence, the behaviour before the early-stopping rule).
+        stall_tol: a non-leading start that gained at most this (nats) over ``stall_window`` iterations stops.
+        catch_up_windows: ... or that gained less than ``gap / catch_up_windows`` (``gap``: its NLL minus the
+            leader's), i.e. would need more than this many windows to reach the leader at its current pace.
+        race_at: if set, after every start of a GP has done ``race_at`` iterations only the ``race_keep`` best
+            continue (off by default: the audit showed lost optima).
+        race_keep: starts kept by ``race_at``.
+        snr_max: bound of the signal-to-noise variance ratio, :math:`s_n^2 \ge s_f^2 / \mathrm{snr\_max}`
+            (``None``: no bound); keeps :math:`\operatorname{cond}(K) \le 1 + n\,\mathrm{snr\_max}`.
+        max_batch_bytes: memory limit of a fit (bytes); the evaluation is chunked to stay within it, and a fit that
+            cannot (:func:`estimate_fit_bytes` with one start at a time) is refused with a ``ValueError``.
+    """
+
+    kernel: str = "matern52"
+    n_restarts: int = 10
+    max_iter: int = 1000
+    grad_tol: float = 1e-5
+    rel_tol: float = 2e-9
+    seed: int = 0
+    history: int = 10
+    noise_floor: float = 1e-6
+    jitter_max: float = 1e-2
+    init_spread: float = 1.0
+    drop_after: int | None = None
+    drop_margin: float = 20.0
+    stall_window: int | None = 5
+    stall_tol: float = 0.01
+    catch_up_windows: float = 10.0
+    race_at: int | None = None
+    race_keep: int = 5
+    snr_max: float | None = 1e6
+    max_batch_bytes: int = 2 * 1024**3
+    screen_n: int | None = None
+    screen_keep: int = 2
+    screen_max_iter: int = 200
+    screen_rel_tol: float = 1e-6
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> GPFitConfig:
+        """Config from a saved ``asdict`` (unknown keys ignored). Fields missing from a save that predates them take
+        the value that reproduces the old behaviour (``snr_max=None``, ``stall_window=None``), so that a loaded
+        model predicts exactly as when it was saved."""
+        if not isinstance(d, dict):
+            raise TypeError(f"config: expected a dict, got {type(d).__name__}")
+        names = {f.name for f in fields(cls)}
+        kw = {k: v for k, v in d.items() if k in names}
+        for k, v in _LEGACY_DEFAULTS.items():
+            kw.setdefault(k, v)
+        return cls(**kw)
+
+    def __post_init__(self) -> None:
+        check_kernel(self.kernel)
+        for name in ("n_restarts", "max_iter", "history", "screen_keep", "screen_max_iter", "race_keep"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
+                raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
+        for name in ("grad_tol", "rel_tol", "noise_floor", "jitter_max", "init_spread", "drop_margin", "stall_tol",
+                     "screen_rel_tol"):
+            v = getattr(self, name)
+            if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
+                raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
+        if self.drop_after is not None and (not isinstance(self.drop_after, int) or self.drop_after < 1):
+            raise ValueError(f"drop_after: expected None or an integer >= 1, got {self.drop_after!r}")
+        for name in ("stall_window", "race_at"):
+            v = getattr(self, name)
+            if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1):
+                raise ValueError(f"{name}: expected None or an integer >= 1, got {v!r}")
+        if self.snr_max is not None and (not isinstance(self.snr_max, (int, float)) or not math.isfinite(self.snr_max)
+                                         or self.snr_max <= 0):
+            raise ValueError(f"snr_max: expected None or a finite number > 0, got {self.snr_max!r}")
+        if not isinstance(self.max_batch_bytes, (int, np.integer)) or isinstance(self.max_batch_bytes, bool) or \
+                self.max_batch_bytes < 1:
+            raise ValueError(f"max_batch_bytes: expected an integer >= 1, got {self.max_batch_bytes!r}")
+        if not isinstance(self.catch_up_windows, (int, float)) or not self.catch_up_windows > 0:
+            raise ValueError(f"catch_up_windows: expected a number > 0, got {self.catch_up_windows!r}")
+        if self.screen_n is not None and (not isinstance(self.screen_n, int) or self.screen_n < 2):
+            raise ValueError(f"screen_n: expected None or an integer >= 2, got {self.screen_n!r}")
+
+
+def noise_var(cfg: GPFitConfig, sf2: float, e: float) -> float:
+    r"""Noise variance (normalised units) from :math:`s_f^2` and :math:`e^{\theta_{d+2}}`:
+    :math:`s_n^2 = s_{n,\min}^2 + s_f^2 / \mathrm{snr\_max} + e^{\theta_{d+2}}`."""
+    return cfg.noise_floor + (sf2 / cfg.snr_max if cfg.snr_max is not None else 0.0) + e

@@ -1,0 +1,311 @@
+r"""The batched negative log marginal likelihood of exact GPs and its analytic gradient (the cost of a fit).
+
+Negative log marginal likelihood and its gradient
+-------------------------------------------------
+With :math:`K = s_f^2 k(R^2) + s_n^2 I = L L^\top` and :math:`\alpha = K^{-1} \tilde y`,
+
+.. math::
+
+    \mathcal L(\theta) = \tfrac12 \tilde y^\top \alpha + \sum_i \log L_{ii} + \tfrac n2 \log 2\pi,
+    \qquad
+    \frac{\partial \mathcal L}{\partial \theta_j} = \tfrac12 \operatorname{tr}\!\Big(M \frac{\partial K}{\partial \theta_j}\Big),
+    \quad M = K^{-1} - \alpha\alpha^\top.
+
+For the lengthscales, with scaled inputs :math:`Z = \tilde X \operatorname{diag}(1/\ell)`,
+:math:`\partial K_{ij} / \partial \log \ell_k = -2 s_f^2 k'(r^2_{ij}) (z_{ik} - z_{jk})^2`. Writing
+:math:`P = M \circ s_f^2 k'(R^2)` (symmetric),
+
+.. math::
+
+    \frac{\partial \mathcal L}{\partial \log \ell_k}
+      = -\sum_{ij} P_{ij} (z_{ik} - z_{jk})^2
+      = -2 \Big( \sum_i z_{ik}^2 (P\mathbf 1)_i - \sum_i z_{ik} (P Z)_{ik} \Big),
+
+which costs one ``(n, n) @ (n, d)`` product: :math:`O(n^2 d)` without an ``(n, n, d)`` tensor. Further
+:math:`\partial \mathcal L / \partial \log s_f^2 = \tfrac12 s_f^2 \sum_{ij} M_{ij} k_{ij}` and
+:math:`\partial \mathcal L / \partial \theta_{d+2} = \tfrac12 e^{\theta_{d+2}} \operatorname{tr} M` (with the
+``snr_max`` floor, :math:`\partial \mathcal L / \partial \log s_f^2` gains :math:`\tfrac12 (s_f^2/\rho_{\max})
+\operatorname{tr} M`).
+
+Cost of one evaluation (:func:`nll_and_grad`): per start, one Cholesky (LAPACK ``dpotrf``, :math:`n^3/3` flops),
+two triangular solves for :math:`\alpha`, :math:`K^{-1}` from the factor (``dpotri``, :math:`2n^3/3`), and
+:math:`O(n^2 d)` for the kernel and the gradient (one ``(n, n) @ (n, d)`` product on the upper triangle of
+:math:`P`). The element-wise work runs on cache-sized blocks with reused buffers (no ``(n, n)`` temporaries), and
+OpenBLAS runs on one thread during a fit (:func:`blas_threads`). Measured at n = 500, d = 18, one thread (SARCOS
+bench, ``docs/bench``): 7.2 ms per start and evaluation (kernel 1.6, Cholesky 1.5, inverse 2.8, gradient 1.2,
+optimiser 0.1), against 22.8 ms for the earlier all-batch torch version (``torch.cholesky_inverse`` on a
+``(60, 500, 500)`` batch, memory-bound).
+
+Memory
+------
+:func:`estimate_fit_bytes` bounds the memory of a fit from ``(starts, outputs, n, d)`` before anything large is
+allocated: three ``(chunk, n, n)`` work matrices, the ``(B, n, n)`` factors kept for prediction and the data.
+:func:`plan_chunk` picks the block size within ``GPFitConfig.max_batch_bytes`` (default 2 GiB) and raises a
+``ValueError`` naming ``max_batch_bytes`` when even one start at a time does not fit. The batch of starts never
+needs ``(starts, n, n)`` at once, so memory grows as :math:`n^2 (B + 3)` and not with the number of starts; results
+do not depend on the block size (tested to round-off).
+
+Conditioning
+------------
+Noise-free or nearly noise-free targets drive the noise to its floor while :math:`s_f^2` grows; before the bound,
+a fit with :math:`s_f^2 / s_n^2 \approx 5 \cdot 10^{14}` had :math:`\operatorname{cond}(K) \approx 10^{17}` and
+predictions off by ~1e-4 from an exact solve. With :math:`s_n^2 \ge s_f^2 / \rho_{\max}` and :math:`k \le 1`,
+:math:`\lambda_{\max}(K) \le n s_f^2 + s_n^2` and :math:`\lambda_{\min}(K) \ge s_n^2`, so
+:math:`\operatorname{cond}(K) \le 1 + n \rho_{\max}`; predictions then match a float64 reference solve to 1e-8
+(``tests/test_gp_fit_rules.py``). On SARCOS the fitted ratios are <= 1.3e5, so the default bound 1e6 is inactive
+there (``snr_max=None`` removes it).
+
+Jitter is added only when a Cholesky fails (``dpotrf`` in the fit, ``torch.linalg.cholesky_ex`` for the final
+factors), for just the failing members, starting at ``1e-8`` times the mean diagonal and growing 10x up to ``jitter_max``; the amount is recorded in ``fit_info``.
+A point where even that fails has NLL ``inf`` (the line search backs off).
+
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import torch
+from scipy.linalg.lapack import dpotrf as _dpotrf, dpotri as _dpotri, dpotrs as _dpotrs
+
+from cascgp.gp.config import GPFitConfig
+from cascgp.gp.kernels import get_kernel
+
+__all__ = ["nll_and_grad", "estimate_fit_bytes", "plan_chunk", "blas_threads", "PROFILE", "DTYPE", "LOG2PI"]
+
+#: Every GP computation is float64.
+DTYPE = torch.float64
+LOG2PI = math.log(2.0 * math.pi)
+
+
+@contextlib.contextmanager
+def blas_threads(k: int) -> Iterator[None]:
+    """Limit the BLAS/LAPACK threads of NumPy/SciPy (OpenBLAS) to ``k`` while fitting.
+
+    The per-member LAPACK calls are small (n x n); OpenBLAS's own threads gained nothing there and, on a shared
+    2-core machine, spun against the other process (measured: 25 ms instead of 8 ms per evaluation at n = 500).
+    Uses ``threadpoolctl`` when installed; otherwise set ``OPENBLAS_NUM_THREADS=1`` yourself.
+    """
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # pragma: no cover - optional
+        yield
+        return
+    with threadpool_limits(limits=k, user_api="blas"):
+        yield
+
+
+# Cache-sized chunks: the element-wise kernel work runs on (c, n, n) blocks of about this many bytes per tensor
+# (measured, 1 thread: one (60, 500, 500) batch per op was 2.2x slower per evaluation than member-sized blocks, the
+# whole batch being memory-bandwidth bound; at n = 300 and 500 one member per block was 6 % faster than 5).
+_CACHE_CHUNK_BYTES = 1 << 20
+
+
+def _potrf_jitter(kk: torch.Tensor, K: torch.Tensor, sf2: float, sn2: float,
+                  jitter_max: float) -> tuple[np.ndarray | None, float]:
+    """Cholesky (LAPACK ``dpotrf``) of ``sf2 * kk + sn2 I`` written into the buffer ``K``; jitter only if it fails.
+
+    ``kk`` and ``K`` are C-contiguous ``(n, n)``; ``K``'s memory read as an F-ordered array is the same symmetric
+    matrix, so LAPACK works in place. Returns the F-ordered factor (lower triangle = L, strict upper = junk) and
+    the jitter, or ``(None, jitter)`` when even ``jitter_max`` (relative to the mean diagonal) fails.
+    """
+    jit = 0.0
+    scale = sf2 + sn2  # mean diagonal of K (unit kernel diagonal)
+    j = 1e-8
+    Kf = K.numpy().T
+    while True:
+        torch.mul(kk, sf2, out=K)
+        K.diagonal().add_(sn2 + jit)
+        c, info = _dpotrf(Kf, lower=1, overwrite_a=1, clean=0)
+        if info == 0:
+            return c, jit
+        if j > jitter_max * (1 + 1e-12):
+            return None, jit
+        jit = j * scale
+        j *= 10.0
+
+
+#: When a dict, :func:`nll_and_grad` adds the seconds spent per phase (``kernel``: distances and kernel values,
+#: ``cholesky``: factor, solve and log-determinant, ``inverse``: :math:`K^{-1}` from the factor, ``gradient``:
+#: the rest of the gradient) and counts ``members`` (for the time breakdown of ``scripts.bench_cascgp``).
+PROFILE: dict[str, float] | None = None
+
+
+def nll_and_grad(
+    theta: torch.Tensor,
+    X: torch.Tensor,
+    y: torch.Tensor,
+    mask: torch.Tensor | None = None,
+    kernel: str = "matern52",
+    noise_floor: float = 1e-6,
+    jitter_max: float = 1e-2,
+    need_grad: bool = True,
+    chunk: int | None = None,
+    snr_max: float | None = None,
+) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
+    r"""Negative log marginal likelihood and its analytic gradient for a batch of GPs.
+
+    The batch is processed in chunks of ``chunk`` members (default: as many as keep one ``(chunk, n, n)`` block
+    near 1 MB, i.e. in cache); three ``(chunk, n, n)`` work buffers are reused for every chunk. Per member: one
+    Cholesky :math:`K = L L^\top` (LAPACK ``dpotrf``), :math:`\alpha` by two triangular solves (``dpotrs``),
+    :math:`K^{-1}` from the factor (``dpotri``), and the ARD gradient from the upper triangle :math:`U` of the
+    symmetric :math:`P` (diagonal included; its terms vanish):
+
+    .. math::
+
+        \sum_{ij} P_{ij} (z_{ik} - z_{jk})^2 = 2 \Big( \sum_i z_{ik}^2 \big[(U\mathbf 1)_i + (U^\top\mathbf 1)_i\big]
+        - 2 \sum_i z_{ik} (U Z)_{ik} \Big),
+
+    one ``(n, n) @ (n, D)`` product and no symmetrisation pass. Peak extra memory: ``3 * chunk * n^2 * 8`` bytes,
+    independent of the batch size.
+
+    Args:
+        theta: ``(k, D + 2)`` log hyperparameters ``(log l_1..l_D, log s_f^2, log(s_n^2 - floor))``.
+        X: ``(k, n, D)`` normalised inputs (padded columns must be zero).
+        y: ``(k, n)`` normalised targets.
+        mask: ``(k, D)`` 1 for active input columns, 0 for padding/ignored columns (default: all active).
+        kernel: kernel name.
+        noise_floor: :math:`s_{n,\min}^2`.
+        jitter_max: largest jitter (relative to the mean diagonal of K) tried when a Cholesky fails.
+        need_grad: compute the gradient.
+        chunk: members per block (``None``: cache-sized).
+        snr_max: if set, the noise floor grows with the signal: ``floor = noise_floor + s_f^2 / snr_max``
+            (see :class:`~cascgp.gp.config.GPFitConfig`), which bounds :math:`\operatorname{cond}(K) \le 1 + n\,\mathrm{snr\_max}`.
+
+    Returns:
+        ``(nll (k,), grad (k, D+2) or None, jitter (k,))``; ``nll`` is ``inf`` where the Cholesky failed even with
+        jitter or the value is not finite (the gradient there is 0).
+    """
+    k_, n, D = X.shape
+    theta = theta.to(DTYPE)
+    if mask is None:
+        mask = torch.ones(k_, D, dtype=DTYPE, device=X.device)
+    if chunk is None:
+        chunk = max(1, _CACHE_CHUNK_BYTES // (8 * n * n))
+    chunk = min(chunk, max(k_, 1))
+    prof = PROFILE
+    clock = time.perf_counter
+    th_np = theta.detach().cpu().numpy()
+    mask_np = mask.numpy()
+    nll = np.full(k_, math.inf)
+    jitter = np.zeros(k_)
+    grad = np.zeros((k_, D + 2)) if need_grad else None
+    half_n_log2pi = 0.5 * n * LOG2PI
+    bufA = torch.empty(chunk, n, n, dtype=DTYPE)
+    bufB = torch.empty(chunk, n, n, dtype=DTYPE)
+    bufC = torch.empty(chunk, n, n, dtype=DTYPE)
+    inv_snr = 0.0 if snr_max is None else 1.0 / snr_max
+    kern = get_kernel(kernel)
+    r2s = kern.r2_scale
+    with np.errstate(over="ignore", invalid="ignore"):
+        sf2_all = np.exp(th_np[:, D])
+        en_all = np.exp(th_np[:, D + 1])
+        row_ok = np.all(np.isfinite(np.exp(-th_np[:, :D])), axis=1) & np.all(np.isfinite(th_np), axis=1)
+    for s0 in range(0, k_, chunk):
+        if prof is not None:
+            t0 = clock()
+        c_ = min(chunk, k_ - s0)
+        sl = slice(s0, s0 + c_)
+        A, Bu, C = bufA[:c_], bufB[:c_], bufC[:c_]
+        inv_l = torch.exp(-theta[sl, :D]) * mask[sl]
+        Z = X[sl] * inv_l[:, None, :]
+        sq = (Z * Z).sum(-1).mul_(r2s)
+        torch.baddbmm(sq.unsqueeze(-1), Z, Z.transpose(-1, -2), alpha=-2.0 * r2s, out=A)
+        A.add_(sq.unsqueeze(-2)).clamp_min_(0.0)
+        A.diagonal(dim1=-2, dim2=-1).zero_()
+        c_u = kern.value_and_grad_(A, Bu, C)
+        y_np = y[sl].numpy()
+        if prof is not None:
+            t1 = clock()
+            prof["kernel"] = prof.get("kernel", 0.0) + t1 - t0
+            prof["members"] = prof.get("members", 0) + c_
+        for i in range(c_):
+            if prof is not None:
+                t1 = clock()
+            m = s0 + i
+            sf2 = float(sf2_all[m])
+            en = float(en_all[m])
+            sn2 = noise_floor + sf2 * inv_snr + en
+            if not (row_ok[m] and math.isfinite(sn2) and math.isfinite(sf2)):
+                continue  # a trial point far out (huge step): NLL inf, the line search backs off
+            cf, jit = _potrf_jitter(A[i], C[i], sf2, sn2, jitter_max)
+            jitter[m] = jit
+            if cf is None:
+                continue
+            yi = y_np[i]
+            alpha, _ = _dpotrs(cf, yi, lower=1)
+            f = 0.5 * float(yi @ alpha) + float(np.log(np.diagonal(cf)).sum()) + half_n_log2pi
+            if prof is not None:
+                t2 = clock()
+                prof["cholesky"] = prof.get("cholesky", 0.0) + t2 - t1
+            if not math.isfinite(f):
+                continue
+            nll[m] = f
+            if not need_grad:
+                continue
+            ci, info = _dpotri(cf, lower=1, overwrite_c=1)
+            if prof is not None:
+                t3 = clock()
+                prof["inverse"] = prof.get("inverse", 0.0) + t3 - t2
+            if info != 0:
+                nll[m] = math.inf
+                continue
+            # ci (F order, the memory of C[i]) holds K^-1 in its lower triangle = the upper triangle of C[i].
+            U = C[i]
+            at = torch.from_numpy(alpha)
+            U.addr_(at, at, alpha=-1.0).triu_()  # upper triangle of M = K^-1 - alpha alpha^T
+            trM = float(U.diagonal().sum())
+            Ai = A[i]
+            g_sf = 0.5 * sf2 * (2.0 * float(torch.dot(U.view(-1), Ai.view(-1))) - trM)  # diag(k) = 1
+            U.mul_(Bu[i])  # upper triangle of P / (c_u sf2)
+            Zi = Z[i]
+            UZ = U @ Zi
+            rc = U.sum(1).add_(U.sum(0))
+            g_l = (-2.0 * c_u * sf2) * ((Zi * Zi * rc.unsqueeze(-1)).sum(0) - 2.0 * (Zi * UZ).sum(0))
+            g = grad[m]
+            g[:D] = g_l.numpy() * mask_np[m]
+            g[D] = g_sf + 0.5 * sf2 * inv_snr * trM
+            g[D + 1] = 0.5 * en * trM
+            if not np.all(np.isfinite(g)):
+                g[:] = 0.0
+            if prof is not None:
+                prof["gradient"] = prof.get("gradient", 0.0) + clock() - t3
+    return torch.from_numpy(nll), (torch.from_numpy(grad) if need_grad else None), torch.from_numpy(jitter)
+
+
+# ----------------------------------------------------------------------------------------------------------------
+# memory
+
+
+def estimate_fit_bytes(n: int, d: int, n_gps: int, n_starts: int, chunk: int = 1) -> int:
+    """Bytes :meth:`cascgp.gp.GPBank.fit` needs beyond the interpreter, before fitting (a deliberately high estimate).
+
+    ``3 * chunk`` work matrices ``(n, n)`` of the batched evaluation (:func:`nll_and_grad`), the stored factor of
+    every GP ``(n_gps, n, n)`` plus twelve ``(n, n)`` for the temporaries of the final factors and for allocator
+    fragmentation (freed ``(n, n)`` blocks are not always returned to the system), the data copies (normalised
+    inputs of every start, ``(n_gps * n_starts, n, d)``, twice), all float64, and 128 MiB of fixed overhead.
+    Measured (``bench_cascgp --scaling``, 6 GPs x 10 starts, d = 18, two runs): peak RSS growth 40 / 68 /
+    161-187 / 565-703 MiB at n = 250 / 500 / 1000 / 2000.
+    """
+    return 8 * (3 * chunk * n * n + (n_gps + 12) * n * n + 2 * n_gps * n_starts * n * d + 6 * n_gps * n * d) \
+        + (128 << 20)
+
+
+def plan_chunk(cfg: GPFitConfig, n: int, d: int, n_gps: int) -> int:
+    """Members per evaluation block: cache-sized, shrunk to keep :func:`estimate_fit_bytes` within
+    ``cfg.max_batch_bytes``; ``ValueError`` naming ``max_batch_bytes`` when even one member does not fit."""
+    chunk = max(1, _CACHE_CHUNK_BYTES // (8 * n * n))
+    need1 = estimate_fit_bytes(n, d, n_gps, cfg.n_restarts, 1)
+    if need1 > cfg.max_batch_bytes:
+        raise ValueError(
+            f"max_batch_bytes: fitting {n_gps} GPs x {cfg.n_restarts} starts on n={n} points (d={d}) needs about "
+            f"{need1 / 2**20:.0f} MiB even one start at a time (3 + {n_gps + 12} matrices of {n}x{n} float64 plus "
+            f"the data), over GPFitConfig.max_batch_bytes = {cfg.max_batch_bytes / 2**20:.0f} MiB; raise "
+            "GPFitConfig.max_batch_bytes, or use fewer training points (memory grows as n^2)")
+    while chunk > 1 and estimate_fit_bytes(n, d, n_gps, cfg.n_restarts, chunk) > cfg.max_batch_bytes:
+        chunk -= 1
+    return chunk

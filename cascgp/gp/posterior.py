@@ -1,0 +1,145 @@
+r"""The fitted state of a GP bank: Cholesky factors, :math:`\alpha`, final NLL (:func:`compute_factors`), and the
+per-GP NumPy posterior that hand-written prediction paths read (:class:`GPPosterior`)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from cascgp.gp.config import GPFitConfig, noise_var
+from cascgp.gp.kernels import get_kernel, scaled_sqdist
+from cascgp.gp.likelihood import DTYPE, LOG2PI
+
+__all__ = ["GPPosterior", "Factors", "compute_factors", "robust_cholesky"]
+
+
+@dataclass(frozen=True)
+class GPPosterior:
+    r"""Cached posterior of one fitted GP as plain NumPy float64 arrays (for hand-written fast paths).
+
+    .. math::
+
+        z = (x - x_{mean}) / x_{scale}, \quad
+        \mu(x) = y_{mean} + y_{std}\, s_f^2\, k(r^2(z, Z))^\top \alpha, \quad
+        \sigma^2(x) = y_{std}^2\, \big(s_f^2 - \|L^{-1} s_f^2 k(r^2(z, Z))\|^2\big)
+
+    ``x_scale`` is ``inf`` for ignored (constant) input columns, so their ``z`` is 0.
+    ``noise_var`` and ``signal_var`` are in normalised units (multiply by ``y_std**2`` for target units).
+    """
+
+    kernel: str
+    x_mean: np.ndarray
+    x_scale: np.ndarray
+    Z: np.ndarray
+    alpha: np.ndarray
+    L: np.ndarray
+    signal_var: float
+    noise_var: float
+    y_mean: float
+    y_std: float
+    jitter: float = 0.0
+
+    def predict(self, x: np.ndarray, return_var: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+        """Reference NumPy prediction: ``x`` ``(m, d)`` or ``(d,)`` -> mean ``(m,)``, latent variance ``(m,)``."""
+        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        z = (x - self.x_mean) / self.x_scale
+        r2 = (z * z).sum(1)[:, None] + (self.Z * self.Z).sum(1)[None, :] - 2.0 * z @ self.Z.T
+        ks = self.signal_var * get_kernel(self.kernel).value(r2)
+        mean = self.y_mean + self.y_std * (ks @ self.alpha)
+        if not return_var:
+            return mean, None
+        from scipy.linalg import solve_triangular
+
+        v = solve_triangular(self.L, ks.T, lower=True)
+        var = np.maximum(self.signal_var - (v * v).sum(0), 0.0) * self.y_std**2
+        return mean, var
+
+
+def robust_cholesky(K: torch.Tensor, jitter_max: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Batched Cholesky; jitter only for the members whose factorisation fails.
+
+    Returns ``(L, jitter (k,), failed (k,) bool)``; failed members get an identity factor (caller marks them).
+    """
+    L, info = torch.linalg.cholesky_ex(K)
+    jitter = torch.zeros(K.shape[0], dtype=K.dtype, device=K.device)
+    bad = info != 0
+    failed = torch.zeros_like(bad)
+    if bool(bad.any()):
+        idx = bad.nonzero().squeeze(1)
+        scale = K[idx].diagonal(dim1=-2, dim2=-1).mean(-1).abs().clamp_min(1e-300)
+        j = 1e-8
+        while idx.numel() > 0 and j <= jitter_max * (1 + 1e-12):
+            Kj = K[idx].clone()
+            Kj.diagonal(dim1=-2, dim2=-1).add_((j * scale)[:, None])
+            Lj, infoj = torch.linalg.cholesky_ex(Kj)
+            ok = infoj == 0
+            if bool(ok.any()):
+                L[idx[ok]] = Lj[ok]
+                jitter[idx[ok]] = j * scale[ok]
+            idx, scale = idx[~ok], scale[~ok]
+            j *= 10.0
+        if idx.numel() > 0:
+            failed[idx] = True
+            L[idx] = torch.eye(K.shape[-1], dtype=K.dtype, device=K.device)
+    return L, jitter, failed
+
+
+@dataclass(frozen=True)
+class Factors:
+    r"""What prediction needs of every GP of a bank at its final hyperparameters (torch, float64).
+
+    Attributes:
+        Z: ``(B, n, D)`` training inputs, normalised and divided by the lengthscales.
+        inv_l: ``(B, D)`` inverse lengthscales (0 for masked columns).
+        L: ``(B, n, n)`` lower Cholesky factors of :math:`K`.
+        alpha: ``(B, n)`` :math:`K^{-1} \tilde y`.
+        sf2, sn2: ``(B,)`` signal and noise variances (normalised units).
+        jitter: ``(B,)`` jitter added to the diagonal (normalised units).
+        nll: ``(B,)`` final negative log marginal likelihood.
+    """
+
+    Z: torch.Tensor
+    inv_l: torch.Tensor
+    L: torch.Tensor
+    alpha: torch.Tensor
+    sf2: torch.Tensor
+    sn2: torch.Tensor
+    jitter: np.ndarray
+    nll: np.ndarray
+
+
+def compute_factors(cfg: GPFitConfig, Xn: np.ndarray, yn: np.ndarray, mask: np.ndarray,
+                    theta: np.ndarray) -> Factors:
+    """Cholesky factor, ``alpha`` and final NLL of every GP at ``theta`` on normalised data ``Xn (B, n, D)``,
+    ``yn (B, n)`` (one GP at a time: the temporaries are a few ``(n, n)`` matrices; only the ``(B, n, n)``
+    factor is kept). ``RuntimeError`` if a factorisation fails even with jitter 1.0."""
+    B, n, D = Xn.shape
+    kern = get_kernel(cfg.kernel)
+    th = torch.as_tensor(theta, dtype=DTYPE)
+    tX = torch.as_tensor(Xn, dtype=DTYPE)
+    ty = torch.as_tensor(yn, dtype=DTYPE)
+    tm = torch.as_tensor(mask, dtype=DTYPE)
+    inv_l = torch.exp(-th[:, :D]) * tm
+    Z = tX * inv_l[:, None, :]
+    sf2 = torch.exp(th[:, D])
+    sn2 = torch.tensor([noise_var(cfg, float(sf2[b]), math.exp(float(th[b, D + 1]))) for b in range(B)],
+                       dtype=DTYPE)
+    L = torch.empty(B, n, n, dtype=DTYPE)
+    alpha = torch.empty(B, n, dtype=DTYPE)
+    jitter = np.zeros(B)
+    nll = np.zeros(B)
+    for b in range(B):
+        K = kern.value_torch(scaled_sqdist(Z[b : b + 1])).mul_(sf2[b])
+        K.diagonal(dim1=-2, dim2=-1).add_(sn2[b])
+        Lb, jit, failed = robust_cholesky(K, max(cfg.jitter_max, 1.0))
+        del K
+        if bool(failed.any()):
+            raise RuntimeError(f"GPBank: Cholesky failed for GP {b} even with jitter 1.0")
+        L[b] = Lb[0]
+        alpha[b] = torch.cholesky_solve(ty[b, :, None], Lb[0])[:, 0]
+        jitter[b] = float(jit[0])
+        nll[b] = float(0.5 * (ty[b] * alpha[b]).sum() + torch.log(Lb[0].diagonal()).sum() + 0.5 * n * LOG2PI)
+    return Factors(Z=Z, inv_l=inv_l, L=L, alpha=alpha, sf2=sf2, sn2=sn2, jitter=jitter, nll=nll)
