@@ -43,7 +43,7 @@ Batching
 All GPs x all restarts form one batch ``(B, n, n)``. GPs with fewer inputs than the widest are padded with zero
 columns; their lengthscales are masked (gradient zero, never moved, reported as ``inf`` scale). Input columns that
 are constant in the training data are treated the same way (they carry no information; at prediction time their
-value is ignored). Each batch member runs its own L-BFGS (:mod:`cascgp.lbfgs`) and leaves the batch when it stops.
+value is ignored). Each batch member runs its own L-BFGS (:mod:`cascgp.gp.lbfgs`) and leaves the batch when it stops.
 """
 
 from cascgp.gp.bank import GPBank

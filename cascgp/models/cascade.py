@@ -1,81 +1,29 @@
-r"""The paper's twelve inverse-dynamics models: ``{np,sp}-{standard,inward,outward}[-df]``.
+r"""The cascaded GP model: one GP per joint, chained in cascade order (:class:`CascadedGPModel`).
 
-================  =====================================================================
-name part         meaning
-================  =====================================================================
-``np`` / ``sp``   non-parametric (the GP models :math:`\tau_i`) / semi-parametric (the GP
-                  models :math:`\tau_i - \tau_{RBD,i}`, prediction adds :math:`\tau_{RBD,i}`
-                  back: the rigid-body model is the GP's mean function, paper eq. 4)
-``standard``      joint i's GP sees the states of all joints
-``inward``        joint i's GP sees :math:`\tau_{i+1}, s_1..s_i` (joint N: all states);
-                  prediction chains the predicted torques N -> 1
-``outward``       joint i's GP sees :math:`\tau_{i-1}, s_i..s_N` (joint 1: all states);
-                  prediction chains the predicted torques 1 -> N
-``-df``           derivative-free states :math:`s_j = (q_j(t), q_j(t-\Delta), q_j(t-2\Delta))`
-                  instead of :math:`(q_j, \dot q_j, \ddot q_j)` (see :mod:`cascgp.features`)
-================  =====================================================================
-
-Training and the cascade
-------------------------
-By default every joint's GP is trained on the *measured* torque of its neighbour (the
-torque input), and all joints are trained in ONE :meth:`GPBank.fit` call (one batch).  In an
-SP model the neighbour input is the full measured torque (not the residual).
-
-At prediction the cascade always uses the model's own *predicted* torque: inward from joint
-N down to 1, outward from 1 up to N; in an SP cascade the torque passed along is the full
-predicted torque :math:`\tau_{RBD} + \text{GP mean}`.
-
-``train_on_predicted=True`` (cascades only) trains each joint on the torque predicted for its
-neighbour by the already-fitted neighbour model instead.  That needs the neighbour's model
-before the joint's own, so the fit runs in cascade order as N single-GP fits (inward: joint N
-first; outward: joint 1 first): after each fit, the model's in-sample chained prediction of
-that joint on the training rows becomes the next joint's torque input.  (The model then holds
-N one-GP banks instead of one N-GP bank; prediction is the same.)  The in-sample prediction is
-close to the measured torque when the GP interpolates, so the two options differ most with
-noisy torques and small n.
-
-Prediction variance
--------------------
-``var`` is the latent (noise-free) posterior variance of each joint's GP in torque units.  In
-a cascade it is the variance of that joint's GP *given the chained mean input*: the
-uncertainty of the neighbour's predicted torque is not propagated.
-
-Bad input (documented behaviour)
---------------------------------
-Unknown name, SP without ``rbd``, ``rbd.dof != dof``, data of another DOF, NaN/inf or wrong
-shapes of queries: ``ValueError``/``TypeError`` naming the field.  Fewer than 2 usable rows
-(``-df`` models lose the rows whose history reaches before their segment's start): ``ValueError``.
-Duplicated samples are allowed (the noise variance absorbs them).  A joint with constant
-targets gets the constant as its prediction (see :mod:`cascgp.gp`).  Predictions are finite
-for finite inputs (normalised inputs are clipped to +-1e6 so no distance overflows).
+Owns training (one batched :class:`~cascgp.gp.GPBank` fit, or N fits in cascade order with
+``train_on_predicted``) and batched prediction; the single-query path is :mod:`cascgp.models.fastpath`, files are
+:mod:`cascgp.models.io`. The variants and their meaning are in :mod:`cascgp.models`.
 """
 
 from __future__ import annotations
 
-import json
-import math
 import os
 import warnings
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .data import DynamicsData
-from .io import atomic_savez, check_format_header, read_npz
-from .features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
+from cascgp.data import DynamicsData
+from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
+from cascgp.gp import GPBank, GPFitConfig
+from cascgp.models.fastpath import ZCLIP, FastPath
 
-__all__ = ["MODEL_NAMES", "FORMAT_VERSION", "CascadedGPModel", "make_model", "load_model", "parse_name"]
+__all__ = ["MODEL_NAMES", "CascadedGPModel", "make_model", "parse_name"]
 
 #: The twelve model names.
 MODEL_NAMES: tuple[str, ...] = tuple(
     f"{p}-{s}{d}" for p in ("np", "sp") for s in STRUCTURES for d in ("", "-df"))
-#: Version of the saved-model ``.npz`` layout.
-FORMAT_VERSION = 1
-_KIND = "cascgp.CascadedGPModel"
-_ZCLIP = 1e6  # normalised inputs are clipped to +-_ZCLIP: no overflow of squared distances
-_N_CHECK = 5  # stored check queries (save -> load verification)
 
 
 def parse_name(name: str) -> tuple[str, str, str]:
@@ -115,8 +63,6 @@ class CascadedGPModel:
 
     def __init__(self, name: str, dof: int, rbd: Any = None, *, gp_config: Any = None,
                  df_delta: float = 0.1, train_on_predicted: bool = False) -> None:
-        from .gp import GPFitConfig
-
         self.parametric, self.structure, self.feature_kind = parse_name(name)
         self.name = name
         if isinstance(dof, bool) or not isinstance(dof, (int, np.integer)) or dof < 1:
@@ -148,7 +94,7 @@ class CascadedGPModel:
         self.where: list[tuple[int, int]] = []
         self.n_train = 0
         self._post: list[Any] = []
-        self._fast: dict[str, Any] = {}
+        self._fast: FastPath | None = None
 
     # ------------------------------------------------------------------ basics
     @property
@@ -213,8 +159,6 @@ class CascadedGPModel:
         a fitted ``GPBank``) whose hyperparameters warm-start the fit (as one start).
         Returns ``self``.
         """
-        from .gp import GPBank
-
         arr = self._training_arrays(data)
         S = self._states(arr["q"], arr["qd"], arr["qdd"], arr["q_hist"])
         tau = arr["tau"]
@@ -266,47 +210,27 @@ class CascadedGPModel:
         self._cache()
         return self
 
+    def adopt_banks(self, banks: list[GPBank], where: list[tuple[int, int]], n_train: int) -> None:
+        """Install fitted banks (``where[j] = (bank, GP)`` locates joint j's GP), e.g. read from a file;
+        ``ValueError`` if they do not fit this model's joints and inputs. Changes nothing on error."""
+        N = self.dof
+        if len(where) != N or any(not (0 <= k < len(banks) and 0 <= b < banks[k].n_gps) for k, b in where):
+            raise ValueError(f"config_json.where: {where} does not match {len(banks)} bank(s) and dof={N}")
+        for j, (k, b) in enumerate(where):
+            want = 3 * len(self.specs[j][0]) + (self.specs[j][1] is not None)
+            if banks[k].dims[b] != want:
+                raise ValueError(f"bank {k} GP {b}: input dimension {banks[k].dims[b]} does not match "
+                                 f"{self.name!r} joint {j} ({want})")
+        self.banks = list(banks)
+        self.where = [tuple(w) for w in where]
+        self.n_train = int(n_train)
+        self._cache()
+
     # ------------------------------------------------------------------ caches
     def _cache(self) -> None:
         """Posterior factors per joint and the padded arrays of the single-query path."""
-        N = self.dof
         self._post = [self.banks[k].posterior(b) for k, b in self.where]
-        kernel = self._post[0].kernel
-        n = self._post[0].Z.shape[0]
-        D = 3 * N
-        # Matern 5/2: k = (1 + s + s^2/3) e^{-s} with s = sqrt(5 r2): pre-scale by sqrt(5).
-        # RBF: k = exp(-r2/2): pre-scale by sqrt(1/2).  Then one sqrt / exp per joint.
-        c = math.sqrt(5.0) if kernel == "matern52" else math.sqrt(0.5)
-        idx = np.full((N, D), D, dtype=np.intp)   # index D -> the appended constant 0
-        xm = np.zeros((N, D))
-        xs_inv = np.zeros((N, D))
-        W = np.zeros((N, n, D))
-        tm = np.zeros(N)
-        ts_inv = np.zeros(N)
-        Zt = np.zeros((N, n))
-        a = np.zeros((N, n))
-        y_mean = np.zeros(N)
-        for j, P in enumerate(self._post):
-            sj, tj = self.specs[j]
-            cols = np.concatenate([[3 * s, 3 * s + 1, 3 * s + 2] for s in sj]).astype(np.intp)
-            ds = cols.size
-            idx[j, :ds] = cols
-            xm[j, :ds] = P.x_mean[:ds]
-            xs_inv[j, :ds] = c / P.x_scale[:ds]  # inf scale (ignored column) -> 0
-            W[j, :, :ds] = c * P.Z[:, :ds]
-            if tj is not None:
-                tm[j] = P.x_mean[ds]
-                ts_inv[j] = c / P.x_scale[ds]
-                Zt[j] = c * P.Z[:, ds]
-            a[j] = P.y_std * P.signal_var * P.alpha
-            y_mean[j] = P.y_mean
-        self._fast = {
-            "matern": kernel == "matern52", "idx": idx, "xm": xm, "xs_inv": xs_inv, "W": W,
-            "W2": np.einsum("jnd,jnd->jn", W, W), "Wt": np.ascontiguousarray(W.transpose(0, 2, 1)),
-            "tm": tm.tolist(), "ts_inv": ts_inv.tolist(), "Zt": Zt, "a": a, "y_mean": y_mean.tolist(),
-            "tj": [self.specs[j][1] for j in range(N)], "buf": np.zeros(D + 1),
-            "zclip": _ZCLIP * c,
-        }
+        self._fast = FastPath.build(self._post, self.specs, self.order)
 
     # ------------------------------------------------------------------ prediction
     def _check_queries(self, q: Any, qd: Any, qdd: Any, q_hist: Any
@@ -386,21 +310,17 @@ class CascadedGPModel:
         return self._predict_arrays(data.q, data.qd, data.qdd, q_hist, return_var=True)
 
     def predict_one(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None) -> np.ndarray:
-        """Mean torque (N,) for ONE query: the lean NumPy path for a controller (no torch, no variance).
-
-        The state part of every joint's kernel input is computed in one batch (per-joint state
-        inputs padded to the common width 3N); only the scalar torque input is chained joint by
-        joint.  Equals :meth:`predict` to round-off (~1e-12).  Inputs are checked for shape and
-        finiteness (``ValueError``).
-        """
+        """Mean torque (N,) for ONE query: the lean NumPy path for a controller (no torch, no variance;
+        :mod:`cascgp.models.fastpath`). Equals :meth:`predict` to round-off (~1e-12). Inputs are checked for
+        shape and finiteness (``ValueError``)."""
         f = self._fast
-        if not f:
+        if f is None:
             self._require_fitted()
         N = self.dof
         q = np.asarray(q, dtype=np.float64)
         if q.shape != (N,):
             raise ValueError(f"q: expected shape ({N},), got {q.shape}")
-        buf = f["buf"]
+        buf = f.buf
         buf[0:3 * N:3] = q
         if self.feature_kind == "db" or self.parametric == "sp":
             if qd is None or qdd is None:
@@ -424,93 +344,16 @@ class CascadedGPModel:
             buf[2:3 * N:3] = h[1]
         if not np.isfinite(buf).all():
             raise ValueError("q/qd/qdd/q_hist: non-finite value (NaN or inf) in the query")
-        # state part of every joint at once: z (N, D), r2s (N, n) = |W|^2 + |z|^2 - 2 W z
-        z = buf[f["idx"]]
-        z -= f["xm"]
-        z *= f["xs_inv"]
-        np.clip(z, -f["zclip"], f["zclip"], out=z)
-        r2s = np.matmul(f["W"], z[:, :, None])[:, :, 0]
-        r2s *= -2.0
-        r2s += f["W2"]
-        r2s += np.einsum("jd,jd->j", z, z)[:, None]
-        np.maximum(r2s, 0.0, out=r2s)
-        out = np.empty(N)
-        if self.parametric == "sp":
-            out_rbd = np.asarray(self.rbd.inverse_dynamics(q, qd, qdd), dtype=np.float64)
-        matern = f["matern"]
-        Zt, a, tjs, tm, tsi, ym = f["Zt"], f["a"], f["tj"], f["tm"], f["ts_inv"], f["y_mean"]
-        zc = f["zclip"]
-        for j in self.order:
-            r2 = r2s[j]
-            tj = tjs[j]
-            if tj is not None:  # chain: the neighbour's PREDICTED torque
-                tq = (out[tj] - tm[j]) * tsi[j]
-                tq = zc if tq > zc else (-zc if tq < -zc else tq)
-                d = Zt[j] - tq
-                d *= d
-                r2 = d + r2
-            if matern:
-                s = np.sqrt(r2)
-                e = np.exp(-s)
-                r2 *= 1.0 / 3.0
-                r2 += s
-                r2 += 1.0
-                r2 *= e
-                m = ym[j] + float(r2 @ a[j])
-            else:
-                m = ym[j] + float(np.exp(-r2) @ a[j])
-            if self.parametric == "sp":
-                m += float(out_rbd[j])
-            out[j] = m
-        return out
+        tau_rbd = np.asarray(self.rbd.inverse_dynamics(q, qd, qdd), dtype=np.float64) \
+            if self.parametric == "sp" else None
+        return f.mean(tau_rbd)
 
     # ------------------------------------------------------------------ persistence
-    def _config(self) -> dict[str, Any]:
-        rbd_ref = None
-        if self.rbd is not None:
-            src = getattr(self.rbd, "source", None)
-            arm = getattr(self.rbd, "armature", None)
-            rbd_ref = {"source": None if src is None else str(src),
-                       "nominal": bool(getattr(self.rbd, "meta", None)),
-                       "armature": None if arm is None else np.asarray(arm, float).tolist(),
-                       "type": type(self.rbd).__name__}
-        return {"name": self.name, "dof": self.dof, "df_delta": self.df_delta,
-                "train_on_predicted": self.train_on_predicted, "gp_config": asdict(self.gp_config),
-                "where": [list(w) for w in self.where], "n_banks": len(self.banks), "n_train": self.n_train,
-                "rbd": rbd_ref}
-
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the fitted model to ``path`` (``.npz``, atomically).
+        """Write the fitted model to ``path`` (``.npz``, atomically); see :func:`cascgp.models.io.save_model`."""
+        from cascgp.models.io import save_model
 
-        Contents: format kind/version, config JSON (name, dof, df_delta, train_on_predicted,
-        GP config, RBD reference), every bank's ``state_dict`` (normalisation, hyperparameters,
-        training inputs and targets), and check queries with their predictions (verified by
-        :func:`load_model`).  The RBD itself is not stored: SP models record
-        ``rbd.source`` (URDF path) for :func:`load_model`.
-        """
-        self._require_fitted()
-        arrays: dict[str, np.ndarray] = {
-            "format_kind": np.array(_KIND), "format_version": np.array(FORMAT_VERSION),
-            "config_json": np.array(json.dumps(self._config())),
-        }
-        for k, bank in enumerate(self.banks):
-            for key, val in bank.state_dict().items():
-                arrays[f"bank{k}/{key}"] = np.asarray(val)
-        # check queries: the first training rows (features rebuilt from the bank's inputs)
-        chk = self._check_set()
-        arrays.update({f"check/{k}": v for k, v in chk.items()})
-        return atomic_savez(path, arrays)
-
-    def _check_set(self) -> dict[str, np.ndarray]:
-        """Deterministic check queries and their predictions (stored by save, verified by load)."""
-        rng = np.random.default_rng(12345)
-        N, m = self.dof, _N_CHECK
-        q = rng.uniform(-1.0, 1.0, (m, N))
-        qd = rng.uniform(-1.0, 1.0, (m, N))
-        qdd = rng.uniform(-1.0, 1.0, (m, N))
-        qh = np.stack([q - 0.1 * qd, q - 0.2 * qd], axis=1)
-        mean, var = self._predict_arrays(q, qd, qdd, qh if self.feature_kind == "df" else None, True)
-        return {"q": q, "qd": qd, "qdd": qdd, "q_hist": qh, "mean": mean, "var": var}
+        return save_model(self, path)
 
 
 def _state_cols(sflat: np.ndarray, state_joints: tuple[int, ...]) -> np.ndarray:
@@ -521,8 +364,8 @@ def _state_cols(sflat: np.ndarray, state_joints: tuple[int, ...]) -> np.ndarray:
 def _posterior_predict(P: Any, x: np.ndarray, return_var: bool) -> tuple[np.ndarray, np.ndarray | None]:
     """GPPosterior.predict with the normalised inputs clipped (finite output for finite input)."""
     z = (x - P.x_mean) / P.x_scale
-    if not (np.abs(z) <= _ZCLIP).all():
-        zc = np.clip(z, -_ZCLIP, _ZCLIP)
+    if not (np.abs(z) <= ZCLIP).all():
+        zc = np.clip(z, -ZCLIP, ZCLIP)
         x = np.where(np.isfinite(P.x_scale), P.x_mean + zc * P.x_scale, x)
     return P.predict(x, return_var=return_var)
 
@@ -534,75 +377,3 @@ def make_model(name: str, dof: int, rbd: Any = None, *, gp_config: Any = None, d
     :class:`cascgp.rbd.RigidBodyModel`) whose DOF equals ``dof``.  See :class:`CascadedGPModel`."""
     return CascadedGPModel(name, dof, rbd, gp_config=gp_config, df_delta=df_delta,
                            train_on_predicted=train_on_predicted)
-
-
-def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
-    """Read a model written by :meth:`CascadedGPModel.save`.
-
-    SP models need their rigid-body model: pass ``rbd=``; without it the URDF recorded at
-    save time (``rbd.source``) is loaded with :func:`cascgp.rbd.load_nominal` (when it had a
-    sidecar) or :meth:`RigidBodyModel.from_urdf` with the recorded armature.  After loading, the
-    stored check predictions are recomputed; any difference (corrupt file, another RBD) raises
-    ``ValueError``.  Missing file: ``FileNotFoundError``; corrupt/truncated archive, missing
-    fields or another format version: ``ValueError`` naming the file.
-    """
-    from .gp import GPBank, GPFitConfig
-
-    z = read_npz(path, "cascgp model")
-    check_format_header(z, path, _KIND, FORMAT_VERSION)
-    try:
-        cfg = json.loads(str(z["config_json"]))
-        gp_config = GPFitConfig.from_dict(cfg["gp_config"])
-        name, dof = cfg["name"], int(cfg["dof"])
-        where = [tuple(int(v) for v in w) for w in cfg["where"]]
-        n_banks = int(cfg["n_banks"])
-    except (KeyError, ValueError, TypeError) as exc:
-        raise ValueError(f"{path}: config_json: missing or invalid ({type(exc).__name__}: {exc})") from exc
-    p, _, _ = parse_name(name)
-    if p == "sp" and rbd is None:
-        ref = cfg.get("rbd") or {}
-        src = ref.get("source")
-        if not src or not Path(src).is_file():
-            raise ValueError(f"{path}: rbd: the semi-parametric model {name!r} needs its rigid-body model; pass "
-                             f"load_model(path, rbd=...) (recorded URDF {src!r} not available)")
-        from .rbd import RigidBodyModel, load_nominal, sidecar_path
-
-        if ref.get("nominal") and sidecar_path(src).is_file():
-            rbd = load_nominal(src, dof=dof)
-        else:
-            rbd = RigidBodyModel.from_urdf(src, armature=ref.get("armature"), dof=dof)
-    model = CascadedGPModel(name, dof, rbd, gp_config=gp_config, df_delta=float(cfg["df_delta"]),
-                            train_on_predicted=bool(cfg["train_on_predicted"]))
-    banks = []
-    for k in range(n_banks):
-        pre = f"bank{k}/"
-        sd = {key[len(pre):]: val for key, val in z.items() if key.startswith(pre)}
-        if not sd:
-            raise ValueError(f"{path}: {pre}*: missing GP bank {k}")
-        try:
-            banks.append(GPBank.from_state_dict(sd))
-        except (ValueError, RuntimeError) as exc:
-            raise ValueError(f"{path}: bank {k}: {exc}") from exc
-    if len(where) != dof or any(not (0 <= k < n_banks and 0 <= b < banks[k].n_gps) for k, b in where):
-        raise ValueError(f"{path}: config_json.where: {where} does not match {n_banks} bank(s) and dof={dof}")
-    for j, (k, b) in enumerate(where):
-        want = 3 * len(model.specs[j][0]) + (model.specs[j][1] is not None)
-        if banks[k].dims[b] != want:
-            raise ValueError(f"{path}: bank {k} GP {b}: input dimension {banks[k].dims[b]} does not match "
-                             f"{name!r} joint {j} ({want})")
-    model.banks = banks
-    model.where = where
-    model.n_train = int(cfg.get("n_train", banks[0].n_train))
-    model._cache()
-    need = [f"check/{k}" for k in ("q", "qd", "qdd", "q_hist", "mean", "var")]
-    if any(k not in z for k in need):
-        raise ValueError(f"{path}: missing check fields {[k for k in need if k not in z]}")
-    mean, var = model._predict_arrays(z["check/q"], z["check/qd"], z["check/qdd"],
-                                      z["check/q_hist"] if model.feature_kind == "df" else None, True)
-    ref_m, ref_v = z["check/mean"], z["check/var"]
-    tol_m = 1e-8 * (1.0 + np.abs(ref_m))
-    if mean.shape != ref_m.shape or not (np.abs(mean - ref_m) <= tol_m).all() or \
-            not np.allclose(var, ref_v, rtol=1e-6, atol=1e-10):
-        raise ValueError(f"{path}: the loaded model does not reproduce its stored check predictions "
-                         "(corrupt file, or a different rigid-body model than at save time)")
-    return model

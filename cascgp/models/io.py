@@ -1,0 +1,146 @@
+"""Model files: :func:`save_model` / :func:`load_model` (``.npz``, no pickle, written atomically).
+
+A file holds the format kind and version, the model's config as JSON (name, dof, df_delta, train_on_predicted,
+GP config, a reference to the rigid-body model), every GP bank's saved state (:mod:`cascgp.gp.state`), and check
+queries with the predictions made at save time; :func:`load_model` recomputes them and refuses a file that does
+not reproduce them.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cascgp.gp import GPBank, GPFitConfig
+from cascgp.io import atomic_savez, check_format_header, read_npz
+from cascgp.models.cascade import CascadedGPModel, parse_name
+
+__all__ = ["FORMAT_VERSION", "save_model", "load_model"]
+
+#: Version of the saved-model ``.npz`` layout.
+FORMAT_VERSION = 1
+_KIND = "cascgp.CascadedGPModel"
+_N_CHECK = 5  # stored check queries (save -> load verification)
+
+
+def model_config(model: CascadedGPModel) -> dict[str, Any]:
+    """The JSON config stored in a model file (everything but the banks and the check set)."""
+    rbd_ref = None
+    if model.rbd is not None:
+        src = getattr(model.rbd, "source", None)
+        arm = getattr(model.rbd, "armature", None)
+        rbd_ref = {"source": None if src is None else str(src),
+                   "nominal": bool(getattr(model.rbd, "meta", None)),
+                   "armature": None if arm is None else np.asarray(arm, float).tolist(),
+                   "type": type(model.rbd).__name__}
+    return {"name": model.name, "dof": model.dof, "df_delta": model.df_delta,
+            "train_on_predicted": model.train_on_predicted, "gp_config": asdict(model.gp_config),
+            "where": [list(w) for w in model.where], "n_banks": len(model.banks), "n_train": model.n_train,
+            "rbd": rbd_ref}
+
+
+def save_model(model: CascadedGPModel, path: str | os.PathLike) -> Path:
+    """Write the fitted model to ``path`` (``.npz``, atomically).
+
+    Contents: format kind/version, config JSON (name, dof, df_delta, train_on_predicted,
+    GP config, RBD reference), every bank's ``state_dict`` (normalisation, hyperparameters,
+    training inputs and targets), and check queries with their predictions (verified by
+    :func:`load_model`).  The RBD itself is not stored: SP models record
+    ``rbd.source`` (URDF path) for :func:`load_model`.
+    """
+    if not model.fitted:
+        raise RuntimeError(f"model {model.name!r}: not fitted; nothing to save")
+    arrays: dict[str, np.ndarray] = {
+        "format_kind": np.array(_KIND), "format_version": np.array(FORMAT_VERSION),
+        "config_json": np.array(json.dumps(model_config(model))),
+    }
+    for k, bank in enumerate(model.banks):
+        for key, val in bank.state_dict().items():
+            arrays[f"bank{k}/{key}"] = np.asarray(val)
+    # check queries: the first training rows (features rebuilt from the bank's inputs)
+    chk = check_set(model)
+    arrays.update({f"check/{k}": v for k, v in chk.items()})
+    return atomic_savez(path, arrays)
+
+
+def check_set(model: CascadedGPModel) -> dict[str, np.ndarray]:
+    """Deterministic check queries and their predictions (stored by save, verified by load)."""
+    rng = np.random.default_rng(12345)
+    N, m = model.dof, _N_CHECK
+    q = rng.uniform(-1.0, 1.0, (m, N))
+    qd = rng.uniform(-1.0, 1.0, (m, N))
+    qdd = rng.uniform(-1.0, 1.0, (m, N))
+    qh = np.stack([q - 0.1 * qd, q - 0.2 * qd], axis=1)
+    mean, var = model.predict(q, qd, qdd, qh if model.feature_kind == "df" else None)
+    return {"q": q, "qd": qd, "qdd": qdd, "q_hist": qh, "mean": mean, "var": var}
+
+
+def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
+    """Read a model written by :meth:`CascadedGPModel.save`.
+
+    SP models need their rigid-body model: pass ``rbd=``; without it the URDF recorded at
+    save time (``rbd.source``) is loaded with :func:`cascgp.rbd.load_nominal` (when it had a
+    sidecar) or :meth:`RigidBodyModel.from_urdf` with the recorded armature.  After loading, the
+    stored check predictions are recomputed; any difference (corrupt file, another RBD) raises
+    ``ValueError``.  Missing file: ``FileNotFoundError``; corrupt/truncated archive, missing
+    fields or another format version: ``ValueError`` naming the file.
+    """
+    z = read_npz(path, "cascgp model")
+    check_format_header(z, path, _KIND, FORMAT_VERSION)
+    try:
+        cfg = json.loads(str(z["config_json"]))
+        gp_config = GPFitConfig.from_dict(cfg["gp_config"])
+        name, dof = cfg["name"], int(cfg["dof"])
+        where = [tuple(int(v) for v in w) for w in cfg["where"]]
+        n_banks = int(cfg["n_banks"])
+    except (KeyError, ValueError, TypeError) as exc:
+        raise ValueError(f"{path}: config_json: missing or invalid ({type(exc).__name__}: {exc})") from exc
+    p, _, _ = parse_name(name)
+    if p == "sp" and rbd is None:
+        ref = cfg.get("rbd") or {}
+        src = ref.get("source")
+        if not src or not Path(src).is_file():
+            raise ValueError(f"{path}: rbd: the semi-parametric model {name!r} needs its rigid-body model; pass "
+                             f"load_model(path, rbd=...) (recorded URDF {src!r} not available)")
+        from cascgp.rbd import RigidBodyModel, load_nominal, sidecar_path
+
+        if ref.get("nominal") and sidecar_path(src).is_file():
+            rbd = load_nominal(src, dof=dof)
+        else:
+            rbd = RigidBodyModel.from_urdf(src, armature=ref.get("armature"), dof=dof)
+    model = CascadedGPModel(name, dof, rbd, gp_config=gp_config, df_delta=float(cfg["df_delta"]),
+                            train_on_predicted=bool(cfg["train_on_predicted"]))
+    banks = []
+    for k in range(n_banks):
+        pre = f"bank{k}/"
+        sd = {key[len(pre):]: val for key, val in z.items() if key.startswith(pre)}
+        if not sd:
+            raise ValueError(f"{path}: {pre}*: missing GP bank {k}")
+        try:
+            banks.append(GPBank.from_state_dict(sd))
+        except (ValueError, RuntimeError) as exc:
+            raise ValueError(f"{path}: bank {k}: {exc}") from exc
+    try:
+        model.adopt_banks(banks, where, int(cfg.get("n_train", banks[0].n_train)))
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from exc
+    need = [f"check/{k}" for k in ("q", "qd", "qdd", "q_hist", "mean", "var")]
+    if any(k not in z for k in need):
+        raise ValueError(f"{path}: missing check fields {[k for k in need if k not in z]}")
+    try:
+        mean, var = model.predict(z["check/q"], z["check/qd"], z["check/qdd"],
+                                  z["check/q_hist"] if model.feature_kind == "df" else None)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{path}: check queries: {exc}") from exc
+    ref_m, ref_v = z["check/mean"], z["check/var"]
+    tol_m = 1e-8 * (1.0 + np.abs(ref_m))
+    if mean.shape != ref_m.shape or not (np.abs(mean - ref_m) <= tol_m).all() or \
+            not np.allclose(var, ref_v, rtol=1e-6, atol=1e-10):
+        raise ValueError(f"{path}: the loaded model does not reproduce its stored check predictions "
+                         "(corrupt file, or a different rigid-body model than at save time)")
+    return model
