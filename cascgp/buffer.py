@@ -5,6 +5,12 @@ in the buffer's folder with :meth:`cascgp.data.DynamicsData.save`, which is atom
 so an interrupted run never leaves a half-written buffer: reopening the folder
 gives every episode that was completely saved.
 
+No episode is ever overwritten: a new file takes the number after the highest one in
+the folder *at the time of the append* (a gap left by a removed file is not reused),
+and it is published exclusively (:func:`cascgp.io.atomic_write` with ``exclusive``), so
+two buffers appending to one folder each keep all their episodes; one buffer does not
+see the other's later episodes until the folder is reopened.
+
 Training-set cap
 ----------------
 :meth:`DataBuffer.training_set` subsamples all data to ``rate_hz`` (10 Hz by default,
@@ -24,7 +30,7 @@ import numpy as np
 
 from cascgp.data import DynamicsData
 
-_EPISODE_FILE = re.compile(r"^episode_(\d{5})\.npz$")
+_EPISODE_FILE = re.compile(r"^episode_(\d{5,})\.npz$")
 
 
 class DataBuffer:
@@ -40,7 +46,8 @@ class DataBuffer:
         self._episodes: list[DynamicsData] = []
         if self.folder is not None:
             self.folder.mkdir(parents=True, exist_ok=True)
-            files = sorted(p for p in self.folder.iterdir() if _EPISODE_FILE.match(p.name))
+            files = sorted((p for p in self.folder.iterdir() if _EPISODE_FILE.match(p.name)),
+                           key=lambda p: int(_EPISODE_FILE.match(p.name).group(1)))
             self._episodes = [DynamicsData.load(p) for p in files]
 
     def __len__(self) -> int:
@@ -62,8 +69,18 @@ class DataBuffer:
         if self._episodes and data.dof != self._episodes[0].dof:
             raise ValueError(f"data.dof is {data.dof}, the buffer holds {self._episodes[0].dof}-DOF data")
         if self.folder is not None:
-            data.save(self.folder / f"episode_{len(self._episodes):05d}.npz")
+            while True:
+                try:
+                    data.save(self.folder / f"episode_{self._next_index():05d}.npz", exclusive=True)
+                    break
+                except FileExistsError:  # another writer took the number first: take the next one
+                    continue
         self._episodes.append(data)
+
+    def _next_index(self) -> int:
+        """One past the highest episode number on disk (0 for an empty folder)."""
+        nums = [int(m.group(1)) for p in self.folder.iterdir() if (m := _EPISODE_FILE.match(p.name))]
+        return max(nums, default=-1) + 1
 
     def all_data(self) -> DynamicsData:
         """Every episode concatenated (each episode its own segment)."""

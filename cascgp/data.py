@@ -370,9 +370,10 @@ class DynamicsData:
         return self.take(keep)
 
     # ------------------------------------------------------------------ files
-    def save(self, path: str | os.PathLike) -> Path:
-        """Write an ``.npz`` archive atomically (see :func:`atomic_savez`); returns the path."""
-        return atomic_savez(path, {
+    def save(self, path: str | os.PathLike, *, exclusive: bool = False) -> Path:
+        """Write an ``.npz`` archive atomically (see :func:`cascgp.io.atomic_savez`); returns the path.
+        ``exclusive=True`` raises ``FileExistsError`` instead of replacing an existing file."""
+        return atomic_savez(path, exclusive=exclusive, arrays={
             "format_kind": np.array(_KIND), "format_version": np.array(FORMAT_VERSION),
             "q": self.q, "qd": self.qd, "qdd": self.qdd, "tau": self.tau, "t": self.t,
             "segment": self.segment, "meta_json": np.array(json.dumps(self.meta)),

@@ -5,6 +5,16 @@ flushed and fsync'ed, then :func:`os.replace`), so a reader never sees a half-wr
 and a killed writer leaves the old file intact. :func:`atomic_savez` and :func:`write_json`
 build on it; :func:`read_npz` and :func:`check_format_header` read and check the ``.npz``
 formats (no pickle anywhere).
+
+Temporary files are named ``.<name>.<host>-<pid>.<random>.tmp`` (``host``: a short hash of the
+host name). A writer killed with SIGKILL cannot remove its own; the next write into the same
+folder removes those of this host whose process no longer exists
+(:func:`remove_stale_temporaries`), so they do not pile up. Files of other hosts (a shared
+network folder) are left alone.
+
+Reading is bounded: :func:`read_npz` refuses a file that is not a zip archive (a ``.npy``
+array, random bytes) with a message naming the file, and an archive whose members would
+inflate beyond ``max_bytes`` (default :data:`MAX_NPZ_BYTES`) before decompressing anything.
 """
 
 from __future__ import annotations
@@ -12,31 +22,81 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
+import socket
 import tempfile
 import zipfile
+import zlib
 from pathlib import Path
 from typing import IO, Any, Callable
 
 import numpy as np
 
 __all__ = ["atomic_write", "atomic_write_text", "atomic_savez", "write_json", "read_json", "json_safe",
-           "read_npz", "check_format_header"]
+           "read_npz", "check_format_header", "remove_stale_temporaries", "MAX_NPZ_BYTES"]
+
+#: Default cap of the decompressed size of an ``.npz`` file read by :func:`read_npz` (bytes).
+MAX_NPZ_BYTES = 1 << 30
+_ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # local file header; empty archive
+_TMP = re.compile(r"^\.(?P<name>.+)\.(?P<host>[0-9a-f]{8})-(?P<pid>\d+)\.[^.]+\.tmp$")
+_HOST = f"{zlib.crc32(socket.gethostname().encode()):08x}"
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], None]) -> Path:
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
+    """Remove the temporary files of :func:`atomic_write` in ``folder`` whose writing process is gone
+    (killed before it could clean up). Returns the removed paths."""
+    removed = []
+    try:
+        entries = list(os.scandir(folder))
+    except OSError:
+        return removed
+    for e in entries:
+        m = _TMP.match(e.name)
+        if m and m["host"] == _HOST and e.is_file(follow_symlinks=False) and not _pid_alive(int(m["pid"])):
+            try:
+                os.unlink(e.path)
+                removed.append(Path(e.path))
+            except OSError:
+                pass
+    return removed
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], None], *, exclusive: bool = False) -> Path:
     """Create ``path`` atomically: ``write(fh)`` fills a temporary binary file in the same
     folder, which is fsync'ed and moved over ``path``. On any error the temporary file is
-    removed and ``path`` is left as it was. Returns ``path``."""
+    removed and ``path`` is left as it was. Returns ``path``.
+
+    ``exclusive=True`` never replaces an existing file: the finished file is published with a
+    hard link, which fails with ``FileExistsError`` when ``path`` exists (also when another
+    process created it in the meantime).
+    """
     path = Path(path)
     folder = path.parent if str(path.parent) else Path(".")
     folder.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    remove_stale_temporaries(folder)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_HOST}-{os.getpid()}.", suffix=".tmp", dir=folder)
     try:
         with os.fdopen(fd, "wb") as f:
             write(f)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+        if exclusive:
+            os.link(tmp, path)
+            os.unlink(tmp)
+        else:
+            os.replace(tmp, path)
     except BaseException:
         try:
             os.unlink(tmp)
@@ -51,10 +111,10 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
     return atomic_write(path, lambda f: f.write(text.encode("utf-8")))
 
 
-def atomic_savez(path: str | os.PathLike, arrays: dict[str, np.ndarray]) -> Path:
-    """Write ``arrays`` to ``path`` (``.npz``) atomically. ``numpy.savez`` would append
-    ``.npz`` to a name without it; the path is kept exactly as given."""
-    return atomic_write(path, lambda f: np.savez(f, **arrays))
+def atomic_savez(path: str | os.PathLike, arrays: dict[str, np.ndarray], *, exclusive: bool = False) -> Path:
+    """Write ``arrays`` to ``path`` (``.npz``) atomically (``exclusive``: see :func:`atomic_write`).
+    ``numpy.savez`` would append ``.npz`` to a name without it; the path is kept exactly as given."""
+    return atomic_write(path, lambda f: np.savez(f, **arrays), exclusive=exclusive)
 
 
 def json_safe(x: Any) -> Any:
@@ -86,15 +146,34 @@ def read_json(path: str | os.PathLike) -> Any:
         return json.load(f)
 
 
-def read_npz(path: str | os.PathLike, what: str) -> dict[str, np.ndarray]:
+def read_npz(path: str | os.PathLike, what: str, max_bytes: int = MAX_NPZ_BYTES) -> dict[str, np.ndarray]:
     """Read every array of an ``.npz`` file eagerly (no pickle).
 
     Raises ``FileNotFoundError`` for a missing file and ``ValueError`` naming ``path`` and
-    ``what`` for anything unreadable (truncated or corrupt archive, bad CRC, pickled data).
+    ``what`` for anything else: not a zip archive (e.g. a ``.npy`` array or random bytes),
+    members that would decompress to more than ``max_bytes`` in total (checked from the
+    archive's directory before anything is inflated), truncated or corrupt archive, bad CRC,
+    pickled data.
     """
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f"{what} file not found: {path}")
+    if not path.is_file():
+        raise ValueError(f"{path}: not a file (expected a {what} .npz file)")
+    with open(path, "rb") as fh:
+        head = fh.read(4)
+    if head not in _ZIP_MAGIC:
+        kind = "is a .npy array" if head == b"\x93NUM" else f"starts with {head!r}"
+        raise ValueError(f"{path}: not a {what} .npz file (a .npz file is a zip archive; this file {kind})")
+    try:
+        with zipfile.ZipFile(path) as zf:
+            total = sum(info.file_size for info in zf.infolist())
+    except (zipfile.BadZipFile, OSError, EOFError, ValueError) as exc:
+        raise ValueError(f"{path}: not a readable {what} .npz file (corrupt or truncated?): "
+                         f"{type(exc).__name__}: {exc}") from exc
+    if total > max_bytes:
+        raise ValueError(f"{path}: the {what} file would decompress to {total / 2**20:.0f} MiB, over the limit of "
+                         f"{max_bytes / 2**20:.0f} MiB (max_bytes); refusing to load it")
     try:
         with np.load(path, allow_pickle=False) as z:
             return {k: np.asarray(z[k]) for k in z.files}

@@ -66,6 +66,9 @@ class RigidBodyModel:
         gravity: (3,) gravity vector in the world frame (m/s^2).
         torque_limits, velocity_limits: (N,) or ``None`` (from the sidecar).
         meta: the sidecar dict (empty for :meth:`from_urdf`).
+        source: the URDF path it was read from (``None`` when built from text).
+        urdf_text: the URDF document itself (``None`` when built from a ``pinocchio.Model``): model files
+            embed it, so a saved semi-parametric model loads without the URDF file.
         pin_model: the underlying ``pinocchio.Model`` (do not change its shape).
     """
 
@@ -79,6 +82,7 @@ class RigidBodyModel:
         velocity_limits: Any = None,
         meta: dict | None = None,
         source: str | None = None,
+        urdf_text: str | None = None,
     ) -> None:
         if model.nq != model.nv:
             raise ValueError(
@@ -101,6 +105,7 @@ class RigidBodyModel:
         )
         self.meta: dict = dict(meta or {})
         self.source = source
+        self.urdf_text = urdf_text
         self._data = model.createData()
 
     # ------------------------------------------------------------------ construction
@@ -125,12 +130,29 @@ class RigidBodyModel:
         if not path.is_file():
             raise FileNotFoundError(f"URDF file not found: {str(path)!r}")
         try:
+            text = path.read_text(encoding="utf-8")
             model = pin.buildModelFromUrdf(str(path))
         except Exception as exc:  # Pinocchio raises a bare ValueError/RuntimeError with a terse message
             raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}") from exc
-        rbd = cls(model, armature=armature, gravity=gravity, source=str(path))
+        rbd = cls(model, armature=armature, gravity=gravity, source=str(path), urdf_text=text)
         if dof is not None and rbd.dof != dof:
             raise ValueError(f"dof mismatch: expected {dof} joints, URDF {str(path)!r} has {rbd.dof}")
+        return rbd
+
+    @classmethod
+    def from_urdf_text(cls, text: str, *, dof: int | None = None, **kwargs: Any) -> "RigidBodyModel":
+        """Build from a URDF document held in a string (e.g. embedded in a model file); ``kwargs`` are those of
+        the constructor (``armature``, ``gravity``, ``torque_limits``, ``velocity_limits``, ``meta``,
+        ``source``). ``ValueError`` if it does not parse or has another number of joints than ``dof``."""
+        if not isinstance(text, str) or not text.strip():
+            raise ValueError("urdf_text: expected a non-empty URDF document")
+        try:
+            model = pin.buildModelFromXML(text)
+        except Exception as exc:
+            raise ValueError(f"urdf_text: cannot parse the URDF document: {exc}") from exc
+        rbd = cls(model, urdf_text=text, **kwargs)
+        if dof is not None and rbd.dof != dof:
+            raise ValueError(f"urdf_text: dof mismatch: expected {dof} joints, the URDF has {rbd.dof}")
         return rbd
 
     # ------------------------------------------------------------------ properties
@@ -259,6 +281,7 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> Rig
             velocity_limits=meta["velocity_limits"],
             meta=meta,
             source=str(urdf_path),
+            urdf_text=rbd.urdf_text,
         )
     except ValueError as exc:
         raise ValueError(f"sidecar {str(js)!r}: {exc}") from exc

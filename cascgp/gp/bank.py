@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from cascgp.gp.checks import as_list, check_matrix, check_vector, json_num
+from cascgp.gp.checks import as_list, check_matrix, check_scale, check_vector, json_num
 from cascgp.gp.config import GPFitConfig, noise_var
 from cascgp.gp.kernels import get_kernel, scaled_sqdist
 from cascgp.gp.lbfgs import LBFGSOptions, minimize_batched
@@ -203,6 +203,9 @@ class GPBank:
             raise ValueError(f"X[0]: a GP needs at least 2 training samples, got n={n}")
         Xs = [X0] + [check_matrix(X[b], f"X[{b}]", n=n) for b in range(1, len(X))]
         ys = [check_vector(y[b], f"y[{b}]", n) for b in range(len(y))]
+        for b in range(len(Xs)):
+            check_scale(Xs[b], f"X[{b}]")
+            check_scale(ys[b], f"y[{b}]")
         if init is not None:
             dims = tuple(a.shape[1] for a in Xs)
             if not isinstance(init, GPBank) or not init.fitted:

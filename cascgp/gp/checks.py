@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["as_list", "check_matrix", "check_vector", "json_num"]
+__all__ = ["as_list", "check_matrix", "check_vector", "check_scale", "json_num"]
 
 
 def json_num(v: float) -> float | None:
@@ -52,3 +52,16 @@ def check_vector(a: Any, field_name: str, n: int) -> np.ndarray:
         row = int(np.argwhere(~np.isfinite(a))[0, 0])
         raise ValueError(f"{field_name}: contains NaN or inf (first at row {row})")
     return a
+
+
+def check_scale(a: np.ndarray, field_name: str) -> None:
+    """``ValueError`` naming the field when finite values are too large to normalise: their standard deviation
+    overflows (|values| beyond ~1e154), which would turn every prediction into NaN."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        sd = np.asarray(a.std(0))
+    bad = ~np.isfinite(sd)
+    if bad.any():
+        col = int(np.flatnonzero(bad.ravel())[0]) if a.ndim > 1 else None
+        where = f" (column {col})" if col is not None else ""
+        raise ValueError(f"{field_name}: values too large to normalise{where}: largest magnitude "
+                         f"{float(np.abs(a).max()):.3g}, whose square overflows float64")

@@ -17,6 +17,7 @@ import numpy as np
 from cascgp.data import DynamicsData
 from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
 from cascgp.gp import GPBank, GPFitConfig
+from cascgp.gp.checks import check_scale
 from cascgp.models.fastpath import ZCLIP, FastPath
 
 __all__ = ["MODEL_NAMES", "CascadedGPModel", "make_model", "parse_name"]
@@ -145,6 +146,8 @@ class CascadedGPModel:
                 f"(of {data.n_samples} rows" + (f"; -df needs 2*df_delta={2 * self.df_delta:g} s of history "
                                                  "within a segment)" if self.feature_kind == "df" else ")"))
         out = {"q": data.q[valid], "qd": data.qd[valid], "qdd": data.qdd[valid], "tau": data.tau[valid]}
+        for key in ("q", "qd", "qdd", "tau"):
+            check_scale(out[key], f"data.{key}")
         out["q_hist"] = q_hist[valid] if q_hist is not None else None
         return out
 
@@ -344,8 +347,7 @@ class CascadedGPModel:
             buf[2:3 * N:3] = h[1]
         if not np.isfinite(buf).all():
             raise ValueError("q/qd/qdd/q_hist: non-finite value (NaN or inf) in the query")
-        tau_rbd = np.asarray(self.rbd.inverse_dynamics(q, qd, qdd), dtype=np.float64) \
-            if self.parametric == "sp" else None
+        tau_rbd = self._rbd_torque(q, qd, qdd) if self.parametric == "sp" else None
         return f.mean(tau_rbd)
 
     # ------------------------------------------------------------------ persistence

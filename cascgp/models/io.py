@@ -4,10 +4,16 @@ A file holds the format kind and version, the model's config as JSON (name, dof,
 GP config, a reference to the rigid-body model), every GP bank's saved state (:mod:`cascgp.gp.state`), and check
 queries with the predictions made at save time; :func:`load_model` recomputes them and refuses a file that does
 not reproduce them.
+
+Self-contained semi-parametric models: when the rigid-body model is a :class:`cascgp.rbd.RigidBodyModel` built from
+a URDF, the file embeds the URDF document, its SHA-256, the armature, gravity, limits and sidecar metadata
+(``rbd/*`` entries), so :func:`load_model` rebuilds the same model from any folder without the URDF file. A
+rigid-body model of another type cannot be embedded; such files need ``load_model(path, rbd=...)``.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from dataclasses import asdict
@@ -62,10 +68,46 @@ def save_model(model: CascadedGPModel, path: str | os.PathLike) -> Path:
     for k, bank in enumerate(model.banks):
         for key, val in bank.state_dict().items():
             arrays[f"bank{k}/{key}"] = np.asarray(val)
+    arrays.update(_embedded_rbd(model.rbd))
     # check queries: the first training rows (features rebuilt from the bank's inputs)
     chk = check_set(model)
     arrays.update({f"check/{k}": v for k, v in chk.items()})
     return atomic_savez(path, arrays)
+
+
+def _embedded_rbd(rbd: Any) -> dict[str, np.ndarray]:
+    """The ``rbd/*`` entries of a model file (empty unless ``rbd`` carries its URDF document)."""
+    text = getattr(rbd, "urdf_text", None)
+    if not text:
+        return {}
+    opt = {k: getattr(rbd, k, None) for k in ("torque_limits", "velocity_limits")}
+    return {
+        "rbd/urdf": np.array(text), "rbd/sha256": np.array(hashlib.sha256(text.encode("utf-8")).hexdigest()),
+        "rbd/armature": np.asarray(rbd.armature, float), "rbd/gravity": np.asarray(rbd.gravity, float),
+        "rbd/meta_json": np.array(json.dumps(getattr(rbd, "meta", {}) or {})),
+        "rbd/limits_json": np.array(json.dumps({k: None if v is None else np.asarray(v, float).tolist()
+                                                for k, v in opt.items()})),
+    }
+
+
+def _rbd_from_file(z: dict[str, np.ndarray], path: str | os.PathLike, dof: int) -> Any:
+    """Rebuild the embedded rigid-body model; ``ValueError`` naming the file and field if it is damaged."""
+    from cascgp.rbd import RigidBodyModel
+
+    try:
+        text = str(z["rbd/urdf"])
+        if hashlib.sha256(text.encode("utf-8")).hexdigest() != str(z["rbd/sha256"]):
+            raise ValueError("rbd/urdf: the embedded URDF does not match its SHA-256 (corrupt file)")
+        limits = json.loads(str(z["rbd/limits_json"]))
+        return RigidBodyModel.from_urdf_text(
+            text, dof=dof, armature=z["rbd/armature"], gravity=z["rbd/gravity"],
+            torque_limits=limits.get("torque_limits"), velocity_limits=limits.get("velocity_limits"),
+            meta=json.loads(str(z["rbd/meta_json"])), source=None)
+    except KeyError as exc:
+        raise ValueError(f"{path}: {exc.args[0]}: missing (the file embeds only part of its rigid-body model)") \
+            from exc
+    except (ValueError, TypeError, AttributeError) as exc:
+        raise ValueError(f"{path}: {exc}") from exc
 
 
 def check_set(model: CascadedGPModel) -> dict[str, np.ndarray]:
@@ -83,9 +125,9 @@ def check_set(model: CascadedGPModel) -> dict[str, np.ndarray]:
 def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
     """Read a model written by :meth:`CascadedGPModel.save`.
 
-    SP models need their rigid-body model: pass ``rbd=``; without it the URDF recorded at
-    save time (``rbd.source``) is loaded with :func:`cascgp.rbd.load_nominal` (when it had a
-    sidecar) or :meth:`RigidBodyModel.from_urdf` with the recorded armature.  After loading, the
+    SP models need their rigid-body model: pass ``rbd=``; without it the model embedded in the
+    file is rebuilt (see the module docstring); a file without one falls back to the URDF path
+    recorded at save time (``rbd.source``).  After loading, the
     stored check predictions are recomputed; any difference (corrupt file, another RBD) raises
     ``ValueError``.  Missing file: ``FileNotFoundError``; corrupt/truncated archive, missing
     fields or another format version: ``ValueError`` naming the file.
@@ -100,8 +142,13 @@ def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
         n_banks = int(cfg["n_banks"])
     except (KeyError, ValueError, TypeError) as exc:
         raise ValueError(f"{path}: config_json: missing or invalid ({type(exc).__name__}: {exc})") from exc
-    p, _, _ = parse_name(name)
-    if p == "sp" and rbd is None:
+    try:
+        p, _, _ = parse_name(name)
+    except ValueError as exc:
+        raise ValueError(f"{path}: config_json.{exc}") from exc
+    if p == "sp" and rbd is None and "rbd/urdf" in z:
+        rbd = _rbd_from_file(z, path, dof)
+    elif p == "sp" and rbd is None:  # files without an embedded model: the recorded URDF path
         ref = cfg.get("rbd") or {}
         src = ref.get("source")
         if not src or not Path(src).is_file():
