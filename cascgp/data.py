@@ -47,6 +47,22 @@ _ARRAY_FIELDS = ("q", "qd", "qdd", "tau")
 
 
 # --------------------------------------------------------------------------- validation
+def _real_array(name: str, raw: object, shape: str) -> np.ndarray:
+    """A float64 copy of ``raw``; ``TypeError`` naming the field for complex, boolean, text or other
+    non-numeric input (a cast would silently drop an imaginary part or turn flags into numbers)."""
+    try:
+        a0 = np.asarray(raw)
+    except (TypeError, ValueError) as exc:  # ragged nested lists
+        raise TypeError(f"DynamicsData.{name}: expected a numeric {shape} array ({exc})") from None
+    if a0.dtype.kind not in "fiuO":
+        raise TypeError(f"DynamicsData.{name}: expected a real numeric {shape} array, got dtype {a0.dtype}")
+    try:
+        a = np.array(a0, dtype=np.float64, order="C", copy=True)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"DynamicsData.{name}: expected a numeric {shape} array ({exc})") from None
+    return a
+
+
 def _first_bad_row(mask: np.ndarray) -> int:
     return int(np.flatnonzero(mask)[0])
 
@@ -103,11 +119,7 @@ class DynamicsData:
     def __post_init__(self) -> None:
         arrays: dict[str, np.ndarray] = {}
         for name in _ARRAY_FIELDS:
-            raw = getattr(self, name)
-            try:
-                a = np.array(raw, dtype=np.float64, order="C", copy=True)
-            except (TypeError, ValueError) as exc:
-                raise TypeError(f"DynamicsData.{name}: expected a numeric (T, N) array ({exc})")
+            a = _real_array(name, getattr(self, name), "(T, N)")
             if a.ndim != 2:
                 raise ValueError(f"DynamicsData.{name}: expected shape (T, N), got {a.shape}")
             arrays[name] = a
@@ -122,10 +134,7 @@ class DynamicsData:
             raise ValueError("DynamicsData.q: empty data set (T = 0 rows); at least one sample is needed")
         if N == 0:
             raise ValueError("DynamicsData.q: expected at least one joint (N >= 1), got N = 0")
-        try:
-            t = np.array(self.t, dtype=np.float64, order="C", copy=True)
-        except (TypeError, ValueError) as exc:
-            raise TypeError(f"DynamicsData.t: expected a numeric (T,) array ({exc})")
+        t = _real_array("t", self.t, "(T,)")
         if t.shape != (T,):
             raise ValueError(f"DynamicsData.t: expected shape ({T},), got {t.shape}")
         if self.segment is None:
@@ -160,6 +169,8 @@ class DynamicsData:
                     f"DynamicsData.t: time must be strictly increasing within a segment; row {r} "
                     f"(t = {t[r]!r}) does not come after row {r - 1} (t = {t[r - 1]!r}) "
                     f"in segment {seg[r]}")
+        if self.meta is not None and not isinstance(self.meta, dict):
+            raise TypeError(f"DynamicsData.meta: expected a dict, got {type(self.meta).__name__}")
         meta = dict(self.meta) if self.meta is not None else {}
         try:
             meta = json.loads(json.dumps(meta))
@@ -397,4 +408,4 @@ class DynamicsData:
             return cls(q=z["q"], qd=z["qd"], qdd=z["qdd"], tau=z["tau"], t=z["t"],
                        segment=z["segment"], meta=meta)
         except (ValueError, TypeError) as exc:
-            raise type(exc)(f"{path}: {exc}") from exc
+            raise ValueError(f"{path}: {exc}") from exc

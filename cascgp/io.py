@@ -13,8 +13,11 @@ folder removes those of this host whose process no longer exists
 network folder) are left alone.
 
 Reading is bounded: :func:`read_npz` refuses a file that is not a zip archive (a ``.npy``
-array, random bytes) with a message naming the file, and an archive whose members would
-inflate beyond ``max_bytes`` (default :data:`MAX_NPZ_BYTES`) before decompressing anything.
+array, random bytes) with a message naming the file, and, before decompressing anything, an
+archive whose members would inflate beyond ``max_bytes`` (default :data:`MAX_NPZ_BYTES`) or
+that looks like a zip bomb: more than :data:`BOMB_MIN_BYTES` decompressed at a ratio above
+:data:`BOMB_RATIO` to the file size. cascgp writes ``.npz`` files uncompressed (ratio ~1), so
+only a crafted file trips the ratio test.
 """
 
 from __future__ import annotations
@@ -33,10 +36,14 @@ from typing import IO, Any, Callable
 import numpy as np
 
 __all__ = ["atomic_write", "atomic_write_text", "atomic_savez", "write_json", "read_json", "json_safe",
-           "read_npz", "check_format_header", "remove_stale_temporaries", "MAX_NPZ_BYTES"]
+           "read_npz", "check_format_header", "remove_stale_temporaries", "MAX_NPZ_BYTES", "BOMB_MIN_BYTES",
+           "BOMB_RATIO"]
 
 #: Default cap of the decompressed size of an ``.npz`` file read by :func:`read_npz` (bytes).
 MAX_NPZ_BYTES = 1 << 30
+#: An archive inflating to more than BOMB_MIN_BYTES at more than BOMB_RATIO times its size is refused.
+BOMB_MIN_BYTES = 64 << 20
+BOMB_RATIO = 100
 _ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # local file header; empty archive
 _TMP = re.compile(r"^\.(?P<name>.+)\.(?P<host>[0-9a-f]{8})-(?P<pid>\d+)\.[^.]+\.tmp$")
 _HOST = f"{zlib.crc32(socket.gethostname().encode()):08x}"
@@ -174,6 +181,11 @@ def read_npz(path: str | os.PathLike, what: str, max_bytes: int = MAX_NPZ_BYTES)
     if total > max_bytes:
         raise ValueError(f"{path}: the {what} file would decompress to {total / 2**20:.0f} MiB, over the limit of "
                          f"{max_bytes / 2**20:.0f} MiB (max_bytes); refusing to load it")
+    size = path.stat().st_size
+    if total > BOMB_MIN_BYTES and total > BOMB_RATIO * size:
+        raise ValueError(f"{path}: the {what} file would decompress to {total / 2**20:.0f} MiB from "
+                         f"{size / 2**10:.0f} KiB (ratio {total / max(size, 1):.0f}, over {BOMB_RATIO}): a zip bomb "
+                         "or a crafted file; refusing to load it")
     try:
         with np.load(path, allow_pickle=False) as z:
             return {k: np.asarray(z[k]) for k in z.files}
@@ -186,9 +198,13 @@ def read_npz(path: str | os.PathLike, what: str, max_bytes: int = MAX_NPZ_BYTES)
 def check_format_header(z: dict[str, np.ndarray], path: str | os.PathLike, kind: str, version: int) -> None:
     """Raise ``ValueError`` naming the file and field unless ``z`` holds ``format_kind == kind``
     and ``format_version == version`` (shared by every cascgp file format)."""
-    got_kind = str(z["format_kind"]) if "format_kind" in z else None
+    got_kind = str(z["format_kind"]) if "format_kind" in z and z["format_kind"].shape == () else None
     if got_kind != kind:
         raise ValueError(f"{path}: format_kind: expected {kind!r}, got {got_kind!r}")
-    got_version = int(z["format_version"]) if "format_version" in z else None
+    raw = z.get("format_version")
+    if raw is None or (raw.shape == () and raw.dtype.kind in "iu"):
+        got_version = None if raw is None else int(raw)
+    else:
+        got_version = f"an array of dtype {raw.dtype} and shape {raw.shape}"
     if got_version != version:
         raise ValueError(f"{path}: format_version: expected {version}, got {got_version}")

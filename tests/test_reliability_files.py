@@ -84,6 +84,17 @@ def test_read_npz_refuses_archives_that_inflate_beyond_the_cap(tmp_path: Path) -
     assert read_npz(bomb, "test", max_bytes=1 << 25)["q"].shape == (2_000_000,)
 
 
+def test_loaders_refuse_a_zip_bomb_under_the_size_cap(tmp_path: Path) -> None:
+    bomb = tmp_path / "bomb.npz"
+    with zipfile.ZipFile(bomb, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        for k in ("q", "qd"):
+            with zf.open(f"{k}.npy", "w") as fh:
+                np.lib.format.write_array(fh, np.zeros(5_000_000))  # 2 x 40 MB of zeros, ~80 kB on disk
+    for loader in (DynamicsData.load, load_model):
+        with pytest.raises(ValueError, match=r"bomb\.npz.*decompress to 76 MiB.*zip bomb"):
+            loader(bomb)
+
+
 # ------------------------------------------------------------------ orphaned temporaries
 def test_killed_writer_temporaries_are_removed_by_the_next_write(tmp_path: Path) -> None:
     code = ("import os, sys; from cascgp.io import atomic_write; "

@@ -115,18 +115,25 @@ def bank_from_state(d: dict[str, Any]) -> tuple[GPFitConfig, BankData, list[dict
     for k in required:
         if k not in d:
             raise ValueError(f"state[{k!r}]: missing")
+    for k in ("format", "version", "config_json", "fit_info_json"):
+        if np.asarray(d[k]).shape != ():
+            raise ValueError(f"state[{k!r}]: expected a scalar, got an array of shape {np.asarray(d[k]).shape}")
     if str(np.asarray(d["format"])) != _FORMAT:
         raise ValueError(f"state['format']: expected {_FORMAT!r}, got {d['format']!r}")
-    if int(np.asarray(d["version"])) != STATE_VERSION:
+    if np.asarray(d["version"]).dtype.kind not in "iu" or int(np.asarray(d["version"])) != STATE_VERSION:
         raise ValueError(f"state['version']: expected {STATE_VERSION}, got {d['version']!r}")
     try:
         config = GPFitConfig.from_dict(json.loads(str(np.asarray(d["config_json"]))))
-    except (json.JSONDecodeError, TypeError) as e:
+    except (json.JSONDecodeError, TypeError, ValueError) as e:
         raise ValueError(f"state['config_json']: not a valid GPFitConfig ({e})") from None
-    dims = np.asarray(d["dims"], dtype=np.int64)
+    dims = np.asarray(d["dims"])
+    if dims.dtype.kind not in "iu":
+        raise ValueError(f"state['dims']: expected integers, got dtype {dims.dtype}")
     if dims.ndim != 1 or dims.size == 0 or np.any(dims < 1):
         raise ValueError(f"state['dims']: expected a non-empty 1-D array of positive ints, got {dims!r}")
     B, D = dims.size, int(dims.max())
+    if np.asarray(d["X"]).dtype.kind not in "fiu":
+        raise ValueError(f"state['X']: expected real numbers, got dtype {np.asarray(d['X']).dtype}")
     Xp = np.asarray(d["X"], dtype=np.float64)
     if Xp.ndim != 3 or Xp.shape[0] != B or Xp.shape[2] != D or Xp.shape[1] < 2:
         raise ValueError(f"state['X']: expected shape ({B}, n>=2, {D}), got {Xp.shape}")
@@ -138,6 +145,8 @@ def bank_from_state(d: dict[str, Any]) -> tuple[GPFitConfig, BankData, list[dict
         a = np.asarray(d[k])
         if a.shape != shp:
             raise ValueError(f"state[{k!r}]: expected shape {shp}, got {a.shape}")
+        if a.dtype.kind not in ("b" if k == "constant_target" else "fiu"):
+            raise ValueError(f"state[{k!r}]: unexpected dtype {a.dtype}")
         if k != "constant_target":
             a = a.astype(np.float64)
             if not np.all(np.isfinite(a)):
@@ -149,6 +158,8 @@ def bank_from_state(d: dict[str, Any]) -> tuple[GPFitConfig, BankData, list[dict
         fit_info = json.loads(str(np.asarray(d["fit_info_json"])))
     except json.JSONDecodeError as e:
         raise ValueError(f"state['fit_info_json']: not valid JSON ({e})") from None
+    if not isinstance(fit_info, list) or len(fit_info) != B:
+        raise ValueError(f"state['fit_info_json']: expected a list of {B} entries (one per GP)")
     data = BankData(dims=dims, X=Xp.copy(), y=arrs["y"].copy(), x_mean=arrs["x_mean"].copy(),
                     x_std=arrs["x_std"].copy(), mask=arrs["mask"].copy(), y_mean=arrs["y_mean"].copy(),
                     y_std=arrs["y_std"].copy(), const_y=arrs["constant_target"].astype(bool),

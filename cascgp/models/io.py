@@ -110,6 +110,20 @@ def _rbd_from_file(z: dict[str, np.ndarray], path: str | os.PathLike, dof: int) 
         raise ValueError(f"{path}: {exc}") from exc
 
 
+def _rbd_from_recorded_path(cfg: dict[str, Any], path: str | os.PathLike, name: str, dof: int) -> Any:
+    """Files without an embedded rigid-body model (written before it was embedded): the recorded URDF path."""
+    from cascgp.rbd import RigidBodyModel, load_nominal, sidecar_path
+
+    ref = cfg.get("rbd") or {}
+    src = ref.get("source") if isinstance(ref, dict) else None
+    if not src or not Path(src).is_file():
+        raise ValueError(f"{path}: rbd: the semi-parametric model {name!r} needs its rigid-body model; pass "
+                         f"load_model(path, rbd=...) (recorded URDF {src!r} not available)")
+    if ref.get("nominal") and sidecar_path(src).is_file():
+        return load_nominal(src, dof=dof)
+    return RigidBodyModel.from_urdf(src, armature=ref.get("armature"), dof=dof)
+
+
 def check_set(model: CascadedGPModel) -> dict[str, np.ndarray]:
     """Deterministic check queries and their predictions (stored by save, verified by load)."""
     rng = np.random.default_rng(12345)
@@ -136,32 +150,23 @@ def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
     check_format_header(z, path, _KIND, FORMAT_VERSION)
     try:
         cfg = json.loads(str(z["config_json"]))
+        if not isinstance(cfg, dict):
+            raise TypeError(f"expected a JSON object, got {type(cfg).__name__}")
         gp_config = GPFitConfig.from_dict(cfg["gp_config"])
         name, dof = cfg["name"], int(cfg["dof"])
         where = [tuple(int(v) for v in w) for w in cfg["where"]]
         n_banks = int(cfg["n_banks"])
+        df_delta, train_on_predicted = float(cfg["df_delta"]), bool(cfg["train_on_predicted"])
+        parse_name(name)
     except (KeyError, ValueError, TypeError) as exc:
         raise ValueError(f"{path}: config_json: missing or invalid ({type(exc).__name__}: {exc})") from exc
+    if parse_name(name)[0] == "sp" and rbd is None:
+        rbd = _rbd_from_file(z, path, dof) if "rbd/urdf" in z else _rbd_from_recorded_path(cfg, path, name, dof)
     try:
-        p, _, _ = parse_name(name)
-    except ValueError as exc:
-        raise ValueError(f"{path}: config_json.{exc}") from exc
-    if p == "sp" and rbd is None and "rbd/urdf" in z:
-        rbd = _rbd_from_file(z, path, dof)
-    elif p == "sp" and rbd is None:  # files without an embedded model: the recorded URDF path
-        ref = cfg.get("rbd") or {}
-        src = ref.get("source")
-        if not src or not Path(src).is_file():
-            raise ValueError(f"{path}: rbd: the semi-parametric model {name!r} needs its rigid-body model; pass "
-                             f"load_model(path, rbd=...) (recorded URDF {src!r} not available)")
-        from cascgp.rbd import RigidBodyModel, load_nominal, sidecar_path
-
-        if ref.get("nominal") and sidecar_path(src).is_file():
-            rbd = load_nominal(src, dof=dof)
-        else:
-            rbd = RigidBodyModel.from_urdf(src, armature=ref.get("armature"), dof=dof)
-    model = CascadedGPModel(name, dof, rbd, gp_config=gp_config, df_delta=float(cfg["df_delta"]),
-                            train_on_predicted=bool(cfg["train_on_predicted"]))
+        model = CascadedGPModel(name, dof, rbd, gp_config=gp_config, df_delta=df_delta,
+                                train_on_predicted=train_on_predicted)
+    except (ValueError, TypeError) as exc:
+        raise ValueError(f"{path}: {exc}") from exc
     banks = []
     for k in range(n_banks):
         pre = f"bank{k}/"
@@ -170,7 +175,7 @@ def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
             raise ValueError(f"{path}: {pre}*: missing GP bank {k}")
         try:
             banks.append(GPBank.from_state_dict(sd))
-        except (ValueError, RuntimeError) as exc:
+        except (ValueError, TypeError, RuntimeError) as exc:
             raise ValueError(f"{path}: bank {k}: {exc}") from exc
     try:
         model.adopt_banks(banks, where, int(cfg.get("n_train", banks[0].n_train)))
@@ -185,9 +190,11 @@ def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{path}: check queries: {exc}") from exc
     ref_m, ref_v = z["check/mean"], z["check/var"]
+    for key, ref in (("check/mean", ref_m), ("check/var", ref_v)):
+        if ref.shape != mean.shape or ref.dtype.kind != "f":
+            raise ValueError(f"{path}: {key}: expected float64 of shape {mean.shape}, got {ref.dtype} {ref.shape}")
     tol_m = 1e-8 * (1.0 + np.abs(ref_m))
-    if mean.shape != ref_m.shape or not (np.abs(mean - ref_m) <= tol_m).all() or \
-            not np.allclose(var, ref_v, rtol=1e-6, atol=1e-10):
+    if not (np.abs(mean - ref_m) <= tol_m).all() or not np.allclose(var, ref_v, rtol=1e-6, atol=1e-10):
         raise ValueError(f"{path}: the loaded model does not reproduce its stored check predictions "
                          "(corrupt file, or a different rigid-body model than at save time)")
     return model
