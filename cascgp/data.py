@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Sequence
@@ -47,20 +48,21 @@ _ARRAY_FIELDS = ("q", "qd", "qdd", "tau")
 
 
 # --------------------------------------------------------------------------- validation
-def _real_array(name: str, raw: object, shape: str) -> np.ndarray:
-    """A float64 copy of ``raw``; ``TypeError`` naming the field for complex, boolean, text or other
+def as_real_array(label: str, raw: object, shape: str) -> np.ndarray:
+    """A float64 copy of ``raw``; ``TypeError`` naming ``label`` for complex, boolean, text or other
     non-numeric input (a cast would silently drop an imaginary part or turn flags into numbers)."""
     try:
         a0 = np.asarray(raw)
     except (TypeError, ValueError) as exc:  # ragged nested lists
-        raise TypeError(f"DynamicsData.{name}: expected a numeric {shape} array ({exc})") from None
+        raise TypeError(f"{label}: expected a numeric {shape} array ({exc})") from None
     if a0.dtype.kind not in "fiuO":
-        raise TypeError(f"DynamicsData.{name}: expected a real numeric {shape} array, got dtype {a0.dtype}")
+        raise TypeError(f"{label}: expected a real numeric {shape} array, got dtype {a0.dtype}")
     try:
-        a = np.array(a0, dtype=np.float64, order="C", copy=True)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"DynamicsData.{name}: expected a numeric {shape} array ({exc})") from None
-    return a
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", np.exceptions.ComplexWarning)
+            return np.array(a0, dtype=np.float64, order="C", copy=True)
+    except (TypeError, ValueError, np.exceptions.ComplexWarning) as exc:
+        raise TypeError(f"{label}: expected a real numeric {shape} array ({exc})") from None
 
 
 def _first_bad_row(mask: np.ndarray) -> int:
@@ -119,7 +121,7 @@ class DynamicsData:
     def __post_init__(self) -> None:
         arrays: dict[str, np.ndarray] = {}
         for name in _ARRAY_FIELDS:
-            a = _real_array(name, getattr(self, name), "(T, N)")
+            a = as_real_array(f"DynamicsData.{name}", getattr(self, name), "(T, N)")
             if a.ndim != 2:
                 raise ValueError(f"DynamicsData.{name}: expected shape (T, N), got {a.shape}")
             arrays[name] = a
@@ -134,7 +136,7 @@ class DynamicsData:
             raise ValueError("DynamicsData.q: empty data set (T = 0 rows); at least one sample is needed")
         if N == 0:
             raise ValueError("DynamicsData.q: expected at least one joint (N >= 1), got N = 0")
-        t = _real_array("t", self.t, "(T,)")
+        t = as_real_array("DynamicsData.t", self.t, "(T,)")
         if t.shape != (T,):
             raise ValueError(f"DynamicsData.t: expected shape ({T},), got {t.shape}")
         if self.segment is None:

@@ -176,3 +176,15 @@ def test_damaged_embedded_urdf_is_reported(tmp_path: Path) -> None:
     np.savez(tmp_path / "bad.npz", **z)
     with pytest.raises(ValueError, match=r"bad\.npz.*SHA-256"):
         load_model(tmp_path / "bad.npz")
+
+
+def test_complex_inputs_are_refused_not_cast() -> None:
+    d = _episode(0)
+    with pytest.raises(TypeError, match=r"DynamicsData\.q: expected a real numeric"):
+        DynamicsData(q=d.q + 1j, qd=d.qd, qdd=d.qdd, tau=d.tau, t=d.t)
+    m = make_model("np-standard", 2, gp_config=FAST).fit(d)
+    z = np.zeros(2)
+    with pytest.raises(TypeError, match="qd: expected a real numeric"):
+        m.predict(z, z + 1j, z)
+    with pytest.raises(TypeError, match="q: expected a real numeric"):
+        m.predict_one(z + 1j, z, z)

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from cascgp.data import DynamicsData
+from cascgp.data import DynamicsData, as_real_array
 from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
 from cascgp.gp import GPBank, GPFitConfig
 from cascgp.gp.checks import check_scale
@@ -35,11 +35,16 @@ def parse_name(name: str) -> tuple[str, str, str]:
     return parts[0], parts[1], ("df" if len(parts) == 3 else "db")
 
 
+def _one_real(name: str, a: Any) -> np.ndarray:
+    """Cheap check of one controller query (no warnings machinery: this runs every control tick)."""
+    x = np.asarray(a)
+    if x.dtype.kind not in "fiu":
+        raise TypeError(f"{name}: expected a real numeric array, got dtype {x.dtype}")
+    return x.astype(np.float64, copy=False)
+
+
 def _as_query(name: str, a: Any, N: int, extra: tuple[int, ...] = ()) -> np.ndarray:
-    try:
-        x = np.asarray(a, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name}: expected a numeric array ({exc})") from None
+    x = as_real_array(name, a, "(T, N)")
     if x.ndim == 1 + len(extra):
         x = x[None]
     if x.ndim != 2 + len(extra) or x.shape[1:] != (*extra, N) or x.shape[0] == 0:
@@ -320,7 +325,7 @@ class CascadedGPModel:
         if f is None:
             self._require_fitted()
         N = self.dof
-        q = np.asarray(q, dtype=np.float64)
+        q = _one_real("q", q)
         if q.shape != (N,):
             raise ValueError(f"q: expected shape ({N},), got {q.shape}")
         buf = f.buf
@@ -328,8 +333,8 @@ class CascadedGPModel:
         if self.feature_kind == "db" or self.parametric == "sp":
             if qd is None or qdd is None:
                 raise ValueError(f"qd/qdd: model {self.name!r} needs velocities and accelerations, got None")
-            qd = np.asarray(qd, dtype=np.float64)
-            qdd = np.asarray(qdd, dtype=np.float64)
+            qd = _one_real("qd", qd)
+            qdd = _one_real("qdd", qdd)
             if qd.shape != (N,) or qdd.shape != (N,):
                 raise ValueError(f"qd/qdd: expected shape ({N},), got {qd.shape} and {qdd.shape}")
             if self.feature_kind == "df" and not (np.isfinite(qd).all() and np.isfinite(qdd).all()):
@@ -340,7 +345,7 @@ class CascadedGPModel:
         else:
             if q_hist is None:
                 raise ValueError(f"q_hist: model {self.name!r} needs q_hist of shape (2, {N}), got None")
-            h = np.asarray(q_hist, dtype=np.float64)
+            h = _one_real("q_hist", q_hist)
             if h.shape != (2, N):
                 raise ValueError(f"q_hist: expected shape (2, {N}), got {h.shape}")
             buf[1:3 * N:3] = h[0]
