@@ -78,6 +78,15 @@ def _load(kind: str, path: Path):
     return DynamicsData.load(path) if kind == "data" else load_model(path)
 
 
+def _loads_or_names_the_file(kind: str, path: Path) -> None:
+    try:
+        obj = _load(kind, path)
+    except ValueError as exc:
+        assert str(path) in str(exc), str(exc)
+        return
+    _check_result(kind, obj)
+
+
 def _check_result(kind: str, obj) -> None:
     if kind == "data":
         assert np.isfinite(obj.q).all() and np.isfinite(obj.tau).all()
@@ -97,12 +106,7 @@ def test_truncated_or_bit_flipped_files_fail_naming_the_file(saved, tmp_path_fac
             raw[f % len(raw)] ^= 0xFF
     path = tmp_path_factory.mktemp("t") / f"{kind}.npz"
     path.write_bytes(bytes(raw))
-    try:
-        obj = _load(kind, path)
-    except ValueError as exc:
-        assert str(path) in str(exc), str(exc)
-        return
-    _check_result(kind, obj)
+    _loads_or_names_the_file(kind, path)
 
 
 _junk = st.one_of(
@@ -125,12 +129,7 @@ def test_any_corrupted_or_missing_field_fails_naming_the_file(saved, tmp_path_fa
         z[key] = data.draw(_junk, label="value")
     path = tmp_path_factory.mktemp("c") / f"{kind}.npz"
     np.savez(path, **z)
-    try:
-        obj = _load(kind, path)
-    except ValueError as exc:
-        assert str(path) in str(exc), str(exc)
-        return
-    _check_result(kind, obj)
+    _loads_or_names_the_file(kind, path)
 
 
 def test_foreign_and_odd_paths_fail_naming_the_file(tmp_path: Path) -> None:
