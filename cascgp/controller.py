@@ -11,7 +11,8 @@ only on the task and never on the noisy measurements; the feedback term uses the
 measured joint positions and velocities.
 
 Safety guarantees (tested): the output is always finite and within
-``[-torque_limits, torque_limits]``. If the model's output is not finite, the
+``[-torque_limits, torque_limits]``. If the model's output is not finite, or the model
+raises any exception (kept in :attr:`FeedforwardController.last_model_error`), the
 controller falls back to the rigid-body feedforward (or to zero when no RBD model
 is given) and counts the event in :attr:`FeedforwardController.n_fallbacks`. A
 non-finite measurement contributes no feedback on that joint (counted in
@@ -70,9 +71,11 @@ class FeedforwardController:
         torque_limits: np.ndarray,
         fallback: InverseDynamics | None = None,
     ) -> None:
-        self.torque_limits = np.asarray(torque_limits, dtype=float).copy()
-        if self.torque_limits.ndim != 1 or not np.all(self.torque_limits > 0):
-            raise ValueError(f"torque_limits must be a 1-D array of positive values, got {torque_limits!r}")
+        limits = np.asarray(torque_limits)
+        if limits.dtype.kind not in "fiu" or limits.ndim != 1 or limits.size == 0 or \
+                not np.all(np.isfinite(limits)) or not np.all(limits > 0):
+            raise ValueError(f"torque_limits must be a 1-D array of finite positive values, got {torque_limits!r}")
+        self.torque_limits = limits.astype(float)
         self.dof = int(self.torque_limits.shape[0])
         self.kp = _as_gain(kp, self.dof, "kp")
         self.kd = _as_gain(kd, self.dof, "kd")
@@ -88,6 +91,7 @@ class FeedforwardController:
         self._delta = float(getattr(model, "df_delta", 0.0) or 0.0)
         self.n_fallbacks = 0
         self.n_bad_measurements = 0
+        self.last_model_error: str | None = None
 
     @property
     def name(self) -> str:
@@ -112,7 +116,8 @@ class FeedforwardController:
         if self.fallback is not None and self.fallback is not self.model:
             try:
                 tau = np.asarray(self.fallback.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
-            except (ValueError, FloatingPointError):
+            except Exception as exc:  # noqa: BLE001 - the fallback must not stop the loop either
+                self.last_model_error = f"fallback: {type(exc).__name__}: {exc}"
                 tau = None
             if tau is not None and tau.shape == (self.dof,) and np.all(np.isfinite(tau)):
                 return tau
@@ -129,15 +134,19 @@ class FeedforwardController:
                     q_hist = np.stack([reference(t - self._delta)[0], reference(t - 2.0 * self._delta)[0]])
                 return np.asarray(model.predict_one(q_d, qd_d, qdd_d, q_hist=q_hist), dtype=float)
             return np.asarray(model.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
-        except (ValueError, FloatingPointError, np.linalg.LinAlgError):
-            # A model that rejects its input (e.g. a reference outside what it accepts) is a
-            # fallback event, never a crash of the control loop.
+        except Exception as exc:  # noqa: BLE001
+            # Whatever the model raises (a rejected input, a numerical failure, a bug in a
+            # user model) is a fallback event, never a crash of the control loop; the last
+            # error is kept for diagnosis. KeyboardInterrupt and SystemExit still stop it.
+            self.last_model_error = f"{type(exc).__name__}: {exc}"
             return None
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, reference: Reference) -> np.ndarray:
         """Joint torques for the measured state ``(q, qd)`` at time ``t``; always finite and within limits."""
-        q = np.asarray(q, dtype=float)
-        qd = np.asarray(qd, dtype=float)
+        q, qd = np.asarray(q), np.asarray(qd)
+        if q.dtype.kind not in "fiu" or qd.dtype.kind not in "fiu":
+            raise TypeError(f"q and qd must be real numeric arrays, got dtypes {q.dtype} and {qd.dtype}")
+        q, qd = q.astype(float, copy=False), qd.astype(float, copy=False)
         if q.shape != (self.dof,) or qd.shape != (self.dof,):
             raise ValueError(f"q and qd must have shape ({self.dof},), got {q.shape} and {qd.shape}")
         q_d, qd_d, qdd_d = reference(t)  # once per tick; shared with the feedforward

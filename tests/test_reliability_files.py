@@ -188,3 +188,30 @@ def test_complex_inputs_are_refused_not_cast() -> None:
         m.predict(z, z + 1j, z)
     with pytest.raises(TypeError, match="q: expected a real numeric"):
         m.predict_one(z + 1j, z, z)
+
+
+# ------------------------------------------------------------------ controller
+def test_controller_falls_back_on_any_model_exception_and_refuses_infinite_limits() -> None:
+    from cascgp.controller import FeedforwardController
+
+    class Broken:
+        dof, name = 2, "broken"
+
+        def predict_one(self, *a, **k):
+            raise RuntimeError("model bug")
+
+    class Nominal:
+        dof = 2
+
+        def inverse_dynamics(self, q, qd, qdd):
+            return np.array([1.0, -1.0])
+
+    def ref(t):
+        return np.zeros(2), np.zeros(2), np.zeros(2)
+
+    ctrl = FeedforwardController(Broken(), 1.0, 0.1, np.array([5.0, 5.0]), fallback=Nominal())
+    np.testing.assert_allclose(ctrl(0.0, np.zeros(2), np.zeros(2), ref), [1.0, -1.0])
+    assert ctrl.n_fallbacks == 1 and "RuntimeError: model bug" in ctrl.last_model_error
+    for bad in (np.array([np.inf, 1.0]), np.array([1.0, np.nan]), np.array([1 + 1j, 1.0]), np.array([])):
+        with pytest.raises(ValueError, match="torque_limits"):
+            FeedforwardController(None, 1.0, 0.1, bad)
