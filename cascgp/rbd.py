@@ -18,8 +18,10 @@ Only fixed-base models whose configuration and velocity spaces coincide
 joint angles as ``(N,)`` vectors.
 
 ``load_nominal(urdf_path)`` reads the JSON sidecar written next to the URDF by
-``scripts/generate_urdf.py`` (armature, torque and velocity limits, gravity,
-calibration error and seed).
+:mod:`cascgp.urdf_export` (armature, torque and velocity limits, gravity,
+calibration error and seed). The sidecar format is defined here, once:
+:func:`sidecar_path` (the path rule), :data:`SIDECAR_FORMAT_VERSION` (written) and
+:data:`SUPPORTED_SIDECAR_VERSIONS` (read), :data:`SIDECAR_REQUIRED_FIELDS`.
 
 Not thread-safe: a model owns one ``pinocchio.Data`` workspace.
 """
@@ -34,10 +36,15 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["RigidBodyModel", "load_nominal", "sidecar_path"]
+__all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
+           "SUPPORTED_SIDECAR_VERSIONS", "SIDECAR_REQUIRED_FIELDS"]
 
+#: Version of the sidecar layout that :mod:`cascgp.urdf_export` writes.
+SIDECAR_FORMAT_VERSION = 1
 #: Sidecar layout versions this module can read.
-SUPPORTED_SIDECAR_VERSIONS = (1,)
+SUPPORTED_SIDECAR_VERSIONS = (SIDECAR_FORMAT_VERSION,)
+#: Fields every sidecar must hold (besides ``format_version``).
+SIDECAR_REQUIRED_FIELDS = ("armature", "torque_limits", "velocity_limits", "joint_names")
 
 
 def sidecar_path(urdf_path: str | os.PathLike) -> Path:
@@ -232,7 +239,7 @@ class RigidBodyModel:
 def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> RigidBodyModel:
     """Load a nominal model: the URDF plus its JSON sidecar (same name, ``.json``).
 
-    The sidecar (written by ``scripts/generate_urdf.py``) holds ``armature``,
+    The sidecar (written by :func:`cascgp.urdf_export.write_urdf`) holds ``armature``,
     ``torque_limits``, ``velocity_limits``, ``gravity``, ``calibration_error``,
     ``seed``, ``joint_names``, ``dof`` and provenance; the whole dict is kept as
     ``model.meta``.
@@ -262,7 +269,7 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> Rig
         raise ValueError(
             f"sidecar {str(js)!r}: format_version must be one of {SUPPORTED_SIDECAR_VERSIONS}, got {version!r}"
         )
-    for key in ("armature", "torque_limits", "velocity_limits", "joint_names"):
+    for key in SIDECAR_REQUIRED_FIELDS:
         if key not in meta:
             raise ValueError(f"sidecar {str(js)!r} lacks the field {key!r}")
     rbd = RigidBodyModel.from_urdf(urdf_path, dof=dof)

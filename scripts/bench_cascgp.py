@@ -9,9 +9,10 @@ also measures the latency of one single-query prediction of a 6-joint NP inward 
 
 Data: the SARCOS IAS file when ``--sarcos`` is given (training rows subsampled to 10 Hz, the first ``n``; joints 1-6;
 torques of joints 1-6 as the 6 outputs; ``--outputs 7``: all 21 inputs and all 7 torques), otherwise a smooth
-synthetic inverse-dynamics-like function. For every cascgp setting it also reports evaluations per start, the cost of
-one NLL+gradient evaluation and its breakdown (kernel, Cholesky, inverse, gradient, optimiser and the rest; from
-``cascgp.gp.PROFILE``). ``--scaling`` instead measures time per evaluation and peak memory against n.
+synthetic inverse-dynamics-like function (both from :func:`cascgp_experiments.audit_suite.benchmark_data`). For
+every cascgp setting it also reports evaluations per start, the cost of one NLL+gradient evaluation and its
+breakdown (kernel, Cholesky, inverse, gradient, optimiser and the rest; from ``cascgp.gp.PROFILE``). ``--scaling``
+instead measures time per evaluation and peak memory against n.
 
 Usage::
 
@@ -45,6 +46,9 @@ if __name__ == "__main__":  # BLAS reads these when NumPy is first imported
 
 import numpy as np  # noqa: E402
 
+from cascgp.io import write_json  # noqa: E402
+from cascgp_experiments.audit_suite import benchmark_data as load_data  # noqa: E402
+
 
 #: cascgp settings of the benchmark. "default" is ``GPFitConfig()`` as a new user gets it (every GP's leading start
 #: runs to convergence; the other starts stop once they stall: less than 0.01 nat gained over 5 iterations, or
@@ -54,42 +58,6 @@ CONFIGS = {
     "default": {},
     "converge-all": {"stall_window": None},
 }
-
-
-def load_data(n: int, sarcos: str | None, seed: int, outputs: int = 6) -> tuple[np.ndarray, np.ndarray, str]:
-    """Return standardised ``X (n, 18)``, ``Y (n, 6)`` and a description (SARCOS with ``outputs=7``: all 21
-    inputs and all 7 torques)."""
-    if sarcos:
-        import scipy.io
-
-        d = scipy.io.loadmat(sarcos)
-        X, Y = np.asarray(d["X_train"], float), np.asarray(d["Y_train"], float)
-        rows = np.arange(0, X.shape[0], 5)[:n]  # ~50 Hz -> 10 Hz, first n
-        if rows.size < n:
-            raise SystemExit(f"--n: the SARCOS file has only {rows.size} rows at 10 Hz")
-        if outputs == 7:
-            X, Y = X[rows], Y[rows][:, :7]
-            desc = f"SARCOS IAS X_train[::5][:{n}], q/qd/qdd of joints 1-7, torques 1-7"
-        else:
-            cols = np.r_[0:6, 7:13, 14:20]  # q, qd, qdd of joints 1-6
-            X, Y = X[rows][:, cols], Y[rows][:, :6]
-            desc = f"SARCOS IAS X_train[::5][:{n}], q/qd/qdd of joints 1-6, torques 1-6"
-    else:
-        rng = np.random.default_rng(seed)
-        t = np.arange(n) * 0.1
-        w = rng.uniform(0.2, 1.0, size=(6, 3))
-        ph = rng.uniform(0, 2 * np.pi, size=(6, 3))
-        q = sum(np.sin(w[:, k] * t[:, None] + ph[:, k]) for k in range(3)) / 3
-        qd = sum(w[:, k] * np.cos(w[:, k] * t[:, None] + ph[:, k]) for k in range(3)) / 3
-        qdd = sum(-(w[:, k] ** 2) * np.sin(w[:, k] * t[:, None] + ph[:, k]) for k in range(3)) / 3
-        X = np.hstack([q, qd, qdd])
-        M = 1.0 + 0.3 * np.cos(q[:, 1:2] - q) + 0.2 * np.cos(q[:, 2:3])
-        Y = M * qdd + 0.5 * np.sin(q) * qd**2 + 3.0 * np.cos(q + q[:, :1]) + 0.4 * np.tanh(5 * qd)
-        Y += 0.02 * rng.normal(size=Y.shape)
-        desc = f"synthetic smooth inverse-dynamics-like function, n={n}"
-    X = (X - X.mean(0)) / X.std(0)
-    Y = (Y - Y.mean(0)) / Y.std(0)
-    return X, Y, desc
 
 
 @contextlib.contextmanager
@@ -244,7 +212,7 @@ def _scaling(args: argparse.Namespace) -> int:
               + ", ".join(f"{k} {v / 1e3:.2f} ms" for k, v in r["us_per_eval"].items())
               + f"); estimate {r['estimate_bytes'] / 2**20:.0f} MiB, peak RSS {r['peak_rss_bytes'] / 2**20:.0f} MiB "
               f"(process before the fit {r['rss_before_fit_bytes'] / 2**20:.0f} MiB)", flush=True)
-    (out / "bench_scaling.json").write_text(json.dumps(rows, indent=1))
+    write_json(out / "bench_scaling.json", rows)
     print(f"wrote {out / 'bench_scaling.json'}")
     return 0
 
@@ -327,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
     else:
         print(f"single-query 6-joint NP inward cascade: median {res['cascade']['median_us']:.1f} us, "
               f"p90 {res['cascade']['p90_us']:.1f} us")
-    (out / "bench_cascgp.json").write_text(json.dumps(res, indent=1))
+    write_json(out / "bench_cascgp.json", res)
     print(f"wrote {out / 'bench_cascgp.json'}")
     return 0
 

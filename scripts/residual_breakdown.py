@@ -1,61 +1,20 @@
 """What the nominal rigid-body model misses on the simulated Jaco 2: a per-joint breakdown.
 
-Runs one noise-free sum-of-sinusoids motion (``JacoPayload-v0``, velocity mode, 100 Hz, the
-data-efficiency study's protocol), computes the residual ``tau - tau_RBD(q, qd, qdd)`` of the
-nominal model (``assets/jaco2_nominal.urdf``) with qdd from the study's Savitzky-Golay filter, and
-again with the true accelerations (the env's privileged ``info["qacc"]``). The measured torque is
-link-side, so it holds no rotor inertia or joint friction: what remains with the true qdd is the
-payload and the calibration error; the difference between the two is the acceleration estimate's
-share.
-
 Usage::
 
     python -m scripts.residual_breakdown --out out/residual [--seconds 20] [--seed 0]
+
+Writes ``residual_breakdown.json`` and prints a table; what is computed:
+:mod:`cascgp_experiments.residual`.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
-import os
 from pathlib import Path
 
-import numpy as np
-
-os.environ.setdefault("MUJOCO_GL", "egl")
-
-import gymnasium as gym  # noqa: E402
-
-import jaco_env  # noqa: E402,F401
-from cascgp.data import DynamicsData, SavGol  # noqa: E402
-from cascgp.rbd import load_nominal  # noqa: E402
-from jaco_env.excitation import make_command  # noqa: E402
-
-REPO = Path(__file__).resolve().parents[1]
-
-
-def breakdown(seconds: float, seed: int, rate_hz: float = 100.0) -> dict[str, list[float]]:
-    env = gym.make("JacoPayload-v0", control_mode="velocity", control_freq=rate_hz, sensor_noise=None)
-    obs, _ = env.reset(seed=seed)
-    command = make_command(seed, seconds)
-    rows, qacc = [], []
-    for k in range(int(seconds * rate_hz)):
-        obs, _, _, _, info = env.step(np.asarray(command(k / rate_hz), dtype=np.float32))
-        rows.append(obs[:19].copy())
-        qacc.append(info["qacc"])
-    env.close()
-    rows, qacc = np.array(rows), np.array(qacc)
-    data = DynamicsData.from_measurements(rows[:, 18], rows[:, :6], rows[:, 6:12], rows[:, 12:18],
-                                          smoothing=SavGol(9, 2))
-    rbd = load_nominal(REPO / "assets" / "jaco2_nominal.urdf")
-    residual = data.tau - rbd.inverse_dynamics(data.q, data.qd, data.qdd)
-    residual_true = data.tau - rbd.inverse_dynamics(data.q, data.qd, qacc)
-    return {
-        "tau_std": data.tau.std(0).tolist(),
-        "residual_mean": residual.mean(0).tolist(),
-        "residual_std": residual.std(0).tolist(),
-        "residual_true_qdd_std": residual_true.std(0).tolist(),
-    }
+from cascgp.io import write_json
+from cascgp_experiments.residual import ROWS, breakdown
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -65,13 +24,10 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args(argv)
     res = breakdown(a.seconds, a.seed)
-    a.out.mkdir(parents=True, exist_ok=True)
-    (a.out / "residual_breakdown.json").write_text(json.dumps({"seconds": a.seconds, "seed": a.seed, **res}, indent=2))
+    write_json(a.out / "residual_breakdown.json", {"seconds": a.seconds, "seed": a.seed, **res}, indent=2)
     print("| N m, per joint | " + " | ".join(f"J{i + 1}" for i in range(6)) + " |")
     print("|---|" + "---|" * 6)
-    for key, label in (("tau_std", "std of measured torque"), ("residual_mean", "mean of RBD residual"),
-                       ("residual_std", "std of RBD residual"),
-                       ("residual_true_qdd_std", "std of RBD residual with the true qdd")):
+    for key, label in ROWS:
         print(f"| {label} | " + " | ".join(f"{v:.2f}" for v in res[key]) + " |")
 
 

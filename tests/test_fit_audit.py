@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +16,7 @@ from cascgp.gp import GPFitConfig
 
 @pytest.mark.slow
 def test_default_fit_within_0p1_nat_of_cold_starts_on_95_percent_of_gps():
-    from scripts.fit_audit import suite
+    from cascgp_experiments.audit_suite import suite
 
     mat = (Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "sarcos" / "ias_sarcos_data.mat").resolve()
     sets = suite(str(mat) if mat.exists() else None, quick=True)  # synthetic n = 50 (2 seeds), SARCOS n = 100
@@ -30,9 +32,8 @@ def test_default_fit_within_0p1_nat_of_cold_starts_on_95_percent_of_gps():
 
 @pytest.mark.slow
 def test_fit_audit_script_writes_report(tmp_path):
-    from scripts.fit_audit import main
-
-    rc = main(["--out", str(tmp_path), "--quick", "--cold", "4"])
+    rc = subprocess.run([sys.executable, "-m", "scripts.fit_audit", "--out", str(tmp_path), "--quick", "--cold", "4"],
+                        cwd=Path(__file__).resolve().parents[1], timeout=1200).returncode
     res = json.loads((tmp_path / "fit_audit.json").read_text())
     assert rc == (0 if res["summary"]["frac_within"] >= 0.95 else 1)
     assert res["summary"]["n"] == 12 and len(res["data_sets"]) == 2

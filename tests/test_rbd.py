@@ -1,4 +1,5 @@
-"""Tests of cascgp.rbd (Pinocchio RNEA wrapper) and scripts/generate_urdf.py (nominal URDF).
+"""Tests of cascgp.rbd (Pinocchio RNEA wrapper), cascgp.urdf_export and the nominal URDF
+(cascgp_experiments.nominal_urdf, written by ``python -m scripts.generate_urdf``).
 
 Reference: MuJoCo's inverse dynamics (``mj_inverse``) of the bare simulated arm with
 armature, zero friction/damping and the constraint solver disabled (so joint limits and
@@ -9,6 +10,8 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -18,8 +21,9 @@ import pinocchio as pin
 import pytest
 
 from cascgp.rbd import RigidBodyModel, load_nominal
+from cascgp.urdf_export import sidecar_text
+from cascgp_experiments import nominal_urdf as gen
 from jaco_env import robot
-from scripts import generate_urdf as gen
 
 REPO = Path(__file__).resolve().parents[1]
 ASSET = REPO / "assets" / "jaco2_nominal.urdf"
@@ -205,7 +209,7 @@ def _numbers_and_skeleton(text: str) -> tuple[np.ndarray, str]:
 def test_committed_asset_equals_regeneration(suffix):
     """The committed nominal model is what the script writes (error 0.1, seed 0): nobody hand-edits it."""
     text, sidecar = gen.generate(error=0.1, seed=0, urdf_name=ASSET.name)
-    fresh = text if suffix == ".urdf" else gen.sidecar_text(sidecar)
+    fresh = text if suffix == ".urdf" else sidecar_text(sidecar)
     committed = ASSET.with_suffix(suffix).read_text(encoding="utf-8")
     if committed != fresh:  # tolerate last-digit libm differences between machines, nothing else
         num_c, skel_c = _numbers_and_skeleton(committed)
@@ -314,10 +318,11 @@ def test_generator_errors(tmp):
         gen.write(tmp / "x.xml", error=0.1, seed=0)
 
 
-def test_generator_cli(tmp, capsys):
+def test_generator_cli(tmp):
     out = tmp / "cli" / "arm.urdf"
-    gen.main(["--out", str(out), "--error", "0.1", "--seed", "0"])
-    assert "wrote" in capsys.readouterr().out
+    run = subprocess.run([sys.executable, "-m", "scripts.generate_urdf", "--out", str(out), "--error", "0.1",
+                          "--seed", "0"], check=True, cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert "wrote" in run.stdout
     text, sidecar = gen.generate(error=0.1, seed=0, urdf_name="arm.urdf")
     assert out.read_text() == text
     assert json.loads(out.with_suffix(".json").read_text()) == sidecar

@@ -1,4 +1,4 @@
-"""Tests of the data-efficiency study scripts (scripts/data_efficiency.py and friends).
+"""Tests of the data-efficiency study (cascgp_experiments: common, curves, study, plots ...; its command line).
 
 Fast unit tests of the table logic, the curve engine (with a fake model factory), the paper's
 numbers, error paths; end-to-end ``--smoke`` (about 15 s) and ``--quick`` (about 35 s on an idle
@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 from cascgp.data import DynamicsData
-from scripts._study_common import (PAPER_TABLE, RBD, VARIANTS, category, interval_mean, label, make_table,
-                                   read_json, write_json)
+from cascgp_experiments.common import (PAPER_TABLE, RBD, VARIANTS, category, interval_mean, label, make_table,
+                                       read_json, write_json)
 
 REPO = Path(__file__).resolve().parents[1]
 PAPER = (REPO / ".." / "shared" / "paper" / "cascaded_gp_paper.tex").resolve()
@@ -126,7 +126,7 @@ def _synthetic(path: Path, n_seg: int, seconds: float, hz: float, seed: int) -> 
 
 
 def test_run_curves_with_fake_factory_and_cache(tmp_path: Path) -> None:
-    from scripts._study_curves import CurveSpec, run_curves
+    from cascgp_experiments.curves import CurveSpec, run_curves
 
     tr = _synthetic(tmp_path / "train.npz", 3, 12.0, 50.0, 0)
     te = _synthetic(tmp_path / "test.npz", 2, 6.0, 50.0, 1)
@@ -136,7 +136,7 @@ def test_run_curves_with_fake_factory_and_cache(tmp_path: Path) -> None:
     out = run_curves(spec, models, workers=1, cache_dir=tmp_path / "cache")
     # Audit: the seeded sample of fits, each refitted cold; gap = protocol - cold NLL (0.5 for a
     # warm-started fit of the fake model, 0 for the first grid point).
-    from scripts._study_curves import audited
+    from cascgp_experiments.curves import audited
 
     a = out["audit"]
     expect = sorted((m, s, gi) for m in models for s in range(3) for gi in range(3) if audited(spec, m, s, gi))
@@ -169,7 +169,7 @@ def test_run_curves_with_fake_factory_and_cache(tmp_path: Path) -> None:
 
 
 def test_curve_spec_errors(tmp_path: Path) -> None:
-    from scripts._study_curves import CurveSpec, prepare
+    from cascgp_experiments.curves import CurveSpec, prepare
 
     tr = _synthetic(tmp_path / "train.npz", 2, 3.0, 50.0, 0)
     with pytest.raises(ValueError, match="n_subsets"):
@@ -179,7 +179,7 @@ def test_curve_spec_errors(tmp_path: Path) -> None:
 
 
 def test_collect_config_errors() -> None:
-    from scripts.collect_jaco_data import CollectConfig, motion_seed
+    from cascgp_experiments.collect import CollectConfig, motion_seed
 
     with pytest.raises(ValueError, match="n_subsets"):
         CollectConfig(n_subsets=0)
@@ -193,14 +193,13 @@ def test_collect_config_errors() -> None:
 
 
 def test_cli_rejects_unknown_model(tmp_path: Path) -> None:
-    from scripts.data_efficiency import main
-
-    with pytest.raises(SystemExit):
-        main(["--out", str(tmp_path), "--models", "np-bogus"])
+    run = subprocess.run([sys.executable, "-m", "scripts.data_efficiency", "--out", str(tmp_path), "--models",
+                          "np-bogus"], env=_env(), cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "--models: unknown ['np-bogus']" in run.stderr
 
 
 def test_iteration_counts_small() -> None:
-    from scripts.iteration_counts import iteration_counts
+    from cascgp_experiments.analyses import iteration_counts
 
     rng = np.random.default_rng(0)
     t = np.arange(40) / 10.0
@@ -216,7 +215,7 @@ def test_iteration_counts_small() -> None:
 
 
 def test_spearman_block() -> None:
-    from scripts.correlation import spearman_block
+    from cascgp_experiments.analyses import spearman_block
 
     rng = np.random.default_rng(0)
     q = rng.standard_normal((200, 2))
@@ -259,13 +258,15 @@ def _check_results(out: Path, res: dict) -> None:
 
 def _regenerate_from_json_alone(out: Path, tmp_path: Path) -> None:
     """Copy only results.json to a fresh folder and rebuild every figure/table there, in a process
-    that imports neither torch, the models nor jaco_env (only the light ``cascgp.io`` helpers)."""
+    that imports neither torch, the models nor jaco_env (only the light ``cascgp.io`` helpers) and,
+    of the experiments, only the plotting module and what it needs (common, claims)."""
     fresh = tmp_path / "fresh"
     fresh.mkdir()
     shutil.copy(out / "results.json", fresh / "results.json")
-    code = ("import sys; from scripts import study_plots; study_plots.render(sys.argv[1], sys.argv[2]); "
+    code = ("import sys; from cascgp_experiments import plots; plots.render(sys.argv[1], sys.argv[2]); "
             "bad = [m for m in sys.modules if m.split('.')[0] in ('jaco_env', 'torch', 'pinocchio') "
-            "or (m.startswith('cascgp.') and m != 'cascgp.io')]; "
+            "or (m.startswith('cascgp.') and m != 'cascgp.io') or (m.startswith('cascgp_experiments.') and m not in "
+            "('cascgp_experiments.plots', 'cascgp_experiments.common', 'cascgp_experiments.claims'))]; "
             "assert not bad, bad")
     subprocess.run([sys.executable, "-c", code, str(fresh / "results.json"), str(fresh)], check=True,
                    env=_env(), cwd=REPO, timeout=120)
@@ -305,7 +306,7 @@ def test_quick_end_to_end(tmp_path: Path) -> None:
 
 
 def test_sign_test_and_paired_comparison() -> None:
-    from scripts.study_claims import paired, paired_verdict, sign_test_p
+    from cascgp_experiments.claims import paired, paired_verdict, sign_test_p
 
     assert sign_test_p(10, 0) == pytest.approx(2 / 1024)
     assert sign_test_p(9, 1) == pytest.approx(2 * 11 / 1024)

@@ -1,4 +1,4 @@
-"""Policy evaluation of the task-transfer loop on JacoPour-v0 (seeded; one shared run for all assertions).
+"""Policy evaluation of the task-transfer loop (cascgp.learning) on JacoPour-v0 (seeded; one shared run).
 
 Two tasks in different parts of the workspace, payload unknown to every controller:
 - PD only and the nominal RBD feedforward attempt each task once;
@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scripts.task_transfer import TransferConfig, make_controller, run_controller
+from cascgp.learning import make_controller, run_controller
+from cascgp_experiments.transfer import TransferConfig, jaco_feedback
 
 TASK_A, TASK_B = "front", "left"
 #: Revisit tolerance: the first attempt back on task A may be at most this much worse (relative)
@@ -21,20 +22,20 @@ REVISIT_TOLERANCE = 0.15
 
 @pytest.fixture(scope="module")
 def runs():
-    import gymnasium as gym
-
     from cascgp.rbd import load_nominal
-    from scripts.task_transfer import NOMINAL_URDF
+    from cascgp_experiments.common import NOMINAL_URDF
 
     cfg = TransferConfig(controllers=("pd", "rbd", "sp-inward"), tasks=(TASK_A, TASK_B), attempts=4,
                          payload_mass=1.2, seed=0, restarts=2, cap=400)
     rbd = load_nominal(NOMINAL_URDF)
-    env = gym.make("JacoPour-v0", n_marbles=cfg.n_marbles)
+    env = cfg.make_env()
     once = [(TASK_A, 0, "eval"), (TASK_B, 0, "eval")]
     learn = ([(TASK_A, k, "train") for k in range(4)] + [(TASK_B, k, "train") for k in range(4)]
              + [(TASK_A, 4, "revisit")])
-    out = {name: run_controller(name, cfg, env, rbd, plan=once) for name in ("pd", "rbd")}
-    out["sp-inward"] = run_controller("sp-inward", cfg, env, rbd, plan=learn)
+    args = (rbd, jaco_feedback(), cfg.retrain())
+    opts = cfg.reset_options()
+    out = {name: run_controller(name, env, once, *args, reset_options=opts) for name in ("pd", "rbd")}
+    out["sp-inward"] = run_controller("sp-inward", env, learn, *args, reset_options=opts)
     env.close()
     return {name: run.attempts for name, run in out.items()}
 
@@ -80,4 +81,4 @@ def test_no_fallbacks_or_instability(runs):
 
 def test_unknown_controller_name_is_a_clear_error():
     with pytest.raises(ValueError, match="unknown controller 'sp-sideways'"):
-        make_controller("sp-sideways", rbd=None, model=None)
+        make_controller("sp-sideways", rbd=None, model=None, feedback=jaco_feedback())

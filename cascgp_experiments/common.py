@@ -1,21 +1,20 @@
-"""Shared pieces of the data-efficiency study scripts: model names and labels, grids, the
-paper's Table I numbers, JSON I/O, thread limits and the table computation.
+"""Shared pieces of the experiments: model names and labels, grids, the paper's Table I numbers and
+the table computation, repository paths, JSON and figure writing, thread limits.
 
-Nothing here imports ``jaco_env`` or builds a GP; :mod:`scripts.study_plots` imports only this
-module (and matplotlib) so that figures and tables are regenerated from the JSON alone.
+Nothing here imports ``jaco_env``, torch or a GP module (only numpy and :mod:`cascgp.io`):
+:mod:`cascgp_experiments.plots` imports only this module, :mod:`cascgp_experiments.claims` and
+matplotlib, so that figures and tables are regenerated from the JSON alone.
 """
 
 from __future__ import annotations
 
-import json
-import math
 import os
 from pathlib import Path
 from typing import Any, Iterable
 
 import numpy as np
 
-from cascgp.io import json_safe, read_json, write_json  # noqa: F401  (re-exported for the study modules)
+from cascgp.io import atomic_write, json_safe, read_json, write_json  # noqa: F401  (re-exported for the study)
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_SARCOS = (REPO / ".." / "shared" / "data" / "sarcos" / "ias_sarcos_data.mat").resolve()
@@ -138,6 +137,12 @@ PAPER_TABLE: dict[str, list[list[float]]] = {
 
 
 # --------------------------------------------------------------------------- I/O
+def save_figure(fig: Any, path: str | Path, dpi: int) -> Path:
+    """Write a matplotlib figure atomically (:func:`cascgp.io.atomic_write`); the format is the suffix's."""
+    path = Path(path)
+    return atomic_write(path, lambda f: fig.savefig(f, dpi=dpi, format=path.suffix.lstrip(".")))
+
+
 def limit_threads(n: int = 1) -> None:
     """Limit torch and BLAS threads (OpenBLAS spinning threads otherwise steal cores from torch)."""
     for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):

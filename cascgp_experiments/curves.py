@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 from tqdm import tqdm
 
-from scripts._study_common import RBD, limit_threads, read_json, write_json
+from cascgp_experiments.common import RBD, limit_threads, read_json, write_json
 
 
 @dataclass

@@ -1,11 +1,19 @@
-"""Optimiser iteration counts per joint (the paper's run-time figure).
+"""The paper's two analyses besides the curves: optimiser iteration counts and rank correlations.
 
-For the NP standard, inward and outward models, the GP of every joint is fitted on its own
-(one :class:`cascgp.gp.GPBank` per joint, so that each fit's wall time is that joint's) on
-``n`` (500) training rows with ``n_restarts`` (10) starts. L-BFGS stops at max |gradient| <= 1e-5
-or a relative objective change <= 2e-9 (the paper's tolerances, :class:`GPFitConfig` defaults).
-Reported per joint: the iteration count of every start, their mean and standard deviation, the
-evaluations, and the wall time of the fit.
+Iteration counts per joint (the paper's run-time figure, :func:`iteration_counts`): for the NP
+standard, inward and outward models, the GP of every joint is fitted on its own (one
+:class:`cascgp.gp.GPBank` per joint, so that each fit's wall time is that joint's) on ``n`` (500)
+training rows with ``n_restarts`` (10) starts. L-BFGS stops at max |gradient| <= 1e-5 or a relative
+objective change <= 2e-9 (the paper's tolerances, :class:`GPFitConfig` defaults). Reported per
+joint: the iteration count of every start, their mean and standard deviation, the evaluations, and
+the wall time of the fit.
+
+Spearman rank correlation of joint states and torques (the paper's correlation figure,
+:func:`spearman_block`): the labels ``q1..qN, qd1..qdN, qdd1..qddN, tau1..tauN`` and the matrix of
+absolute Spearman coefficients (:func:`scipy.stats.spearmanr`) over all rows; the command line is
+``python -m scripts.correlation``.
+
+The figures are made by :mod:`cascgp_experiments.plots` from the JSON.
 """
 
 from __future__ import annotations
@@ -56,3 +64,20 @@ def iteration_counts(data, *, n: int = 500, n_restarts: int = 10, seed: int = 0,
         out["models"][f"np-{s}"] = rec
     bar.close()
     return out
+
+
+def spearman_block(data, max_rows: int | None = None) -> dict[str, Any]:
+    """``{"labels": [...], "abs_spearman": (4N, 4N)}`` for a :class:`cascgp.data.DynamicsData`.
+
+    ``max_rows``: use an evenly spaced subset of rows (rank correlation of long records is
+    dominated by sorting; 10 Hz data is used in the study anyway)."""
+    from scipy.stats import spearmanr
+
+    n = data.dof
+    M = np.concatenate([data.q, data.qd, data.qdd, data.tau], axis=1)
+    if max_rows is not None and M.shape[0] > max_rows:
+        M = M[np.linspace(0, M.shape[0] - 1, max_rows).astype(int)]
+    rho = spearmanr(M).statistic
+    labels = ([f"q{j + 1}" for j in range(n)] + [f"qd{j + 1}" for j in range(n)]
+              + [f"qdd{j + 1}" for j in range(n)] + [f"tau{j + 1}" for j in range(n)])
+    return {"labels": labels, "abs_spearman": np.abs(np.asarray(rho)), "n_rows": int(M.shape[0])}

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from scripts._study_common import PAPER_TABLE, RBD, interval_mean, make_table, model_name
+from cascgp_experiments.common import PAPER_TABLE, RBD, interval_mean, make_table, model_name
 
 IV = ("1-2 s", "4-5 s", "9-10 s")
 

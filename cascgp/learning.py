@@ -1,0 +1,175 @@
+"""The paper's retrain loop: attempt a task, add the measured episode to a buffer, refit the model (warm-started).
+
+This module owns the loop of the task-transfer experiment and the choice of feedforward for each named
+controller; it knows no particular robot or environment. The caller passes in the environment (or a
+factory), the attempt plan (which task, in which order), the nominal rigid-body model, the feedback
+gains and torque limits (:class:`Feedback`) and, optionally, a model factory and extra reset options
+(for the Jaco 2 pouring env, :mod:`cascgp_experiments.transfer` does).
+
+Controllers: ``"pd"`` (feedback only), ``"rbd"`` (nominal rigid-body feedforward) and any model name
+of :mod:`cascgp.models`. Before a learning controller has any data, an SP model is its RBD mean (RBD
+feedforward) and an NP model is zero (PD). After every ``"train"`` attempt of a learning controller,
+the measured episode joins a :class:`cascgp.buffer.DataBuffer` and a new model is fitted on
+everything seen so far (subsampled to ``rate_hz``, at most ``cap`` rows), warm-started from the
+previous model's hyperparameters.
+
+Seeds: attempt ``i`` resets the env with seed ``seed * 1000 + i``; the refit after it uses the GP
+seed ``seed + i``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+import numpy as np
+
+from cascgp.buffer import DataBuffer
+from cascgp.controller import FeedforwardController
+from cascgp.episodes import EpisodeResult, run_episode
+from cascgp.gp import GPFitConfig
+from cascgp.models import MODEL_NAMES, make_model
+
+__all__ = ["PLAIN_CONTROLLERS", "Attempt", "Feedback", "RetrainConfig", "ControllerRun", "check_controller",
+           "make_controller", "attempt_plan", "default_model_factory", "run_controller", "run_controllers"]
+
+#: Controllers that never learn.
+PLAIN_CONTROLLERS = ("pd", "rbd")
+
+#: One attempt: (task, attempt index within the task, phase). Only ``"train"`` attempts feed the buffer.
+Attempt = tuple[str, int, str]
+#: ``factory(name, rbd, gp_config)`` -> an unfitted model with ``fit(data, init=previous)``.
+ModelFactory = Callable[[str, Any, GPFitConfig], Any]
+#: ``callback(controller_name, record)``, called after every attempt.
+AttemptCallback = Callable[[str, dict[str, Any]], None]
+
+
+@dataclass(frozen=True)
+class Feedback:
+    """The robot-specific parts of every controller: PD gains and symmetric torque limits (per joint)."""
+
+    kp: np.ndarray
+    kd: np.ndarray
+    torque_limits: np.ndarray
+
+
+@dataclass(frozen=True)
+class RetrainConfig:
+    """How episodes are seeded and how a learning controller is refitted after a training attempt."""
+
+    seed: int = 0
+    rate_hz: float = 10.0   # training data rate (Hz)
+    cap: int = 500          # maximum training-set size
+    restarts: int = 3       # GP optimiser restarts per refit
+
+
+@dataclass
+class ControllerRun:
+    """One controller's sequence of attempts (one record per attempt)."""
+
+    name: str
+    attempts: list[dict[str, Any]] = field(default_factory=list)
+
+
+def check_controller(name: str) -> None:
+    """``ValueError`` unless ``name`` is ``"pd"``, ``"rbd"`` or a model name of :mod:`cascgp.models`."""
+    if name not in PLAIN_CONTROLLERS and name not in MODEL_NAMES:
+        raise ValueError(f"unknown controller {name!r}; expected 'pd', 'rbd' or one of {list(MODEL_NAMES)}")
+
+
+def make_controller(name: str, rbd: Any, model: Any | None, feedback: Feedback) -> FeedforwardController:
+    """The controller for ``name`` given the current (possibly unfitted/None) learned model."""
+    check_controller(name)
+    if name == "pd":
+        feedforward = None
+    elif name == "rbd":
+        feedforward = rbd
+    elif model is not None and model.fitted:
+        feedforward = model
+    else:  # no data yet: an SP model's mean is the RBD model, an NP model's mean is zero
+        feedforward = rbd if name.startswith("sp") else None
+    return FeedforwardController(feedforward, feedback.kp, feedback.kd, feedback.torque_limits, fallback=rbd)
+
+
+def attempt_plan(tasks: Sequence[str], attempts: int, revisit: bool = True) -> list[Attempt]:
+    """``attempts`` training attempts of every task in order, then (``revisit``) one more of the first task."""
+    plan = [(task, k, "train") for task in tasks for k in range(attempts)]
+    if revisit and tasks:
+        plan.append((tasks[0], attempts, "revisit"))
+    return plan
+
+
+def default_model_factory(name: str, rbd: Any, gp_config: GPFitConfig) -> Any:
+    """:func:`cascgp.models.make_model` with the RBD mean for SP models."""
+    return make_model(name, rbd.dof, rbd=rbd if name.startswith("sp") else None, gp_config=gp_config)
+
+
+def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedback: Feedback,
+                   config: RetrainConfig = RetrainConfig(), *, reset_options: dict[str, Any] | None = None,
+                   model_factory: ModelFactory = default_model_factory, buffer_dir: str | Path | None = None,
+                   on_attempt: AttemptCallback | None = None) -> ControllerRun:
+    """Run every attempt of ``plan`` with one controller; a learning controller is refitted after every
+    ``"train"`` attempt on all data so far.
+
+    Args:
+        name: controller name (:func:`check_controller`).
+        env: a Gymnasium env that :func:`cascgp.episodes.run_episode` can run; reset with
+            ``options={"task": task, **reset_options}``.
+        plan: the attempts (:func:`attempt_plan` or any list of :data:`Attempt`).
+        rbd: the nominal rigid-body model (RBD feedforward, SP models' mean, fallback).
+        feedback: gains and torque limits.
+        config: seeds and refit settings.
+        buffer_dir: folder that persists the buffer (must be empty); ``None``: in memory.
+        on_attempt: called with ``(name, record)`` after every attempt (e.g. a progress bar).
+
+    Returns:
+        The run; each record holds ``attempt``, ``task``, ``task_attempt``, ``phase``, ``n_train`` (rows the
+        controller's model was fitted on), the episode's :meth:`EpisodeResult.summary` and, after a refit,
+        ``fit_seconds``.
+    """
+    learns = name not in PLAIN_CONTROLLERS
+    buffer = DataBuffer(buffer_dir) if learns else None
+    if buffer is not None and len(buffer):
+        raise ValueError(f"buffer folder {buffer_dir} already holds data; use an empty --out folder")
+    options = dict(reset_options or {})
+    model = None
+    run = ControllerRun(name)
+    for i, (task, k, phase) in enumerate(plan):
+        controller = make_controller(name, rbd, model, feedback)
+        result: EpisodeResult = run_episode(
+            env, controller, seed=config.seed * 1000 + i, options={"task": task, **options},
+            meta={"attempt": i, "phase": phase})
+        record = {"attempt": i, "task": task, "task_attempt": k, "phase": phase,
+                  "n_train": 0 if model is None else int(model.n_train), **result.summary()}
+        if learns and phase == "train":
+            buffer.append(result.data)
+            t0 = time.perf_counter()
+            new = model_factory(name, rbd, GPFitConfig(n_restarts=config.restarts, seed=config.seed + i))
+            model = new.fit(buffer.training_set(config.rate_hz, config.cap), init=model)
+            record["fit_seconds"] = time.perf_counter() - t0
+        run.attempts.append(record)
+        if on_attempt is not None:
+            on_attempt(name, record)
+    return run
+
+
+def run_controllers(names: Sequence[str], make_env: Callable[[], Any], plan: Sequence[Attempt], rbd: Any,
+                    feedback: Feedback, config: RetrainConfig = RetrainConfig(), *,
+                    reset_options: dict[str, Any] | None = None, model_factory: ModelFactory = default_model_factory,
+                    buffer_root: str | Path | None = None,
+                    on_attempt: AttemptCallback | None = None) -> list[ControllerRun]:
+    """:func:`run_controller` for each of ``names`` in turn on one env from ``make_env()`` (closed at the end);
+    controller ``name``'s buffer goes to ``buffer_root / name`` when ``buffer_root`` is given."""
+    for name in names:
+        check_controller(name)
+    env = make_env()
+    try:
+        return [run_controller(name, env, plan, rbd, feedback, config, reset_options=reset_options,
+                               model_factory=model_factory,
+                               buffer_dir=None if buffer_root is None else Path(buffer_root) / name,
+                               on_attempt=on_attempt)
+                for name in names]
+    finally:
+        env.close()

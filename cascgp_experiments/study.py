@@ -1,0 +1,242 @@
+"""The paper's data-efficiency study, reproduced in simulation (and on SARCOS), in one command.
+
+Steps (each with progress bars; everything lands in ``--out``):
+
+1. Collect the simulated Jaco data (:mod:`cascgp_experiments.collect`): 10 x 60 s of random
+   sum-of-sinusoids velocity-commanded motion with a 0.8 kg payload unknown to the nominal model,
+   3 x 60 s of test motion; measured (noisy) q, qd, tau at 100 Hz, qdd by a Savitzky-Golay filter.
+   Cached in ``<out>/data``.
+2. Curves (:mod:`cascgp_experiments.curves`): each of the 12 variants is trained on the first T
+   seconds of each subset, subsampled to 10 Hz, for T on the grid; nRMSE per joint on the test
+   set (all three test minutes, subsampled to 10 Hz: 1800 rows, minus the first 0.2 s of each
+   test motion, where the derivative-free history is missing, for every model alike). The RBD
+   baseline (nominal RNEA) is evaluated on the same rows.
+3. Optimiser iteration counts per joint, NP standard / inward / outward, n = 500, 10 restarts
+   (:func:`cascgp_experiments.analyses.iteration_counts`), with the wall time of each fit.
+4. Spearman rank correlation of joint states and torques (:func:`cascgp_experiments.analyses.spearman_block`).
+5. SARCOS NP curves (:func:`run_sarcos`, below).
+6. ``results.json`` (every number shown), ``curves_jaco.csv``, ``curves_sarcos.csv``, ``table1.md``,
+   the figures (:mod:`cascgp_experiments.plots`, from the JSON alone) and ``claims.md``.
+
+Settings (``--quick`` / ``--smoke`` reduce everything; the defaults are the full study, sized for
+a 2-core machine shared with other work to finish in under an hour: the grid has 15 points;
+every grid fit has the paper's 10 starts, one of them warm-started from the previous grid point's
+optimum after the first grid point; a seeded 5 % of the grid fits is audited against 10 cold starts
+run to convergence (``results.json["jaco"]["audit"]``). Table I reports medians over the subsets
+with their interquartile ranges; the claims are judged with paired per-subset comparisons (wins
+out of the subsets and a two-sided sign-test p-value, :mod:`cascgp_experiments.claims`). The
+iteration-count study uses 10 starts per GP as in the paper.
+
+SARCOS block (:func:`run_sarcos`, the paper's Fig. 5; alone: ``python -m scripts.sarcos_study``).
+Data: the IAS SARCOS file (``ias_sarcos_data.mat``, path argument), the real 7-DOF SARCOS arm.
+Training: the IAS training rows subsampled to 10 Hz (every 5th row of the nominal 50 Hz, restarting
+at each recording boundary that :mod:`cascgp.sarcos` detects: 2803 rows) and
+split into 9 time-contiguous subsets of equal row counts (about 31 s each). Test: the IAS test
+rows whose inputs do NOT also stand in the training rows (to 8 decimals: 2785 of 5569 are
+removed, :func:`cascgp.sarcos.load_ias` with ``dedup=True``), all 2784 kept rows, not
+subsampled. Models: NP standard, inward and outward (derivative based), as in the paper.
+
+This module owns the presets (:data:`PRESETS`), :func:`run_study` and :func:`run_sarcos`; the command
+line is ``python -m scripts.data_efficiency``.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+import time
+from dataclasses import asdict, dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from cascgp_experiments.common import (FULL_GRID, NOMINAL_URDF, NP_DB, PAPER_TABLE, QUICK_GRID, RBD, SMOKE_GRID,
+                                       VARIANTS, label, make_table, read_json, write_json)
+from cascgp_experiments.curves import CurveSpec, default_workers, run_curves
+
+
+@dataclass(frozen=True)
+class Settings:
+    """One preset of the study (all of it is written to ``results.json``)."""
+
+    collection: str = "full"           # preset of cascgp_experiments.collect
+    grid: tuple[float, ...] = FULL_GRID
+    n_subsets: int = 10
+    n_restarts: int = 10
+    warm_start: bool = True
+    audit_fraction: float = 0.05
+    iter_n: int = 500
+    iter_restarts: int = 10
+    sarcos_grid: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0, 4.0, 4.5, 5.0, 7.0, 9.0, 9.5, 10.0, 14.0, 20.0, 30.0)
+    sarcos_subsets: int = 9
+    test_hz: float = 10.0
+    seed: int = 0
+
+
+PRESETS: dict[str, Settings] = {
+    "full": Settings(),
+    "quick": Settings(collection="quick", grid=QUICK_GRID, n_subsets=3, n_restarts=3, audit_fraction=0.1, iter_n=100,
+                      iter_restarts=3, sarcos_grid=(1.0, 2.0, 5.0, 10.0), sarcos_subsets=3),
+    "smoke": Settings(collection="smoke", grid=SMOKE_GRID, n_subsets=2, n_restarts=2, audit_fraction=0.25, iter_n=20,
+                      iter_restarts=2, sarcos_grid=(1.0, 2.0), sarcos_subsets=2),
+}
+
+
+def _versions() -> dict[str, str]:
+    import importlib.metadata as md
+
+    out = {"python": platform.python_version()}
+    for p in ("numpy", "scipy", "torch", "mujoco", "gymnasium", "pin"):
+        try:
+            out[p] = md.version(p)
+        except md.PackageNotFoundError:
+            pass
+    return out
+
+
+def cached_iteration_counts(out: Path, train, settings: Settings) -> dict[str, Any]:
+    """Iteration counts (step 3) on the first training subset at 10 Hz, cached in
+    ``<out>/cache/iterations.json`` (keyed by the settings that matter)."""
+    from cascgp_experiments.analyses import iteration_counts
+
+    key = {"n": settings.iter_n, "n_restarts": settings.iter_restarts, "seed": settings.seed,
+           "collection": settings.collection}
+    path = Path(out) / "cache" / "iterations.json"
+    if path.exists():
+        cached = read_json(path)
+        if cached.get("key") == key:
+            return cached
+    t0 = time.perf_counter()
+    d10 = train.subsample(10.0)
+    first = d10.take(d10.segment == d10.segments[0])
+    src = first if first.n_samples >= settings.iter_n else d10
+    res = iteration_counts(src, n=settings.iter_n, n_restarts=settings.iter_restarts, seed=settings.seed)
+    res["data"] = "first training subset (10 Hz)" if src is first else "training set (10 Hz)"
+    res["key"] = key
+    res["wall_s"] = time.perf_counter() - t0
+    write_json(path, res)
+    return res
+
+
+def run_study(out: str | Path, settings: Settings, *, models: list[str] | None = None, workers: int = 2,
+              sarcos: str | Path | None = None, do_iterations: bool = True, do_plots: bool = True,
+              command: str = "") -> dict[str, Any]:
+    """Run the whole study into ``out``; returns the results dict (also ``out/results.json``)."""
+    from cascgp.data import DynamicsData
+
+    from cascgp_experiments import collect as col
+    from cascgp_experiments.analyses import spearman_block
+
+    t_all = time.perf_counter()
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    models = list(models or VARIANTS)
+    timings: dict[str, float] = {}
+    results: dict[str, Any] = {"meta": {
+        "command": command, "settings": asdict(settings), "models": models, "workers": workers,
+        "versions": _versions(), "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}}}
+
+    # 1. data
+    ccfg = replace(col.PRESETS[settings.collection], seed=settings.seed)
+    train, test, cinfo = col.collect(out / "data", ccfg)
+    timings["collect_s"] = cinfo["wall_s"]
+    results["meta"]["collection"] = {**asdict(ccfg), "reused": cinfo["reused"],
+                                     "train_rows": train.n_samples, "test_rows": test.n_samples,
+                                     "train_total_seconds": train.duration, "test_total_seconds": test.duration,
+                                     "qdd": train.meta.get("qdd_source")}
+
+    # 2. curves (12 variants + RBD)
+    spec = CurveSpec(train_path=str(out / "data" / "jaco_train.npz"), test_path=str(out / "data" / "jaco_test.npz"),
+                     n_subsets=settings.n_subsets, grid=list(settings.grid), train_hz=10.0,
+                     test_hz=settings.test_hz, split_by="segment", urdf=str(NOMINAL_URDF),
+                     n_restarts=settings.n_restarts, warm_start=settings.warm_start, seed=settings.seed,
+                     audit_fraction=settings.audit_fraction)
+    jaco = run_curves(spec, models + [RBD], workers=workers, cache_dir=out / "cache" / "jaco", desc="Jaco fits")
+    timings["jaco_curves_s"] = jaco["wall_s"]
+    jaco["dof"] = train.dof
+    jaco["labels"] = {m: label(m) for m in jaco["models"]}
+    # Table I from the medians over subsets (errors are heavy-tailed); the IQR beside it; means and
+    # standard deviations stay in the JSON.
+    jaco["table"] = make_table(jaco["grid_s"], {m: v["nrmse_median"] for m, v in jaco["models"].items()})
+    jaco["table_q25"] = make_table(jaco["grid_s"], {m: v["nrmse_q25"] for m, v in jaco["models"].items()})["rows"]
+    jaco["table_q75"] = make_table(jaco["grid_s"], {m: v["nrmse_q75"] for m, v in jaco["models"].items()})["rows"]
+    jaco["table_mean"] = make_table(jaco["grid_s"], {m: v["nrmse_mean"] for m, v in jaco["models"].items()})["rows"]
+    jaco["table_std"] = make_table(jaco["grid_s"], {m: v["nrmse_std"] for m, v in jaco["models"].items()})["rows"]
+    results["jaco"] = jaco
+    results["paper_table"] = {"intervals": [[1, 2], [4, 5], [9, 10]], "rows": PAPER_TABLE}
+    write_json(out / "results.json", results)
+
+    # 3. iteration counts
+    if do_iterations:
+        results["iterations"] = cached_iteration_counts(out, train, settings)
+        timings["iterations_s"] = results["iterations"]["wall_s"]
+        write_json(out / "results.json", results)
+
+    # 4. correlation
+    t0 = time.perf_counter()
+    results["correlation"] = spearman_block(train.subsample(10.0))
+    results["correlation"]["data"] = "Jaco training set, 10 Hz"
+    timings["correlation_s"] = time.perf_counter() - t0
+
+    # 5. SARCOS
+    if sarcos is not None:
+        s = run_sarcos(sarcos, out / "sarcos", grid=settings.sarcos_grid, n_subsets=settings.sarcos_subsets,
+                       n_restarts=settings.n_restarts, workers=workers, seed=settings.seed)
+        s["labels"] = {m: label(m) for m in s["models"]}
+        results["sarcos"] = s
+        timings["sarcos_s"] = s["wall_s_total"]
+
+    timings["total_s"] = time.perf_counter() - t_all
+    results["meta"]["timings"] = timings
+    results["meta"]["finished"] = time.strftime("%Y-%m-%d %H:%M:%S")
+    write_json(out / "results.json", results)
+
+    # 6. tables, figures, claims (from the JSON alone)
+    if do_plots:
+        from cascgp_experiments.plots import render
+
+        render(out / "results.json", out)
+    return results
+
+
+# --------------------------------------------------------------------------- SARCOS block
+SARCOS_FULL_GRID = (1.0, 1.5, 2.0, 3.0, 4.0, 4.5, 5.0, 7.0, 9.0, 9.5, 10.0, 14.0, 20.0, 30.0)
+SARCOS_QUICK_GRID = (1.0, 2.0, 5.0, 10.0)
+SARCOS_SMOKE_GRID = (1.0, 2.0)
+
+
+def prepare_files(sarcos_path: str | Path, out: str | Path) -> tuple[Path, Path, dict[str, Any]]:
+    """Write the IAS train / de-duplicated test sets as DynamicsData files under ``out``."""
+    from cascgp.sarcos import load_ias
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    train, test = load_ias(sarcos_path, dedup=True)
+    tr, te = out / "sarcos_train.npz", out / "sarcos_test.npz"
+    train.save(tr)
+    test.save(te)
+    info = {"file": str(sarcos_path), "n_train_rows_file": train.n_samples,
+            "n_test_rows_file": int(test.meta["n_rows_in_file"]),
+            "n_test_duplicates_removed": int(test.meta["n_duplicates_removed"]),
+            "n_test_rows": test.n_samples,
+            "test_set": "IAS X_test/Y_test rows whose inputs do not stand in X_train (8 decimals)"}
+    return tr, te, info
+
+
+def run_sarcos(sarcos_path: str | Path, out: str | Path, *, grid=SARCOS_FULL_GRID, n_subsets: int = 9,
+               n_restarts: int = 1, workers: int | None = None, seed: int = 0,
+               gp_overrides: dict | None = None) -> dict[str, Any]:
+    """The SARCOS block of the results JSON (curves of NP standard / inward / outward)."""
+    t0 = time.perf_counter()
+    out = Path(out)
+    tr, te, info = prepare_files(sarcos_path, out / "data")
+    spec = CurveSpec(train_path=str(tr), test_path=str(te), n_subsets=n_subsets, grid=list(grid),
+                     train_hz=10.0, test_hz=None, split_by="rows", urdf=None, n_restarts=n_restarts,
+                     seed=seed, gp_overrides=dict(gp_overrides or {}))
+    block = run_curves(spec, list(NP_DB), workers=workers or default_workers(),
+                       cache_dir=out / "cache" / "sarcos", desc="SARCOS fits")
+    block.update(info)
+    block["dof"] = 7
+    block["wall_s_total"] = time.perf_counter() - t0
+    return block
+
