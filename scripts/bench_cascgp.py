@@ -11,7 +11,7 @@ Data: the SARCOS IAS file when ``--sarcos`` is given (training rows subsampled t
 torques of joints 1-6 as the 6 outputs; ``--outputs 7``: all 21 inputs and all 7 torques), otherwise a smooth
 synthetic inverse-dynamics-like function (both from :func:`cascgp_experiments.audit_suite.benchmark_data`). For
 every cascgp setting it also reports evaluations per start, the cost of one NLL+gradient evaluation and its
-breakdown (kernel, Cholesky, inverse, gradient, optimiser and the rest; from ``cascgp.gp.PROFILE``). ``--scaling``
+breakdown (kernel, Cholesky, inverse, gradient, optimiser and the rest; from ``cascgp.gp.likelihood.PROFILE``). ``--scaling``
 instead measures time per evaluation and peak memory against n.
 
 Usage::
@@ -76,7 +76,7 @@ def bench_cascgp(X: np.ndarray, Y: np.ndarray, restarts: int, threads: int, conf
 
     from cascgp.gp import GPBank, GPFitConfig
 
-    import cascgp.gp as gp_mod
+    import cascgp.gp.likelihood as gp_mod
 
     torch.set_num_threads(threads)
     cfg = GPFitConfig(kernel="matern52", n_restarts=restarts, **config_kw)
@@ -172,7 +172,7 @@ def _scaling_one(args: argparse.Namespace) -> int:
     """One n: a default fit capped at ``--scaling-iter`` iterations per start; prints one JSON line."""
     import torch
 
-    import cascgp.gp as gp_mod
+    import cascgp.gp.likelihood as gp_mod
     from cascgp.gp import GPBank, GPFitConfig, estimate_fit_bytes, plan_chunk
 
     torch.set_num_threads(args.threads)
