@@ -382,7 +382,8 @@ class GPBank:
         b = self._check_b(b)
         d = int(s.dims[b])
         act = s.mask[b, :d] > 0
-        x_scale = np.where(act, s.x_std[b, :d] * np.exp(s.theta[b, :d]), np.inf)
+        with np.errstate(over="ignore"):  # a lengthscale beyond float range: the column is irrelevant (z = 0)
+            x_scale = np.where(act, s.x_std[b, :d] * np.exp(s.theta[b, :d]), np.inf)
         return GPPosterior(
             kernel=self.config.kernel,
             x_mean=s.x_mean[b, :d].copy(),
