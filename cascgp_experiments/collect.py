@@ -34,8 +34,9 @@ or a Ray cluster); ``vector_env=True`` runs the motions of a split side by side 
 ``AsyncVectorEnv`` instead. Every motion is seeded on its own, so the files are the same whatever the
 worker count or the backend (tested). Jobs are the default because an env step here is cheap (about
 0.3 ms), so the vector env's lockstep (one round trip to every sub-process per step) costs more than
-it gains: on the 2-core machine, shared with other work, the full collection took 21 s serially and
-86 s with a 2-env ``AsyncVectorEnv`` (``docs/bench/parallel_study_max5.json``, ``collect_s``).
+it gains: on the 2-core machine (load average 0.1-0.8 from other work) the full collection took 24 s
+serially, 14 s as jobs on 2 processes and 46 s in a 2-env ``AsyncVectorEnv``
+(``python -m scripts.bench_parallel --cases collect-full``, ``docs/bench/parallel_collect_full.json``).
 
 Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N]
 [--ray ADDRESS]``.
