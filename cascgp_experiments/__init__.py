@@ -8,8 +8,9 @@ module               owns
 ===================  ============================================================================
 common               study names and labels, grids, Table I computation and numbers, repo paths,
                      thread limits (numpy and ``cascgp.io`` only)
-curves               the nRMSE-vs-seconds curve engine (jobs, process pool, cache, fit audit)
-collect              the simulated Jaco data collection (sum-of-sinusoids, velocity mode)
+execution            the parallel job layer (local processes / Ray, job cache and resume, retry, progress)
+curves               the nRMSE-vs-seconds curve engine (one job per model and subset, fit audit)
+collect              the simulated Jaco data collection (sum-of-sinusoids, velocity mode; one job per motion)
 analyses             optimiser iteration counts per joint, Spearman correlation of states and torques
 study                the whole data-efficiency study (presets, ``run_study``, the SARCOS block)
 claims               the paper's claims checked on ``results.json``
@@ -18,5 +19,6 @@ audit_suite          the GP fit equivalence audit's data sets and report
 transfer             the task-transfer experiment on ``JacoPour-v0`` (uses :mod:`cascgp.learning`)
 nominal_urdf         the Jaco 2 nominal URDF (uses :mod:`cascgp.urdf_export`)
 residual             what the nominal model misses on the simulated Jaco 2
+parallel_bench       wall time of the experiments with 1 vs N workers (``scripts.bench_parallel``)
 ===================  ============================================================================
 """
