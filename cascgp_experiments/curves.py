@@ -190,7 +190,7 @@ def curve_job(spec: dict[str, Any], model: str, subset: int, data_sha256: dict[s
                            "nll": nll, "nll_cold": nll_ref, "gap": [a - b for a, b in zip(nll, nll_ref)],
                            "wall_s": walls[-1], "wall_cold_s": time.perf_counter() - t1})
         prev = m
-        report_progress(1, f"{model}#{subset} {T:g}s")
+        report_progress(1, f"{model}#{subset} T={T:g} s")
     return {"model": model, "subset": subset, "nrmse": rows, "fit_wall_s": walls, "n_train": ntrain,
             "audit": audits}
 

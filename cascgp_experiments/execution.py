@@ -385,7 +385,7 @@ def run_jobs(fn: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], *, worke
                             "inputs": jobs[i], "wall_s": secs, "result": value})
             results[i] = value
             results.job_seconds[i] = secs
-            progress.finish(i, f"{label(jobs[i])} {secs:.0f}s")
+            progress.finish(i, f"{label(jobs[i])} done in {secs:.0f} s")
             return False
         failures[i] += 1
         head = value.splitlines()[0] if value else "?"
