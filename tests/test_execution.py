@@ -37,7 +37,7 @@ def _env() -> dict[str, str]:
 
 
 def _needs_ray():
-    return pytest.importorskip("ray")
+    return pytest.importorskip("ray", exc_type=ImportError)  # also a broken install
 
 
 # --------------------------------------------------------------------------- toy jobs (module level: picklable)
