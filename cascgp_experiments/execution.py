@@ -416,7 +416,11 @@ def run_jobs(fn: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], *, worke
 
 
 def _short(job: Mapping[str, Any], limit: int = 600) -> str:
-    s = _canonical(job)
+    """The job's inputs for a message (JSON where it can be, else ``repr``), cut at ``limit`` characters."""
+    try:
+        s = _canonical(job)
+    except TypeError:
+        s = repr(dict(job))
     return s if len(s) <= limit else s[:limit] + "..."
 
 

@@ -154,13 +154,16 @@ def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bo
     the Ray cluster at ``ray_address``); the attempts do not depend on either.
 
     ``out`` (if given) receives the data buffers under ``out/buffers/<controller>`` and the job cache
-    under ``out/cache/transfer`` (:func:`claim_output` prepares it): a killed run started again with the
-    same settings resumes with the controllers that had not finished. ``stats`` (a dict), if given, receives
+    under ``out/cache/transfer`` (:func:`claim_output` checks it: buffers of a run with other settings are
+    refused with ``ValueError``): a killed run started again with the same settings resumes with the
+    controllers that had not finished. ``stats`` (a dict), if given, receives
     the job statistics (:meth:`cascgp_experiments.execution.JobResults.stats`)."""
     from cascgp_experiments.execution import run_jobs
 
     for name in cfg.controllers:
         check_controller(name)
+    if out is not None:
+        claim_output(cfg, out)  # refuses buffers of a run with other settings (the CLI may have cleared them)
     plan = cfg.plan()
     config = cfg.to_dict()
     jobs = [{"config": config, "name": name,
