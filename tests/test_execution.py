@@ -376,7 +376,10 @@ def test_quick_study_identical_across_backends(quick_study_serial: Path, tmp_pat
     _assert_same_data(quick_study_serial, out)
     assert _study_numbers(out) == _study_numbers(quick_study_serial)
     res, ref = read_json(out / "results.json"), read_json(quick_study_serial / "results.json")
-    assert res.get("sarcos", {}).get("models") == ref.get("sarcos", {}).get("models")
+    assert ("sarcos" in res) == ("sarcos" in ref)
+    if "sarcos" in res:  # the SARCOS curves (not their timings)
+        assert {m: (v["nrmse_all"], v["n_train"]) for m, v in res["sarcos"]["models"].items()} == \
+            {m: (v["nrmse_all"], v["n_train"]) for m, v in ref["sarcos"]["models"].items()}
     assert res["iterations"]["models"].keys() == ref["iterations"]["models"].keys()
 
 
