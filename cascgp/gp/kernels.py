@@ -28,6 +28,7 @@ Each kernel object offers the formula in the forms its callers need, all written
 method                     used by
 =========================  ===============================================================================
 ``value(r2)``              NumPy reference (:class:`cascgp.gp.posterior.GPPosterior.predict`, tests)
+``grad_r2(r2)``            NumPy derivative (the mean's input gradient, cascade variance propagation)
 ``value_torch(r2)``        batched prediction and the final factors (:mod:`cascgp.gp.bank`)
 ``value_and_grad_(A,B,C)`` the NLL gradient (:func:`cascgp.gp.likelihood.nll_and_grad`): in place on
                            :math:`s\,r^2` (``s = r2_scale``), no temporaries
@@ -62,6 +63,10 @@ class Kernel(ABC):
         """:math:`k(r^2)` in NumPy float64; tiny negative round-off in ``r2`` is clipped to 0."""
 
     @abstractmethod
+    def grad_r2(self, r2: np.ndarray) -> np.ndarray:
+        r""":math:`\partial k / \partial (r^2)` in NumPy float64 (finite at :math:`r = 0`)."""
+
+    @abstractmethod
     def value_torch(self, r2: torch.Tensor) -> torch.Tensor:
         """:math:`k(r^2)` in torch (no autograd bookkeeping needed)."""
 
@@ -90,6 +95,10 @@ class Matern52(Kernel):
         r2 = np.maximum(np.asarray(r2, dtype=np.float64), 0.0)
         sr = self._SQRT5 * np.sqrt(r2)
         return (1.0 + sr + (5.0 / 3.0) * r2) * np.exp(-sr)
+
+    def grad_r2(self, r2: np.ndarray) -> np.ndarray:
+        sr = self._SQRT5 * np.sqrt(np.maximum(np.asarray(r2, dtype=np.float64), 0.0))
+        return (-5.0 / 6.0) * (1.0 + sr) * np.exp(-sr)
 
     def value_torch(self, r2: torch.Tensor) -> torch.Tensor:
         sr = torch.sqrt(r2).mul_(self._SQRT5)
@@ -122,6 +131,9 @@ class RBF(Kernel):
     def value(self, r2: np.ndarray) -> np.ndarray:
         r2 = np.maximum(np.asarray(r2, dtype=np.float64), 0.0)
         return np.exp(-0.5 * r2)
+
+    def grad_r2(self, r2: np.ndarray) -> np.ndarray:
+        return -0.5 * np.exp(-0.5 * np.maximum(np.asarray(r2, dtype=np.float64), 0.0))
 
     def value_torch(self, r2: torch.Tensor) -> torch.Tensor:
         return torch.exp(-0.5 * r2)
