@@ -16,7 +16,8 @@ from gymnasium.utils import EzPickle
 
 from jaco_env import robot, scene
 from jaco_env.sensors import SensorNoise
-from jaco_env.tasks import DEFAULT_TASKS, PouringTask, get_task, home_pose
+from jaco_env.kinematics import home_pose
+from jaco_env.tasks import DEFAULT_TASKS, PouringTask, get_task
 
 #: Default range (kg) of the total payload in the hand (bottle + marbles + extra rigid mass),
 #: drawn uniformly per episode unless the task or ``reset(options=...)`` fixes it.
@@ -121,8 +122,7 @@ class _JacoBase(MujocoEnv):
     def _set_payload(self, total: float, fixed_mass: float) -> None:
         extra = total - fixed_mass
         self.model.body_mass[self._payload_body] = extra
-        # Solid sphere of radius 3 cm (the inertia barely matters at the hand).
-        self.model.body_inertia[self._payload_body] = 0.4 * extra * 0.03**2
+        self.model.body_inertia[self._payload_body] = scene.payload_inertia(extra)
         self.payload_mass = float(total)
 
     def _validate_action(self, action) -> np.ndarray:

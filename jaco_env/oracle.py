@@ -43,7 +43,7 @@ from jaco_env import robot, scene
 from jaco_env.gains import DEFAULT_KD, DEFAULT_KP
 from jaco_env.tasks import PouringTask
 
-_PAYLOAD_BODY = "jaco_arm/jaco_hand/payload"
+_PAYLOAD_BODY = scene.PAYLOAD_BODY
 
 
 @functools.lru_cache(maxsize=1)
@@ -73,7 +73,7 @@ def rigid_scene_model(payload_mass: float, n_marbles: int = 0) -> mujoco.MjModel
     com_z = m_marb * z_marb / total
     m.body_mass[b] = total
     m.body_ipos[b] = [0.0, 0.0, com_z]
-    m.body_inertia[b] = 0.4 * extra * 0.03**2 + m_marb * (0.02**2) + extra * 0.0 + 1e-9
+    m.body_inertia[b] = scene.payload_inertia(extra, m_marb) + 1e-9
     return m
 
 

@@ -41,7 +41,8 @@ def run_one(task: str, controller: str, payload: float, seed: int, n_marbles: in
 
     import jaco_env  # noqa: F401
     from jaco_env import DEFAULT_KD, DEFAULT_KP, oracle
-    from jaco_env.tasks import MOUTH_SITE, bottle_pose
+    from jaco_env.kinematics import bottle_pose
+    from jaco_env.scene import MOUTH_SITE
 
     env = gym.make("JacoPour-v0", n_marbles=n_marbles)
     u = env.unwrapped

@@ -14,7 +14,8 @@ import jaco_env
 from jaco_env import robot, scene
 from jaco_env.envs import JacoPayloadEnv, JacoPourEnv
 from jaco_env.excitation import JOINT_RANGES, SumOfSinusoids
-from jaco_env.tasks import DEFAULT_TASKS, PouringTask, home_pose
+from jaco_env.kinematics import home_pose
+from jaco_env.tasks import DEFAULT_TASKS, PouringTask
 
 
 @pytest.fixture(scope="module")

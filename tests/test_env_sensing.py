@@ -146,7 +146,7 @@ def test_loop_parameters_follow_their_derivation():
     np.testing.assert_allclose(u.model.dof_frictionloss[u._arm_dof], robot.FRICTIONLOSS)
     env.close()
     # The design inertia is the links' joint-space inertia at home with a 1 kg payload (two digits).
-    from jaco_env.tasks import home_pose
+    from jaco_env.kinematics import home_pose
 
     m = mujoco.MjModel.from_xml_string(*(lambda r: (r.to_xml_string(), r.get_assets()))(
         scene.build_scene(kind="payload", control_mode=None)))
