@@ -159,7 +159,7 @@ def run_episode(env, controller_factory: Callable[[PouringTask, dict], Callable]
         ret += r
         errs.append(info["tracking_error"])
         ts.append(info["time"])
-        qs.append(u.data.qpos[u._arm_qpos].copy())
+        qs.append(u.arm_state()[0])
         if term or trunc:
             break
     t = np.array(ts)

@@ -41,7 +41,7 @@ def bench(env_id: str, steps: int) -> dict:
 
     m_id = rigid_scene_model(u.payload_mass, getattr(u, "n_marbles", 0))
     d_id = mujoco.MjData(m_id)
-    d_id.qpos[:6] = u.data.qpos[u._arm_qpos]
+    d_id.qpos[:6] = u.data.qpos[u.arm_qpos_adr]
     mujoco.mj_inverse(m_id, d_id)
     tau = np.clip(d_id.qfrc_inverse[:6], -u.torque_limits, u.torque_limits).astype(np.float32)
 
@@ -76,8 +76,8 @@ def bench(env_id: str, steps: int) -> dict:
             mujoco.mj_step(m2, d2, nstep=u.frame_skip)
         solver_cmp[name] = (time.perf_counter() - t0, d2.qpos.copy())
     q_n, q_c = solver_cmp["newton"][1], solver_cmp["cg"][1]
-    arm = u._arm_qpos
-    marb = getattr(u, "_marble_qpos", np.zeros(0, int))
+    arm = u.arm_qpos_adr
+    marb = getattr(u, "marble_qpos_adr", np.zeros(0, int))
     env.close()
     return {
         "newton_raw_steps_per_s": steps / solver_cmp["newton"][0],
