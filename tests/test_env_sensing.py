@@ -87,11 +87,13 @@ def test_pour_env_measures_link_side_torque_with_marbles():
     env = gym.make("JacoPour-v0", sensor_noise=None, n_marbles=10, task="near")
     obs, info = env.reset(seed=0, options={"payload_mass": 1.0})
     u = env.unwrapped
-    ctrl = OracleController(u.task, info["payload_mass"], info["n_marbles"]).bind(u)
+    ctrl = OracleController()
+    ctrl.start(u, info)
     meas, ref = [], []
     t0, t1 = u.task.pour_window
     while True:
-        obs, _, term, trunc, info = env.step(ctrl(obs))
+        q, qd, _, t = jaco_env.split_obs(obs)
+        obs, _, term, trunc, info = env.step(ctrl(t, q, qd, u.task.reference))
         if t0 - 0.5 <= info["time"] <= t1:
             meas.append(jaco_env.split_obs(obs)[2])
             ref.append(link_side_torque(u))
