@@ -17,6 +17,9 @@ controller falls back to the rigid-body feedforward (or to zero when no RBD mode
 is given) and counts the event in :attr:`FeedforwardController.n_fallbacks`. A
 non-finite measurement contributes no feedback on that joint (counted in
 :attr:`FeedforwardController.n_bad_measurements`).
+
+:class:`Controller` is the protocol every controller run by :func:`cascgp.episodes.run_episode`
+follows (this one, and e.g. ``jaco_env.oracle``'s oracle and PD controllers).
 """
 
 from __future__ import annotations
@@ -28,6 +31,27 @@ import numpy as np
 _BIG = 1e300  # stands in for an overflowed feedback term; far beyond any actuator limit
 
 Reference = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+class Controller(Protocol):
+    """What the episode runner (:func:`cascgp.episodes.run_episode`) needs of a controller.
+
+    ``start(env, info)`` is called right after ``env.reset`` with the unwrapped environment and
+    the reset's ``info`` (reset per-episode state, read e.g. the payload); then every control
+    tick ``__call__(t, q, qd, reference)`` returns the joint command for the measured state at
+    time ``t``, with ``reference(t) -> (q_d, qd_d, qdd_d)``. A controller may count the ticks on
+    which it fell back in ``n_fallbacks`` (the runner reads ``getattr(controller, "n_fallbacks", 0)``).
+    """
+
+    @property
+    def dof(self) -> int: ...
+
+    @property
+    def name(self) -> str: ...
+
+    def start(self, env: Any, info: dict[str, Any]) -> None: ...
+
+    def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, reference: Reference) -> np.ndarray: ...
 
 
 class InverseDynamics(Protocol):
@@ -161,6 +185,10 @@ class FeedforwardController:
         feedback = np.where(bad, 0.0, p_term + d_term)
         tau = self._feedforward(t, q_d, qd_d, qdd_d, reference) + feedback
         return np.clip(tau, -self.torque_limits, self.torque_limits)
+
+    def start(self, env: Any, info: dict[str, Any]) -> None:
+        """Start of an episode (:class:`Controller` protocol): zero the counters."""
+        self.reset_counters()
 
     def reset_counters(self) -> None:
         """Zero the fallback and bad-measurement counters (e.g. at the start of an episode)."""

@@ -96,6 +96,9 @@ def test_non_finite_model_output_falls_back_to_rbd_and_is_counted():
     assert ctrl.n_fallbacks == 1 and model.calls == 1
     ctrl.reset_counters()
     assert ctrl.n_fallbacks == 0
+    ctrl(0.5, q_d, qd_d, reference)
+    ctrl.start(None, {})  # the episode runner's start of an episode (Controller protocol) zeroes them too
+    assert ctrl.n_fallbacks == 0
 
 
 def test_non_finite_model_output_without_rbd_gives_pd_only():
