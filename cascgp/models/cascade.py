@@ -267,26 +267,58 @@ class CascadedGPModel:
             q_hist = None
         return single, q, qd, qdd, q_hist
 
-    def predict(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None
-                ) -> tuple[np.ndarray, np.ndarray]:
-        """Predicted joint torques.
+    def predict(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None, *,
+                propagate: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        r"""Predicted joint torques.
 
         Args:
             q, qd, qdd: (T, N) or (N,) (``qd``/``qdd`` may be None for NP ``-df`` models).
             q_hist: ``-df`` models only: (T, 2, N) or (2, N): ``q(t - df_delta)``, ``q(t - 2 df_delta)``.
+            propagate: cascades only: add the uncertainty of the neighbour's predicted torque to each
+                joint's variance (first-order propagation, below). ``False`` keeps the variance given the
+                chained mean input.
 
         Returns:
             ``mean``, ``var``: (T, N) (or (N,) for (N,) inputs).  ``mean`` is the full torque
-            (RBD added back for SP).  ``var`` is the latent variance of each joint's GP; for a
-            cascade it is the GP variance of that joint given the chained *mean* input (the
-            neighbour's uncertainty is not propagated).
+            (RBD added back for SP).  ``var`` is the latent (noise-free) variance of each joint's
+            torque in N m^2; add :attr:`noise_var` for the variance of a measurement.
+
+        Propagation through the cascade (linearisation of the mean in the torque input, the
+        "delta method"): joint :math:`j` is fed the predicted torque :math:`\hat\tau_t` of its
+        neighbour, itself Gaussian with variance :math:`v_t`; to first order in :math:`\hat\tau_t`,
+
+        .. math::
+
+            v_j = \sigma^2_j(x_j) + \Big(\frac{\partial \mu_j}{\partial \tau}(x_j)\Big)^2 v_t,
+
+        evaluated at the chained mean input :math:`x_j`, with :math:`\partial\mu_j/\partial\tau` in
+        closed form (:meth:`cascgp.gp.posterior.GPPosterior.mean_grad`). The recursion runs in
+        cascade order, so the first joint of the chain keeps its GP variance. The neglected terms are
+        of second order in :math:`\sqrt{v_t}` over the GP's lengthscale in the torque input; a test
+        compares it with Monte Carlo sampling of the cascade. In an SP model the rigid-body part is
+        deterministic, so only the GP part carries variance.
         """
         self._require_fitted()
         single, q, qd, qdd, q_hist = self._check_queries(q, qd, qdd, q_hist)
-        mean, var = self._predict_arrays(q, qd, qdd, q_hist, return_var=True)
+        mean, var = self._predict_arrays(q, qd, qdd, q_hist, return_var=True, propagate=propagate)
         return (mean[0], var[0]) if single else (mean, var)
 
-    def _predict_arrays(self, q, qd, qdd, q_hist, return_var: bool) -> tuple[np.ndarray, np.ndarray]:
+    @property
+    def noise_var(self) -> np.ndarray:
+        """Fitted noise variance of each joint's GP in N m^2, (N,): the measurement noise the model
+        attributes to the torques (add it to ``var`` for a predictive interval of a measurement)."""
+        self._require_fitted()
+        return np.array([P.noise_var * P.y_std**2 for P in self._post])
+
+    @property
+    def signal_var(self) -> np.ndarray:
+        """Prior (signal) variance of each joint's GP in N m^2, (N,): the latent variance far from the
+        training data."""
+        self._require_fitted()
+        return np.array([P.signal_var * P.y_std**2 for P in self._post])
+
+    def _predict_arrays(self, q, qd, qdd, q_hist, return_var: bool,
+                        propagate: bool = False) -> tuple[np.ndarray, np.ndarray]:
         S = self._states(q, qd, qdd, q_hist)
         T, N = q.shape
         sflat = S.reshape(T, -1)
@@ -299,10 +331,13 @@ class CascadedGPModel:
             if tj is not None:
                 x = np.concatenate([x, mean[:, tj:tj + 1]], axis=1)
             P = self._post[j]
-            m, v = _posterior_predict(P, x, return_var)
+            x = _clipped(P, x)
+            m, v = P.predict(x, return_var=return_var)
             mean[:, j] = m + (tau_rbd[:, j] if tau_rbd is not None else 0.0)
             if return_var:
                 var[:, j] = v
+                if propagate and tj is not None:
+                    var[:, j] += P.mean_grad(x, x.shape[1] - 1) ** 2 * var[:, tj]
         return mean, var
 
     def predict_data(self, data: DynamicsData) -> tuple[np.ndarray, np.ndarray]:
@@ -368,13 +403,13 @@ def _state_cols(sflat: np.ndarray, state_joints: tuple[int, ...]) -> np.ndarray:
     return sflat[:, cols]
 
 
-def _posterior_predict(P: Any, x: np.ndarray, return_var: bool) -> tuple[np.ndarray, np.ndarray | None]:
-    """GPPosterior.predict with the normalised inputs clipped (finite output for finite input)."""
+def _clipped(P: Any, x: np.ndarray) -> np.ndarray:
+    """``x`` with its normalised values clipped to +-ZCLIP (finite output for finite input)."""
     z = (x - P.x_mean) / P.x_scale
     if not (np.abs(z) <= ZCLIP).all():
         zc = np.clip(z, -ZCLIP, ZCLIP)
         x = np.where(np.isfinite(P.x_scale), P.x_mean + zc * P.x_scale, x)
-    return P.predict(x, return_var=return_var)
+    return x
 
 
 def make_model(name: str, dof: int, rbd: Any = None, *, gp_config: Any = None, df_delta: float = 0.1,
