@@ -80,7 +80,25 @@ class FeedforwardController:
         kd: derivative gains (N m s / rad), scalar or per joint.
         torque_limits: symmetric actuator limits (N m), per joint.
         fallback: rigid-body model used when ``model`` returns a non-finite torque
-            (defaults to ``model`` itself if that is a rigid-body model, else zero).
+            (defaults to ``model`` itself if that is a rigid-body model, else zero); with ``gate``
+            it is also the nominal model the feedforward falls back toward.
+        gate: trust the learned model only where it is confident (needs a cascgp model with
+            ``predict_one_var`` and a nominal model: ``fallback``, or an SP model's own ``rbd``).
+
+    Gated feedforward (``gate=True``), one rule for every joint, task and model:
+
+    .. math::
+
+        \tau_{ff,j} = \tau_{RBD,j} + w_j\,(\mu_j - \tau_{RBD,j}), \qquad
+        w_j = \operatorname{clip}\Big(1 - \frac{v_j}{p_j},\ 0,\ 1\Big),
+
+    with :math:`\mu_j` the model's mean torque, :math:`v_j` its latent variance propagated through
+    the cascade (:meth:`cascgp.models.CascadedGPModel.predict_one_var`) and :math:`p_j` its prior
+    (signal) variance: :math:`w_j` is the fraction of the prior uncertainty the data have removed at
+    this reference point. Near the training data :math:`w \to 1` (the learned model); far from it
+    :math:`w \to 0` (the nominal rigid-body model). For an SP model this shrinks the learned residual
+    toward zero, for an NP model it blends with the RBD. The weights of the last tick are in
+    :attr:`last_gate`.
 
     The controller is called every control tick with the time, the measured state and
     the task's reference ``reference(t) -> (q_d, qd_d, qdd_d)``. Derivative-free models
@@ -94,6 +112,7 @@ class FeedforwardController:
         kd: float | np.ndarray,
         torque_limits: np.ndarray,
         fallback: InverseDynamics | None = None,
+        gate: bool = False,
     ) -> None:
         limits = np.asarray(torque_limits)
         if limits.dtype.kind not in "fiu" or limits.ndim != 1 or limits.size == 0 or \
@@ -111,6 +130,17 @@ class FeedforwardController:
         if fallback is None and model is not None and hasattr(model, "inverse_dynamics"):
             fallback = model
         self.fallback = fallback
+        self.gate = bool(gate)
+        self.last_gate: np.ndarray | None = None
+        if self.gate:
+            if not hasattr(model, "predict_one_var"):
+                raise ValueError("gate: needs a fitted cascgp model (with predict_one_var), got "
+                                 f"{type(model).__name__}")
+            self._nominal = fallback if fallback is not None else getattr(model, "rbd", None)
+            if self._nominal is None:
+                raise ValueError("gate: needs a nominal rigid-body model to fall back toward: pass fallback=... "
+                                 "(an SP model's own rbd is used when there is none)")
+            self._prior = np.asarray(model.signal_var, dtype=float)
         self._uses_history = getattr(model, "feature_kind", "db") == "df"
         self._delta = float(getattr(model, "df_delta", 0.0) or 0.0)
         self.n_fallbacks = 0
@@ -122,7 +152,8 @@ class FeedforwardController:
         """Short description of the feedforward source."""
         if self.model is None:
             return "pd"
-        return str(getattr(self.model, "name", type(self.model).__name__))
+        name = str(getattr(self.model, "name", type(self.model).__name__))
+        return f"{name}-gated" if self.gate else name
 
     def feedforward(self, t: float, reference: Reference) -> np.ndarray:
         """The feedforward torque at time ``t`` (finite, not yet clipped)."""
@@ -156,6 +187,8 @@ class FeedforwardController:
                 q_hist = None
                 if self._uses_history:
                     q_hist = np.stack([reference(t - self._delta)[0], reference(t - 2.0 * self._delta)[0]])
+                if self.gate:
+                    return self._gated(q_d, qd_d, qdd_d, q_hist)
                 return np.asarray(model.predict_one(q_d, qd_d, qdd_d, q_hist=q_hist), dtype=float)
             return np.asarray(model.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
         except Exception as exc:  # noqa: BLE001
@@ -164,6 +197,17 @@ class FeedforwardController:
             # error is kept for diagnosis. KeyboardInterrupt and SystemExit still stop it.
             self.last_model_error = f"{type(exc).__name__}: {exc}"
             return None
+
+    def _gated(self, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, q_hist: np.ndarray | None
+               ) -> np.ndarray:
+        """The gated feedforward (see the class docstring)."""
+        mean, var = self.model.predict_one_var(q_d, qd_d, qdd_d, q_hist=q_hist)
+        nominal = np.asarray(self._nominal.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w = np.clip(1.0 - var / self._prior, 0.0, 1.0)
+        w = np.where(np.isfinite(w), w, 0.0)
+        self.last_gate = w
+        return nominal + w * (mean - nominal)
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, reference: Reference) -> np.ndarray:
         """Joint torques for the measured state ``(q, qd)`` at time ``t``; always finite and within limits."""

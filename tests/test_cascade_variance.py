@@ -55,3 +55,19 @@ def test_propagated_variance_matches_monte_carlo(name: str) -> None:
     # (median within 10 %, worst within 30 %), and much closer than the unpropagated variance
     assert np.median(rel1) < 0.10 and rel1.max() < 0.30, (rel1, rel0)
     assert rel1.sum() < 0.5 * rel0.sum(), (rel1, rel0)
+
+
+@pytest.mark.parametrize("name", ["np-inward", "sp-outward", "np-standard", "np-outward-df"])
+def test_single_query_mean_and_propagated_variance_equal_the_batched_path(name: str) -> None:
+    arm = make_arm(3, friction=0.3)
+    train = sinusoid_data(arm, 5.0, 10.0, seed=1, noise=0.05)
+    model = make_model(name, 3, make_arm(3) if name.startswith("sp") else None,
+                       gp_config=GPFitConfig(n_restarts=1, max_iter=40)).fit(train)
+    test = sinusoid_data(arm, 2.0, 10.0, seed=4)
+    hist = np.stack([test.q - 0.1 * test.qd, test.q - 0.2 * test.qd], axis=1)
+    df = name.endswith("df")
+    mean, var = model.predict(test.q, test.qd, test.qdd, hist if df else None, propagate=True)
+    for r in range(0, test.n_samples, 3):
+        m1, v1 = model.predict_one_var(test.q[r], test.qd[r], test.qdd[r], hist[r] if df else None)
+        np.testing.assert_allclose(m1, mean[r], rtol=1e-9, atol=1e-9)
+        np.testing.assert_allclose(v1, var[r], rtol=1e-7, atol=1e-12)

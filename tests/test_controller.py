@@ -151,12 +151,17 @@ def test_output_is_always_finite_and_within_limits(q, qd, t, which):
 
 
 @settings(max_examples=50, deadline=None)
-@given(scale=st.floats(min_value=1.0, max_value=1e8))
-def test_far_out_of_range_states_with_a_fitted_gp_model(scale, fitted_planar_model):
-    """A real fitted cascade queried far outside its training data stays finite and clipped."""
+@given(scale=st.floats(min_value=1.0, max_value=1e8), gate=st.booleans(),
+       bad=st.sampled_from([None, np.nan, np.inf, -np.inf]))
+def test_far_out_of_range_states_with_a_fitted_gp_model(scale, gate, bad, fitted_planar_model, arm3_rbd):
+    """A real fitted cascade (gated or not) queried far outside its training data, or with non-finite
+    measurements, stays finite and clipped."""
     model = fitted_planar_model
     limits = np.full(model.dof, 5.0)
-    ctrl = FeedforwardController(model, 10.0, 1.0, limits)
+    ctrl = FeedforwardController(model, 10.0, 1.0, limits, fallback=arm3_rbd, gate=gate)
+    if bad is not None:
+        tau = ctrl(0.0, np.full(model.dof, bad), np.full(model.dof, bad), lambda t: (np.zeros(3),) * 3)
+        assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= limits)
 
     def far_reference(t):
         return np.full(model.dof, scale), np.full(model.dof, -scale), np.full(model.dof, scale)
@@ -172,3 +177,36 @@ def fitted_planar_model(arm3_train):
 
     data = arm3_train.take(np.arange(min(80, arm3_train.n_samples)))
     return make_model("np-inward", data.dof, gp_config=GPFitConfig(n_restarts=2, max_iter=200)).fit(data)
+
+
+def test_gated_feedforward_trusts_the_model_near_its_data_and_the_rbd_far_away(fitted_planar_model, arm3_rbd,
+                                                                               arm3_train):
+    """w = clip(1 - v/p): ~1 at a training point (the model's mean), ~0 far away (the nominal torque)."""
+    model = fitted_planar_model
+    ctrl = FeedforwardController(model, 0.0, 0.0, np.full(3, 1e6), fallback=arm3_rbd, gate=True)
+    r = 10
+    q, qd, qdd = arm3_train.q[r], arm3_train.qd[r], arm3_train.qdd[r]
+
+    def ref(t, q=q, qd=qd, qdd=qdd):
+        return q, qd, qdd
+
+    tau = ctrl(0.0, q, qd, ref)
+    assert ctrl.name.endswith("gated")
+    assert np.all(ctrl.last_gate > 0.9)
+    mean, var = model.predict(q, qd, qdd, propagate=True)
+    nominal = arm3_rbd.inverse_dynamics(q, qd, qdd)
+    np.testing.assert_allclose(tau, nominal + ctrl.last_gate * (mean - nominal), rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(ctrl.last_gate, np.clip(1 - var / model.signal_var, 0, 1), rtol=1e-7, atol=1e-9)
+
+    far = (q + 50.0, qd + 50.0, qdd + 50.0)
+    tau_far = ctrl(0.0, far[0], far[1], lambda t: far)
+    assert np.all(ctrl.last_gate < 0.05)
+    np.testing.assert_allclose(tau_far, arm3_rbd.inverse_dynamics(*far), atol=0.05 * np.abs(
+        model.predict(*far)[0] - arm3_rbd.inverse_dynamics(*far)).max() + 1e-9)
+
+
+def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
+    with pytest.raises(ValueError, match="gate: needs a nominal"):
+        FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], gate=True)
+    with pytest.raises(ValueError, match="gate: needs a fitted cascgp model"):
+        FeedforwardController(AffineRBD(), KP, KD, LIMITS, gate=True)

@@ -18,7 +18,7 @@ from cascgp.data import DynamicsData, as_real_array
 from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
 from cascgp.gp import GPBank, GPFitConfig
 from cascgp.gp.checks import check_scale
-from cascgp.models.fastpath import ZCLIP, FastPath
+from cascgp.models.fastpath import ZCLIP, FastPath, FastVariance
 
 __all__ = ["MODEL_NAMES", "CascadedGPModel", "make_model", "parse_name"]
 
@@ -101,6 +101,7 @@ class CascadedGPModel:
         self.n_train = 0
         self._post: list[Any] = []
         self._fast: FastPath | None = None
+        self._fast_var: FastVariance | None = None
 
     # ------------------------------------------------------------------ basics
     @property
@@ -239,6 +240,7 @@ class CascadedGPModel:
         """Posterior factors per joint and the padded arrays of the single-query path."""
         self._post = [self.banks[k].posterior(b) for k, b in self.where]
         self._fast = FastPath.build(self._post, self.specs, self.order)
+        self._fast_var = None
 
     # ------------------------------------------------------------------ prediction
     def _check_queries(self, q: Any, qd: Any, qdd: Any, q_hist: Any
@@ -356,6 +358,21 @@ class CascadedGPModel:
         """Mean torque (N,) for ONE query: the lean NumPy path for a controller (no torch, no variance;
         :mod:`cascgp.models.fastpath`). Equals :meth:`predict` to round-off (~1e-12). Inputs are checked for
         shape and finiteness (``ValueError``)."""
+        return self._fast.mean(self._load_query(q, qd, qdd, q_hist))
+
+    def predict_one_var(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """Mean torque and *propagated* latent variance (N,), (N,) for ONE query: the single-query form of
+        ``predict(..., propagate=True)`` (equal to round-off). The first call builds one ``(n, n)`` matrix per
+        joint (:class:`~cascgp.models.fastpath.FastVariance`); a query then costs one ``(n, n)`` product per
+        joint on top of :meth:`predict_one`."""
+        tau_rbd = self._load_query(q, qd, qdd, q_hist)
+        if self._fast_var is None:
+            self._fast_var = FastVariance.build(self._post)
+        return self._fast_var.mean_var(self._fast, tau_rbd)
+
+    def _load_query(self, q: Any, qd: Any, qdd: Any, q_hist: Any) -> np.ndarray | None:
+        """Check one query and write its state into the fast path's buffer; returns the RBD torque (SP) or None."""
         f = self._fast
         if f is None:
             self._require_fitted()
@@ -387,8 +404,7 @@ class CascadedGPModel:
             buf[2:3 * N:3] = h[1]
         if not np.isfinite(buf).all():
             raise ValueError("q/qd/qdd/q_hist: non-finite value (NaN or inf) in the query")
-        tau_rbd = self._rbd_torque(q, qd, qdd) if self.parametric == "sp" else None
-        return f.mean(tau_rbd)
+        return self._rbd_torque(q, qd, qdd) if self.parametric == "sp" else None
 
     # ------------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike) -> Path:
