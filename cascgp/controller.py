@@ -41,6 +41,8 @@ class Controller(Protocol):
     tick ``__call__(t, q, qd, reference)`` returns the joint command for the measured state at
     time ``t``, with ``reference(t) -> (q_d, qd_d, qdd_d)``. A controller may count the ticks on
     which it fell back in ``n_fallbacks`` (the runner reads ``getattr(controller, "n_fallbacks", 0)``).
+    A controller that learns from the measurements may define ``observe(q, qd, tau, t)``: the runner
+    calls it after every step with the new measured joint state, torque and time.
     """
 
     @property
@@ -84,6 +86,10 @@ class FeedforwardController:
             it is also the nominal model the feedforward falls back toward.
         gate: trust the learned model only where it is confident (needs a cascgp model with
             ``predict_one_var`` and a nominal model: ``fallback``, or an SP model's own ``rbd``).
+        online: learn inside the episode: at :meth:`start` the model opens an online window of this many
+            samples (:meth:`cascgp.models.CascadedGPModel.start_online`, hyperparameters held) and every
+            ``online_every``-th measurement (:meth:`observe`) enters it. ``None``: offline only.
+        online_every: ticks between online samples (4 at 40 Hz control gives the 10 Hz of the training sets).
 
     Gated feedforward (``gate=True``), one rule for every joint, task and model:
 
@@ -113,6 +119,8 @@ class FeedforwardController:
         torque_limits: np.ndarray,
         fallback: InverseDynamics | None = None,
         gate: bool = False,
+        online: int | None = None,
+        online_every: int = 4,
     ) -> None:
         limits = np.asarray(torque_limits)
         if limits.dtype.kind not in "fiu" or limits.ndim != 1 or limits.size == 0 or \
@@ -141,6 +149,21 @@ class FeedforwardController:
                 raise ValueError("gate: needs a nominal rigid-body model to fall back toward: pass fallback=... "
                                  "(an SP model's own rbd is used when there is none)")
             self._prior = np.asarray(model.signal_var, dtype=float)
+        if online is not None:
+            if not hasattr(model, "start_online"):
+                raise ValueError(f"online: needs a fitted cascgp model, got {type(model).__name__}")
+            if isinstance(online, bool) or not isinstance(online, (int, np.integer)) or online < 1:
+                raise ValueError(f"online: expected None or a window of >= 1 samples, got {online!r}")
+            if model.feature_kind != "db":
+                raise ValueError(f"online: model {model.name!r}: online updates support derivative-based models only")
+        if isinstance(online_every, bool) or not isinstance(online_every, (int, np.integer)) or online_every < 1:
+            raise ValueError(f"online_every: expected an integer >= 1, got {online_every!r}")
+        self.online = None if online is None else int(online)
+        self.online_every = int(online_every)
+        self._recent: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._n_observed = 0
+        self.n_online_samples = 0
+        self.n_online_rejected = 0
         self._uses_history = getattr(model, "feature_kind", "db") == "df"
         self._delta = float(getattr(model, "df_delta", 0.0) or 0.0)
         self.n_fallbacks = 0
@@ -153,7 +176,7 @@ class FeedforwardController:
         if self.model is None:
             return "pd"
         name = str(getattr(self.model, "name", type(self.model).__name__))
-        return f"{name}-gated" if self.gate else name
+        return name + ("-gated" if self.gate else "") + ("-online" if self.online else "")
 
     def feedforward(self, t: float, reference: Reference) -> np.ndarray:
         """The feedforward torque at time ``t`` (finite, not yet clipped)."""
@@ -231,8 +254,34 @@ class FeedforwardController:
         return np.clip(tau, -self.torque_limits, self.torque_limits)
 
     def start(self, env: Any, info: dict[str, Any]) -> None:
-        """Start of an episode (:class:`Controller` protocol): zero the counters."""
+        """Start of an episode (:class:`Controller` protocol): zero the counters; with ``online``, open a
+        fresh online window on the model (samples of earlier episodes enter only through retraining)."""
         self.reset_counters()
+        self._recent, self._n_observed = [], 0
+        self.n_online_samples = self.n_online_rejected = 0
+        if self.online:
+            self.model.start_online(self.online)
+
+    def observe(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, t: float) -> None:
+        """A new measurement (called by the runner after every step). With ``online``, every
+        ``online_every``-th call adds the sample of the *previous* tick to the model: its q and qd,
+        q̈ by central differences of the measured qd (as the recorded episodes), and the torque measured
+        over the period that started at that tick (reported now). A sample the model refuses (e.g.
+        non-finite) is counted in ``n_online_rejected``, never raised."""
+        if not self.online:
+            return
+        self._recent = (self._recent + [(float(t), np.array(q, float), np.array(qd, float),
+                                         np.array(tau, float))])[-3:]
+        self._n_observed += 1
+        if self._n_observed % self.online_every or len(self._recent) < 3:
+            return
+        (t0, _, qd0, _), (t1, q1, qd1, _), (t2, _, qd2, tau2) = self._recent
+        try:
+            self.model.add_sample(q1, qd1, (qd2 - qd0) / (t2 - t0), tau2)
+            self.n_online_samples += 1
+        except (ValueError, TypeError, FloatingPointError, np.linalg.LinAlgError) as exc:
+            self.n_online_rejected += 1
+            self.last_model_error = f"online: {type(exc).__name__}: {exc}"
 
     def reset_counters(self) -> None:
         """Zero the fallback and bad-measurement counters (e.g. at the start of an episode)."""

@@ -113,6 +113,7 @@ def run_episode(
     task = unwrapped.task
     reference = task.reference
     controller.start(unwrapped, info)
+    observe = getattr(controller, "observe", None)  # controllers that learn from what the robot measures
     ts, qs, qds, taus, errors = [], [], [], [], []
     total, steps, unstable = 0.0, 0, False
     while True:
@@ -123,6 +124,8 @@ def run_episode(
         qs.append(q)
         qds.append(qd)
         taus.append(_split_obs(obs, dof)[2])
+        if observe is not None:
+            observe(*_split_obs(obs, dof))
         if "tracking_error" in info:
             errors.append(float(info["tracking_error"]))
         total += float(reward)

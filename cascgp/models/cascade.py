@@ -102,6 +102,7 @@ class CascadedGPModel:
         self._post: list[Any] = []
         self._fast: FastPath | None = None
         self._fast_var: FastVariance | None = None
+        self._online: Any = None
 
     # ------------------------------------------------------------------ basics
     @property
@@ -241,6 +242,7 @@ class CascadedGPModel:
         self._post = [self.banks[k].posterior(b) for k, b in self.where]
         self._fast = FastPath.build(self._post, self.specs, self.order)
         self._fast_var = None
+        self._online = None
 
     # ------------------------------------------------------------------ prediction
     def _check_queries(self, q: Any, qd: Any, qdd: Any, q_hist: Any
@@ -368,8 +370,58 @@ class CascadedGPModel:
         joint on top of :meth:`predict_one`."""
         tau_rbd = self._load_query(q, qd, qdd, q_hist)
         if self._fast_var is None:
-            self._fast_var = FastVariance.build(self._post)
+            online = getattr(self, "_online", None)
+            self._fast_var = online.variance() if online is not None else FastVariance.build(self._post)
         return self._fast_var.mean_var(self._fast, tau_rbd)
+
+    def posteriors(self) -> list[Any]:
+        """Each joint's fitted :class:`~cascgp.gp.posterior.GPPosterior`, in joint order."""
+        self._require_fitted()
+        return list(self._post)
+
+    # ------------------------------------------------------------------ learning inside an episode
+    def start_online(self, window: int = 150) -> None:
+        """Let new samples enter the model (:meth:`add_sample`) until the next :meth:`fit`, with the
+        hyperparameters held: each joint keeps its fitted set plus the ``window`` most recent samples
+        (:mod:`cascgp.models.online`). Derivative-based models only."""
+        from cascgp.models.online import OnlineWindow
+
+        self._require_fitted()
+        self._online = OnlineWindow(self, window)
+        self._fast = self._online.fast
+        self._fast_var = None
+
+    def add_sample(self, q: Any, qd: Any, qdd: Any, tau: Any) -> None:
+        """Add one measured sample ``(q, qd, qdd, tau)``, each (N,), to every joint (see :meth:`start_online`).
+        Each joint's GP input uses the *measured* neighbour torque and its target is the measured torque (minus
+        the RBD torque for SP), as in training. Rejects non-finite values (``ValueError``), changing nothing."""
+        if getattr(self, "_online", None) is None:
+            raise RuntimeError(f"model {self.name!r}: call start_online() before add_sample()")
+        N = self.dof
+        arr = {}
+        for nm, v in (("q", q), ("qd", qd), ("qdd", qdd), ("tau", tau)):
+            a = _one_real(nm, v)
+            if a.shape != (N,) or not np.isfinite(a).all():
+                raise ValueError(f"{nm}: expected a finite array of shape ({N},), got {a!r}")
+            check_scale(np.stack([a, np.zeros(N)]), nm)
+            arr[nm] = a
+        S = self._states(arr["q"][None], arr["qd"][None], arr["qdd"][None], None).reshape(-1)
+        target = arr["tau"] - (self._rbd_torque(arr["q"][None], arr["qd"][None], arr["qdd"][None])[0]
+                               if self.parametric == "sp" else 0.0)
+        xs = []
+        for j in range(N):
+            sj, tj = self.specs[j]
+            x = _state_cols(S[None], sj)[0]
+            xs.append(np.append(x, arr["tau"][tj]) if tj is not None else x)
+        self._online.add(xs, target)
+        if self._fast_var is not None:
+            self._fast_var = self._online.variance()
+
+    @property
+    def n_online(self) -> int:
+        """Samples added since :meth:`start_online` (0 when not learning online)."""
+        online = getattr(self, "_online", None)
+        return 0 if online is None else online.n_added
 
     def _load_query(self, q: Any, qd: Any, qdd: Any, q_hist: Any) -> np.ndarray | None:
         """Check one query and write its state into the fast path's buffer; returns the RBD torque (SP) or None."""

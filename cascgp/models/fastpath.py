@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -71,11 +71,13 @@ class FastPath:
 
     @classmethod
     def build(cls, posts: Sequence[GPPosterior], specs: Sequence[tuple[tuple[int, ...], int | None]],
-              order: tuple[int, ...]) -> FastPath:
-        """From each joint's posterior and input spec ``(state joints, torque joint or None)``."""
+              order: tuple[int, ...], capacity: int = 0) -> FastPath:
+        """From each joint's posterior and input spec ``(state joints, torque joint or None)``; ``capacity``
+        extra zero-weight rows per joint leave room for online samples (:mod:`cascgp.models.online`)."""
         N = len(posts)
         kernel = get_kernel(posts[0].kernel)
-        n = posts[0].Z.shape[0]
+        n0 = posts[0].Z.shape[0]
+        n = n0 + capacity
         D = 3 * N
         c = math.sqrt(kernel.r2_scale)
         idx = np.full((N, D), D, dtype=np.intp)
@@ -94,12 +96,12 @@ class FastPath:
             idx[j, :ds] = cols
             xm[j, :ds] = P.x_mean[:ds]
             xs_inv[j, :ds] = c / P.x_scale[:ds]  # inf scale (ignored column) -> 0
-            W[j, :, :ds] = c * P.Z[:, :ds]
+            W[j, :n0, :ds] = c * P.Z[:, :ds]
             if tj is not None:
                 tm[j] = P.x_mean[ds]
                 ts_inv[j] = c / P.x_scale[ds]
-                Zt[j] = c * P.Z[:, ds]
-            a[j] = P.y_std * P.signal_var * P.alpha
+                Zt[j, :n0] = c * P.Z[:, ds]
+            a[j, :n0] = P.y_std * P.signal_var * P.alpha
             y_mean[j] = P.y_mean
         return cls(kernel=kernel, order=tuple(order), idx=idx, x_mean=xm, x_inv_scale=xs_inv, W=W,
                    W2=np.einsum("jnd,jnd->jn", W, W), torque_from=tuple(s[1] for s in specs),
@@ -166,10 +168,12 @@ class FastVariance:
 
     Attributes:
         B: ``(N, n, n)`` scaled inverse Cholesky factors; prior: ``(N,)`` prior variances (N m^2).
+        window: online samples (:class:`cascgp.models.online.OnlineWindow`) whose variance term is added.
     """
 
     B: np.ndarray
     prior: np.ndarray
+    window: Any = None
 
     @classmethod
     def build(cls, posts: Sequence[GPPosterior]) -> FastVariance:
@@ -200,8 +204,10 @@ class FastVariance:
             if tau_mean is not None:
                 m += float(tau_mean[j])
             mean[j] = m
-            u = self.B[j] @ kap
-            v = max(self.prior[j] - float(u @ u), 0.0)
+            n0 = self.B.shape[1]
+            u = self.B[j] @ kap[:n0]
+            q = float(u @ u) + (self.window.extra_var(j, kap, u) if self.window is not None else 0.0)
+            v = max(self.prior[j] - q, 0.0)
             if tj is not None:
                 g = 2.0 * fast.t_inv_scale[j] * float((dkap * diff) @ a)
                 v += g * g * var[tj]
