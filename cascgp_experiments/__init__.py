@@ -18,5 +18,7 @@ audit_suite          the GP fit equivalence audit's data sets and report
 transfer             the task-transfer experiment on ``JacoPour-v0`` (uses :mod:`cascgp.learning`)
 nominal_urdf         the Jaco 2 nominal URDF (uses :mod:`cascgp.urdf_export`)
 residual             what the nominal model misses on the simulated Jaco 2
+video                MP4 videos of episodes: captioned recorder (runner callback), side by side
+                     comparison of controllers (imageio + imageio-ffmpeg, extra ``video``)
 ===================  ============================================================================
 """
