@@ -29,7 +29,12 @@ Protocol (paper section IV-B-1, simulated):
 Files: ``<out>/jaco_train.npz`` and ``<out>/jaco_test.npz`` (:meth:`DynamicsData.save`), reused when
 present with the same settings (``meta["collection"]``).
 
-Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke]``.
+Parallel: ``workers`` motions of a split run side by side in a Gymnasium ``AsyncVectorEnv`` (one process
+each), or each motion is a job on a Ray cluster (:mod:`cascgp_experiments.execution`); every motion is
+seeded on its own, so the files are the same whatever the worker count or the backend (tested).
+
+Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N]
+[--ray ADDRESS]``.
 """
 
 from __future__ import annotations
@@ -100,33 +105,23 @@ def _command_source(seed: int, duration: float) -> Callable[[float], np.ndarray]
     return excitation.make_command(seed=seed, duration=duration)
 
 
-def record_motion(seed: int, duration: float, cfg: CollectConfig, *, segment: int = 0,
-                  desc: str = "") -> DynamicsData:
-    """Run one velocity-commanded motion and return its measured record (qdd differentiated)."""
+def make_env(rate_hz: float, payload_mass: float):
+    """The collection's env: ``JacoPayload-v0`` in velocity mode at ``rate_hz``, no episode time limit."""
     import gymnasium as gym
 
     import jaco_env  # noqa: F401  (registers the environments)
 
-    env = gym.make(ENV_ID, control_mode="velocity", control_freq=float(cfg.rate_hz),
-                   payload_mass=float(cfg.payload_mass), max_episode_steps=10**9)
-    try:
-        obs, info = env.reset(seed=seed)
-        command = _command_source(seed, duration)
-        n_warm = int(round(cfg.warmup_seconds * cfg.rate_hz))
-        n_steps = int(round(duration * cfg.rate_hz))
-        dt = env.unwrapped.control_dt
-        rows = np.empty((n_steps, obs.shape[0]))
-        qacc = np.empty((n_steps, 6))
-        for k in tqdm(range(n_warm + n_steps), desc=desc or f"motion seed {seed}", unit="step", leave=False,
-                      mininterval=1.0):
-            obs, _, terminated, truncated, info = env.step(np.asarray(command(k * dt), dtype=np.float32))
-            if info.get("unstable", False) or terminated:
-                raise RuntimeError(f"motion seed {seed}: simulation became unstable/terminated at step {k}")
-            if k >= n_warm:
-                rows[k - n_warm] = obs
-                qacc[k - n_warm] = info["qacc"]
-    finally:
-        env.close()
+    return gym.make(ENV_ID, control_mode="velocity", control_freq=float(rate_hz),
+                    payload_mass=float(payload_mass), max_episode_steps=10**9)
+
+
+def _steps(duration: float, cfg: CollectConfig) -> tuple[int, int]:
+    """(warm-up steps, recorded steps) of a motion of ``duration`` seconds."""
+    return int(round(cfg.warmup_seconds * cfg.rate_hz)), int(round(duration * cfg.rate_hz))
+
+
+def _record(seed: int, rows: np.ndarray, qacc: np.ndarray, cfg: CollectConfig, segment: int) -> DynamicsData:
+    """The measured record of one motion from its observations ``rows`` and true accelerations ``qacc``."""
     n = 6
     q, qd, tau, t = rows[:, :n], rows[:, n:2 * n], rows[:, 2 * n:3 * n], rows[:, 3 * n]
     meta = {"robot": "jaco2-sim", "source": ENV_ID, "control_mode": "velocity",
@@ -137,6 +132,80 @@ def record_motion(seed: int, duration: float, cfg: CollectConfig, *, segment: in
                                           segment=np.full(t.shape, segment, dtype=np.int64))
     data.meta["qdd_error"] = qdd_error_stats(data.qdd, qacc)
     return data
+
+
+def record_motion(seed: int, duration: float, cfg: CollectConfig, *, segment: int = 0,
+                  desc: str = "", show_progress: bool = True, on_steps: Callable[[int], None] | None = None
+                  ) -> DynamicsData:
+    """Run one velocity-commanded motion and return its measured record (qdd differentiated).
+
+    ``on_steps(k)``: called every 100 steps with the number of steps done since the last call."""
+    env = make_env(cfg.rate_hz, cfg.payload_mass)
+    try:
+        obs, info = env.reset(seed=seed)
+        command = _command_source(seed, duration)
+        n_warm, n_steps = _steps(duration, cfg)
+        dt = env.unwrapped.control_dt
+        rows = np.empty((n_steps, obs.shape[0]))
+        qacc = np.empty((n_steps, 6))
+        for k in tqdm(range(n_warm + n_steps), desc=desc or f"motion seed {seed}", unit="step", leave=False,
+                      mininterval=1.0, disable=not show_progress):
+            obs, _, terminated, truncated, info = env.step(np.asarray(command(k * dt), dtype=np.float32))
+            if info.get("unstable", False) or terminated:
+                raise RuntimeError(f"motion seed {seed}: simulation became unstable/terminated at step {k}")
+            if k >= n_warm:
+                rows[k - n_warm] = obs
+                qacc[k - n_warm] = info["qacc"]
+            if on_steps is not None and (k + 1) % 100 == 0:
+                on_steps(100)
+    finally:
+        env.close()
+    return _record(seed, rows, qacc, cfg, segment)
+
+
+def motion_job(seed: int, duration: float, cfg: dict, segment: int) -> DynamicsData:
+    """One motion as a job of :func:`cascgp_experiments.execution.run_jobs` (progress in steps)."""
+    from cascgp_experiments.execution import report_progress
+
+    return record_motion(seed, duration, CollectConfig(**cfg), segment=segment, show_progress=False,
+                         on_steps=report_progress)
+
+
+def record_motions_vector(seeds: list[int], duration: float, cfg: CollectConfig, *, segments: list[int],
+                          asynchronous: bool = True, bar: tqdm | None = None) -> list[DynamicsData]:
+    """Run several motions of the same ``duration`` side by side in one Gymnasium vector env
+    (:class:`gymnasium.vector.AsyncVectorEnv`: one process per motion; ``SyncVectorEnv``: all in this
+    process). Every sub-env is reset with its motion's seed and stepped with its own command, so each
+    record equals :func:`record_motion`'s for the same seed. ``bar``: advanced by one per motion step."""
+    from functools import partial
+
+    import gymnasium as gym
+
+    n = len(seeds)
+    fns = [partial(make_env, cfg.rate_hz, cfg.payload_mass)] * n
+    venv = (gym.vector.AsyncVectorEnv(fns, context="spawn") if asynchronous else gym.vector.SyncVectorEnv(fns))
+    try:
+        obs, info = venv.reset(seed=[int(s) for s in seeds])
+        commands = [_command_source(s, duration) for s in seeds]
+        n_warm, n_steps = _steps(duration, cfg)
+        dt = venv.get_attr("control_dt")[0]
+        rows = np.empty((n, n_steps, obs.shape[1]))
+        qacc = np.empty((n, n_steps, 6))
+        for k in range(n_warm + n_steps):
+            action = np.stack([np.asarray(c(k * dt), dtype=np.float32) for c in commands])
+            obs, _, terminated, truncated, info = venv.step(action)
+            bad = np.asarray(info.get("unstable", np.zeros(n, bool)), bool) | np.asarray(terminated, bool)
+            if bad.any():
+                raise RuntimeError(f"motion seed {seeds[int(np.argmax(bad))]}: simulation became unstable/"
+                                   f"terminated at step {k}")
+            if k >= n_warm:
+                rows[:, k - n_warm] = obs
+                qacc[:, k - n_warm] = info["qacc"]
+            if bar is not None:
+                bar.update(n)
+    finally:
+        venv.close()
+    return [_record(s, rows[i], qacc[i], cfg, seg) for i, (s, seg) in enumerate(zip(seeds, segments))]
 
 
 def qdd_error_stats(qdd_est: np.ndarray, qdd_true: np.ndarray) -> dict:
@@ -150,13 +219,34 @@ def qdd_error_stats(qdd_est: np.ndarray, qdd_true: np.ndarray) -> dict:
             "n": int(len(err))}
 
 
-def _collect_split(cfg: CollectConfig, split: str) -> DynamicsData:
+def _collect_split(cfg: CollectConfig, split: str, workers: int = 1, ray_address: str | None = None
+                   ) -> DynamicsData:
+    """The motions of one split: one after the other (``workers=1``), ``workers`` at a time in a Gymnasium
+    ``AsyncVectorEnv``, or as jobs on a Ray cluster; the records are the same in every case."""
     count = cfg.n_subsets if split == "train" else cfg.n_test
     seconds = cfg.subset_seconds if split == "train" else cfg.test_seconds
-    parts = []
-    for k in tqdm(range(count), desc=f"collect {split} ({count} x {seconds:g} s)", unit="motion"):
-        parts.append(record_motion(motion_seed(cfg, split, k), seconds, cfg, segment=k,
-                                   desc=f"{split} {k + 1}/{count}"))
+    seeds = [motion_seed(cfg, split, k) for k in range(count)]
+    desc = f"collect {split} ({count} x {seconds:g} s)"
+    if ray_address is not None:
+        from cascgp_experiments.execution import run_jobs
+
+        n_warm, n_steps = _steps(seconds, cfg)
+        parts = list(run_jobs(motion_job, [{"seed": s, "duration": seconds, "cfg": asdict(cfg), "segment": k}
+                                           for k, s in enumerate(seeds)],
+                              workers=workers, ray_address=ray_address, desc=desc, units=[n_warm + n_steps] * count, unit="step",
+                              label=lambda j: f"seed {j['seed']}"))
+    elif workers <= 1 or count == 1:
+        parts = []
+        for k in tqdm(range(count), desc=desc, unit="motion"):
+            parts.append(record_motion(seeds[k], seconds, cfg, segment=k, desc=f"{split} {k + 1}/{count}"))
+    else:
+        n_warm, n_steps = _steps(seconds, cfg)
+        parts = []
+        with tqdm(total=count * (n_warm + n_steps), desc=desc + f", {min(workers, count)} at a time", unit="step",
+                  unit_scale=True, mininterval=1.0) as bar:
+            for b in range(0, count, workers):
+                ks = list(range(b, min(b + workers, count)))
+                parts += record_motions_vector([seeds[k] for k in ks], seconds, cfg, segments=ks, bar=bar)
     meta = {**parts[0].meta, "split": split, "seeds": [p.meta["seed"] for p in parts],
             "collection": asdict(cfg), "qdd_error_per_motion": [p.meta["qdd_error"] for p in parts]}
     # Pooled over the motions (weighted by rows).
@@ -169,12 +259,17 @@ def _collect_split(cfg: CollectConfig, split: str) -> DynamicsData:
     return DynamicsData.concat(parts, meta=meta)
 
 
-def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: bool = False
-            ) -> tuple[DynamicsData, DynamicsData, dict]:
+def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: bool = False, workers: int | None = None,
+            ray_address: str | None = None) -> tuple[DynamicsData, DynamicsData, dict]:
     """Collect (or reuse) ``<out>/jaco_train.npz`` and ``<out>/jaco_test.npz``.
 
+    ``workers``: motions simulated at once (``None``: every core); ``ray_address``: run the motions
+    on a Ray cluster (:mod:`cascgp_experiments.execution`). The data do not depend on either.
     Returns ``(train, test, info)`` with ``info = {"reused": bool, "wall_s": float}``.
     """
+    from cascgp_experiments.execution import check_workers
+
+    workers = check_workers(workers)
     out = Path(out)
     paths = {s: out / f"jaco_{s}.npz" for s in ("train", "test")}
     if not force and all(p.exists() for p in paths.values()):
@@ -184,7 +279,7 @@ def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: boo
     t0 = time.perf_counter()
     data = {}
     for split in ("train", "test"):
-        data[split] = _collect_split(cfg, split)
+        data[split] = _collect_split(cfg, split, workers, ray_address)
         data[split].save(paths[split])
     return data["train"], data["test"], {"reused": False, "wall_s": time.perf_counter() - t0}
 

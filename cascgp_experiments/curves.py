@@ -17,7 +17,8 @@ Same rows for every variant: the derivative-free (-df) models cannot use the fir
 ``2 * df_delta`` of each segment (no history), so the derivative-based models drop those rows
 too, in training and (``prepare``) in scoring.
 
-Jobs run in a process pool (``workers``), each process with one torch/BLAS thread.
+Jobs run through :mod:`cascgp_experiments.execution` (local processes or a Ray cluster, each job with one
+torch/BLAS thread, a resumable job cache); the numbers do not depend on the worker count or the backend.
 
 The RBD baseline is not trained: its test prediction is the nominal RNEA torque, the same for
 every subset and ``T``.
@@ -25,18 +26,17 @@ every subset and ``T``.
 
 from __future__ import annotations
 
+import hashlib
 import importlib
-import os
+import json
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from tqdm import tqdm
-
-from cascgp_experiments.common import RBD, limit_threads, read_json, write_json
+from cascgp_experiments.common import RBD
+from cascgp_experiments.execution import default_workers, run_jobs  # noqa: F401  (default_workers: re-exported)
 
 
 @dataclass
@@ -60,7 +60,7 @@ class CurveSpec:
     gp_overrides: dict = field(default_factory=dict)
 
 
-_STATE: dict[str, Any] = {}
+_STATE: dict[str, Any] = {}  # the prepared data of one spec, kept per process (``"key"``: the spec's JSON)
 
 
 def _resolve(path: str):
@@ -98,10 +98,26 @@ def prepare(spec: CurveSpec) -> dict[str, Any]:
     return {"subsets": subsets, "test": test, "mask": mask, "rbd": rbd, "spec": spec}
 
 
-def _init_worker(spec: CurveSpec) -> None:
-    limit_threads(1)
-    _STATE.clear()
-    _STATE.update(prepare(spec))
+def state_for(spec: CurveSpec) -> dict[str, Any]:
+    """:func:`prepare` ``spec``, once per process (the last spec's state is kept)."""
+    key = json.dumps(asdict(spec), sort_keys=True)
+    if _STATE.get("key") != key:
+        _STATE.clear()
+        _STATE.update(prepare(spec))
+        _STATE["key"] = key
+    return _STATE
+
+
+def npz_digest(path: str | Path) -> str:
+    """SHA-256 of the arrays of an ``.npz`` file (names, dtypes, shapes, bytes): the data a job reads
+    (the file's own bytes hold a time stamp, so the same data written twice differ there)."""
+    h = hashlib.sha256()
+    with np.load(path, allow_pickle=False) as z:
+        for k in sorted(z.files):
+            a = np.ascontiguousarray(z[k])
+            h.update(f"{k}|{a.dtype.str}|{a.shape}|".encode())
+            h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def _gp_config(spec: CurveSpec, subset: int):
@@ -128,12 +144,20 @@ def audited(spec: CurveSpec, model: str, subset: int, grid_index: int) -> bool:
     return bool(u < spec.audit_fraction)
 
 
-def run_job(model: str, subset: int) -> dict[str, Any]:
-    """Train ``model`` on growing prefixes of subset ``subset``; nRMSE per joint after each fit."""
+def curve_job(spec: dict[str, Any], model: str, subset: int, data_sha256: dict[str, str] | None = None
+              ) -> dict[str, Any]:
+    """One job: train ``model`` on growing prefixes of subset ``subset``; nRMSE per joint after each fit.
+
+    ``spec``: the :class:`CurveSpec` as a dict; ``data_sha256``: digests of its data files
+    (:func:`npz_digest`), unused here but part of the job's inputs, so that the job cache is keyed
+    by the data as well as by the settings."""
     from cascgp.metrics import nrmse
 
-    st = _STATE
-    spec: CurveSpec = st["spec"]
+    from cascgp_experiments.execution import report_progress
+
+    spec_ = CurveSpec(**spec)
+    st = state_for(spec_)
+    spec = spec_
     data = st["subsets"][subset]
     test, mask = st["test"], st["mask"]
     make = _resolve(spec.factory)
@@ -166,6 +190,7 @@ def run_job(model: str, subset: int) -> dict[str, Any]:
                            "nll": nll, "nll_cold": nll_ref, "gap": [a - b for a, b in zip(nll, nll_ref)],
                            "wall_s": walls[-1], "wall_cold_s": time.perf_counter() - t1})
         prev = m
+        report_progress(1, f"{model}#{subset} {T:g}s")
     return {"model": model, "subset": subset, "nrmse": rows, "fit_wall_s": walls, "n_train": ntrain,
             "audit": audits}
 
@@ -179,63 +204,33 @@ def rbd_curve(state: dict[str, Any]) -> list[float]:
     return nrmse(pred[mask], test.tau[mask]).tolist()
 
 
-def run_curves(spec: CurveSpec, models: list[str], *, workers: int = 2, cache_dir: str | Path | None = None,
-               desc: str = "fits") -> dict[str, Any]:
-    """Run every (model, subset) job; returns the per-model curves block of the results JSON:
+def run_curves(spec: CurveSpec, models: list[str], *, workers: int | None = None, ray_address: str | None = None,
+               cache_dir: str | Path | None = None, desc: str = "fits", show_progress: bool = True
+               ) -> dict[str, Any]:
+    """Run every (model, subset) job (:func:`curve_job`) with :func:`cascgp_experiments.execution.run_jobs`
+    (``workers`` local processes, default every core, or the Ray cluster at ``ray_address``); returns the
+    per-model curves block of the results JSON:
 
     ``{"grid_s", "n_subsets", "n_test_rows", "models": {m: {"nrmse_mean" (G, N), "nrmse_std" (G, N),
-    "nrmse_all" (S, G, N), "fit_wall_s" (S, G), "n_train" (S, G)}}, "wall_s"}``.
+    "nrmse_all" (S, G, N), "fit_wall_s" (S, G), "n_train" (S, G)}}, "wall_s", "jobs"}``.
 
-    Finished jobs are cached as JSON in ``cache_dir`` (keyed by the spec) so an interrupted run resumes.
+    Finished jobs are cached as JSON in ``cache_dir`` (keyed by the spec, the model, the subset and the
+    data files' contents) so an interrupted run resumes; the numbers do not depend on ``workers`` or
+    the backend.
     """
     t_start = time.perf_counter()
-    cache = Path(cache_dir) if cache_dir else None
-    key = {k: v for k, v in asdict(spec).items()}
-    if cache:
-        cache.mkdir(parents=True, exist_ok=True)
-        spec_file = cache / "spec.json"
-        if spec_file.exists() and read_json(spec_file) != read_json(write_json(cache / ".spec_new.json", key)):
-            for f in cache.glob("job_*.json"):
-                f.unlink()
-        write_json(spec_file, key)
     gp_models = [m for m in models if m != RBD]
-    jobs = [(m, s) for m in gp_models for s in range(spec.n_subsets)]
-    results: dict[tuple[str, int], dict] = {}
-    todo = []
-    for m, s in jobs:
-        f = cache / f"job_{m}_{s}.json" if cache else None
-        if f is not None and f.exists():
-            results[(m, s)] = read_json(f)
-        else:
-            todo.append((m, s))
+    digests = {"train": npz_digest(spec.train_path), "test": npz_digest(spec.test_path)}
+    spec_d = asdict(spec)
+    pairs = [(m, s) for m in gp_models for s in range(spec.n_subsets)]
+    jobs = [{"spec": spec_d, "model": m, "subset": s, "data_sha256": digests} for m, s in pairs]
     # big models first so the pool's tail is short
-    todo.sort(key=lambda ms: (ms[0].split("-")[1] != "standard", ms[0].endswith("df")))
-    bar = tqdm(total=len(jobs), initial=len(jobs) - len(todo), desc=desc, unit="job")
-
-    def done(r: dict) -> None:
-        results[(r["model"], r["subset"])] = r
-        if cache:
-            write_json(cache / f"job_{r['model']}_{r['subset']}.json", r)
-        bar.update(1)
-        bar.set_postfix_str(f"{r['model']}#{r['subset']} {sum(r['fit_wall_s']):.0f}s")
-
-    state = None
-    if workers <= 1 or not todo:
-        _init_worker(spec)
-        state = _STATE
-        for m, s in todo:
-            done(run_job(m, s))
-    else:
-        import multiprocessing as mp
-
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                                 initializer=_init_worker, initargs=(spec,)) as pool:
-            futs = [pool.submit(run_job, m, s) for m, s in todo]
-            for f in as_completed(futs):
-                done(f.result())
-        _init_worker(spec)
-        state = _STATE
-    bar.close()
+    prio = [2 * (m.split("-")[1] == "standard") + (not m.endswith("df")) for m, _ in pairs]
+    res = run_jobs(curve_job, jobs, workers=workers, ray_address=ray_address, cache_dir=cache_dir, desc=desc,
+                   units=[len(spec.grid)] * len(jobs), unit="fit", priority=prio,
+                   label=lambda j: f"{j['model']}#{j['subset']}", show_progress=show_progress)
+    results = {pair: r for pair, r in zip(pairs, res)}
+    state = state_for(spec)
     out: dict[str, Any] = {"grid_s": list(spec.grid), "n_subsets": spec.n_subsets,
                            "n_test_rows": int(state["mask"].sum()),
                            "train_hz": spec.train_hz, "test_hz": spec.test_hz,
@@ -261,7 +256,8 @@ def run_curves(spec: CurveSpec, models: list[str], *, workers: int = 2, cache_di
     out["audit"] = audit_summary([a for (m, s_), r in sorted(results.items()) for a in r.get("audit", [])],
                                  spec.audit_fraction, len(gp_models) * spec.n_subsets * len(spec.grid))
     out["wall_s"] = time.perf_counter() - t_start
-    out["n_cached_jobs"] = len(jobs) - len(todo)
+    out["n_cached_jobs"] = res.n_cached
+    out["jobs"] = {**res.stats(), "labels": [f"{m}#{s}" for m, s in pairs]}
     return out
 
 
@@ -275,7 +271,3 @@ def audit_summary(records: list[dict], fraction: float, n_fits: int, tol: float 
                     "gap_q95": float(np.percentile(gaps, 95)), "gap_max": float(gaps.max()),
                     "gap_min": float(gaps.min()), "better_than_cold": float(np.mean(gaps < -tol))})
     return out
-
-
-def default_workers() -> int:
-    return max(1, min(2, os.cpu_count() or 1))

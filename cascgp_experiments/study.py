@@ -51,7 +51,8 @@ from typing import Any
 
 from cascgp_experiments.common import (FULL_GRID, NOMINAL_URDF, NP_DB, PAPER_TABLE, QUICK_GRID, RBD, SMOKE_GRID,
                                        VARIANTS, label, make_table, read_json, write_json)
-from cascgp_experiments.curves import CurveSpec, default_workers, run_curves
+from cascgp_experiments.curves import CurveSpec, run_curves
+from cascgp_experiments.execution import check_workers, session
 
 
 @dataclass(frozen=True)
@@ -117,10 +118,21 @@ def cached_iteration_counts(out: Path, train, settings: Settings) -> dict[str, A
     return res
 
 
-def run_study(out: str | Path, settings: Settings, *, models: list[str] | None = None, workers: int = 2,
-              sarcos: str | Path | None = None, do_iterations: bool = True, do_plots: bool = True,
-              command: str = "") -> dict[str, Any]:
-    """Run the whole study into ``out``; returns the results dict (also ``out/results.json``)."""
+def run_study(out: str | Path, settings: Settings, *, models: list[str] | None = None, workers: int | None = None,
+              ray_address: str | None = None, sarcos: str | Path | None = None, do_iterations: bool = True,
+              do_plots: bool = True, command: str = "") -> dict[str, Any]:
+    """Run the whole study into ``out``; returns the results dict (also ``out/results.json``).
+
+    ``workers`` / ``ray_address``: where the collection's motions and the curve fits run
+    (:mod:`cascgp_experiments.execution`; default every local core); the numbers do not depend on them."""
+    with session(ray_address, workers):
+        return _run_study(out, settings, models=models, workers=workers, ray_address=ray_address, sarcos=sarcos,
+                          do_iterations=do_iterations, do_plots=do_plots, command=command)
+
+
+def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None, workers: int | None,
+               ray_address: str | None, sarcos: str | Path | None, do_iterations: bool, do_plots: bool,
+               command: str) -> dict[str, Any]:
     from cascgp.data import DynamicsData
 
     from cascgp_experiments import collect as col
@@ -130,15 +142,16 @@ def run_study(out: str | Path, settings: Settings, *, models: list[str] | None =
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     models = list(models or VARIANTS)
+    workers = check_workers(workers)
     timings: dict[str, float] = {}
     results: dict[str, Any] = {"meta": {
-        "command": command, "settings": asdict(settings), "models": models, "workers": workers,
+        "command": command, "settings": asdict(settings), "models": models, "workers": workers, "ray": ray_address,
         "versions": _versions(), "started": time.strftime("%Y-%m-%d %H:%M:%S"),
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}}}
 
     # 1. data
     ccfg = replace(col.PRESETS[settings.collection], seed=settings.seed)
-    train, test, cinfo = col.collect(out / "data", ccfg)
+    train, test, cinfo = col.collect(out / "data", ccfg, workers=workers, ray_address=ray_address)
     timings["collect_s"] = cinfo["wall_s"]
     results["meta"]["collection"] = {**asdict(ccfg), "reused": cinfo["reused"],
                                      "train_rows": train.n_samples, "test_rows": test.n_samples,
@@ -151,7 +164,8 @@ def run_study(out: str | Path, settings: Settings, *, models: list[str] | None =
                      test_hz=settings.test_hz, split_by="segment", urdf=str(NOMINAL_URDF),
                      n_restarts=settings.n_restarts, warm_start=settings.warm_start, seed=settings.seed,
                      audit_fraction=settings.audit_fraction)
-    jaco = run_curves(spec, models + [RBD], workers=workers, cache_dir=out / "cache" / "jaco", desc="Jaco fits")
+    jaco = run_curves(spec, models + [RBD], workers=workers, ray_address=ray_address, cache_dir=out / "cache" / "jaco",
+                      desc="Jaco fits")
     timings["jaco_curves_s"] = jaco["wall_s"]
     jaco["dof"] = train.dof
     jaco["labels"] = {m: label(m) for m in jaco["models"]}
@@ -181,7 +195,7 @@ def run_study(out: str | Path, settings: Settings, *, models: list[str] | None =
     # 5. SARCOS
     if sarcos is not None:
         s = run_sarcos(sarcos, out / "sarcos", grid=settings.sarcos_grid, n_subsets=settings.sarcos_subsets,
-                       n_restarts=settings.n_restarts, workers=workers, seed=settings.seed)
+                       n_restarts=settings.n_restarts, workers=workers, ray_address=ray_address, seed=settings.seed)
         s["labels"] = {m: label(m) for m in s["models"]}
         results["sarcos"] = s
         timings["sarcos_s"] = s["wall_s_total"]
@@ -224,7 +238,7 @@ def prepare_files(sarcos_path: str | Path, out: str | Path) -> tuple[Path, Path,
 
 
 def run_sarcos(sarcos_path: str | Path, out: str | Path, *, grid=SARCOS_FULL_GRID, n_subsets: int = 9,
-               n_restarts: int = 1, workers: int | None = None, seed: int = 0,
+               n_restarts: int = 1, workers: int | None = None, ray_address: str | None = None, seed: int = 0,
                gp_overrides: dict | None = None) -> dict[str, Any]:
     """The SARCOS block of the results JSON (curves of NP standard / inward / outward)."""
     t0 = time.perf_counter()
@@ -233,7 +247,7 @@ def run_sarcos(sarcos_path: str | Path, out: str | Path, *, grid=SARCOS_FULL_GRI
     spec = CurveSpec(train_path=str(tr), test_path=str(te), n_subsets=n_subsets, grid=list(grid),
                      train_hz=10.0, test_hz=None, split_by="rows", urdf=None, n_restarts=n_restarts,
                      seed=seed, gp_overrides=dict(gp_overrides or {}))
-    block = run_curves(spec, list(NP_DB), workers=workers or default_workers(),
+    block = run_curves(spec, list(NP_DB), workers=workers, ray_address=ray_address,
                        cache_dir=out / "cache" / "sarcos", desc="SARCOS fits")
     block.update(info)
     block["dof"] = 7

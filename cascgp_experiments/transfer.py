@@ -11,13 +11,18 @@ This module owns what is Jaco-specific about the experiment: the env (``JacoPour
 options (``payload_mass``), the gains and torque limits (``jaco_env``), the nominal URDF, the
 presets (:data:`FULL_CONTROLLERS` ...), the summary table and the figure. The command line is
 ``python -m scripts.task_transfer``.
+
+Parallel: every controller is one job (:func:`controller_job`, its own env; a controller's attempts
+stay sequential because its data accumulate), run by :mod:`cascgp_experiments.execution` on local
+processes or a Ray cluster, cached per controller so that a killed run resumes. Attempt ``i`` is seeded
+``seed * 1000 + i`` whatever runs it, so the attempts do not depend on the worker count.
 """
 
 from __future__ import annotations
 
 import os
-import sys
-from dataclasses import dataclass
+import shutil
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -26,12 +31,11 @@ import numpy as np
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 import gymnasium as gym  # noqa: E402
-from tqdm import tqdm  # noqa: E402
 
 import jaco_env  # noqa: E402  (registers the environments)
-from cascgp.io import atomic_write_text, write_json  # noqa: E402
-from cascgp.learning import (Attempt, ControllerRun, Feedback, RetrainConfig, attempt_plan,  # noqa: E402
-                             check_controller, run_controllers)
+from cascgp.io import atomic_write_text, read_json, write_json  # noqa: E402
+from cascgp.learning import (PLAIN_CONTROLLERS, Attempt, ControllerRun, Feedback, RetrainConfig,  # noqa: E402
+                             attempt_plan, check_controller, run_controller)
 from cascgp.rbd import load_nominal  # noqa: E402
 from cascgp_experiments.common import NOMINAL_URDF, save_figure  # noqa: E402
 
@@ -78,22 +82,98 @@ class TransferConfig:
         return gym.make(ENV_ID, n_marbles=self.n_marbles)
 
 
-def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bool = True) -> list[ControllerRun]:
-    """Run the whole experiment; ``out`` (if given) receives the data buffers under ``out/buffers/<controller>``."""
+    def to_dict(self) -> dict[str, Any]:
+        """The settings as JSON-ready values (tuples as lists)."""
+        return {**asdict(self), "controllers": list(self.controllers), "tasks": list(self.tasks)}
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> "TransferConfig":
+        return cls(**{**d, "controllers": tuple(d["controllers"]), "tasks": tuple(d["tasks"])})
+
+
+def controller_job(config: dict[str, Any], name: str, buffer_dir: str | None) -> list[dict[str, Any]]:
+    """One job of :func:`run_transfer`: every attempt of one controller, on its own env (the attempts of a
+    learning controller are sequential: its data accumulate). ``buffer_dir`` belongs to this job: it is
+    emptied first, so a retried or resumed job starts again from no data. Returns the attempt records."""
+    from cascgp_experiments.execution import report_progress
+
+    cfg = TransferConfig.from_dict(config)
+    if buffer_dir is not None:
+        shutil.rmtree(buffer_dir, ignore_errors=True)
+    rbd = load_nominal(NOMINAL_URDF)
+    env = cfg.make_env()
+
+    def progress(name: str, record: dict[str, Any]) -> None:
+        report_progress(1, f"{name} {record['task']}#{record['task_attempt']} "
+                           f"rmse={record['tracking_rmse']:.3f} jar={record['in_jar']:.2f}")
+
+    try:
+        run = run_controller(name, env, cfg.plan(), rbd, jaco_feedback(), cfg.retrain(),
+                             reset_options=cfg.reset_options(), buffer_dir=buffer_dir, on_attempt=progress)
+    finally:
+        env.close()
+    return run.attempts
+
+
+def transfer_cache(out: Path) -> Path:
+    """Where a run in ``out`` keeps its job cache (one finished controller per file) and its settings."""
+    return Path(out) / "cache" / "transfer"
+
+
+def claim_output(cfg: TransferConfig, out: Path, overwrite: bool = False) -> str:
+    """Make ``out`` ready for a run of ``cfg``; returns ``"new"``, ``"resume"`` or ``"overwrite"``.
+
+    An earlier run's buffers are deleted with ``overwrite``; a run of the same settings that was
+    stopped is resumed (the controllers it finished come from the job cache); anything else in
+    ``out/buffers`` is an error (``ValueError``), so that no data are mixed or lost."""
+    out = Path(out)
+    buffers, cache = out / "buffers", transfer_cache(out)
+    settings = cache / "settings.json"
+    if overwrite:
+        had = buffers.exists() or cache.exists()
+        shutil.rmtree(buffers, ignore_errors=True)
+        shutil.rmtree(cache, ignore_errors=True)
+        state = "overwrite" if had else "new"
+    elif settings.exists() and read_json(settings) == cfg.to_dict():
+        state = "resume"
+    elif buffers.exists() and any(buffers.iterdir()):
+        raise ValueError(f"{buffers} holds data from an earlier run with other settings; choose a new --out folder "
+                         "or pass --overwrite")
+    else:
+        shutil.rmtree(cache, ignore_errors=True)
+        state = "new"
+    write_json(settings, cfg.to_dict())
+    return state
+
+
+def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bool = True, *,
+                 workers: int | None = None, ray_address: str | None = None, stats: dict[str, Any] | None = None
+                 ) -> list[ControllerRun]:
+    """Run the whole experiment: one job per controller (:func:`controller_job`) through
+    :func:`cascgp_experiments.execution.run_jobs` (``workers`` local processes, ``None``: every core, or
+    the Ray cluster at ``ray_address``); the attempts do not depend on either.
+
+    ``out`` (if given) receives the data buffers under ``out/buffers/<controller>`` and the job cache
+    under ``out/cache/transfer`` (:func:`claim_output` prepares it): a killed run started again with the
+    same settings resumes with the controllers that had not finished. ``stats`` (a dict), if given, receives
+    the job statistics (:meth:`cascgp_experiments.execution.JobResults.stats`)."""
+    from cascgp_experiments.execution import run_jobs
+
     for name in cfg.controllers:
         check_controller(name)
-    rbd = load_nominal(NOMINAL_URDF)
     plan = cfg.plan()
-    with tqdm(total=len(cfg.controllers) * len(plan), desc="attempts", disable=not show_progress,
-              file=sys.stderr) as bar:
-        def progress(name: str, record: dict[str, Any]) -> None:
-            bar.set_postfix_str(f"{name} {record['task']}#{record['task_attempt']} "
-                                f"rmse={record['tracking_rmse']:.3f} jar={record['in_jar']:.2f}")
-            bar.update(1)
-
-        return run_controllers(cfg.controllers, cfg.make_env, plan, rbd, jaco_feedback(), cfg.retrain(),
-                               reset_options=cfg.reset_options(),
-                               buffer_root=None if out is None else out / "buffers", on_attempt=progress)
+    config = cfg.to_dict()
+    jobs = [{"config": config, "name": name,
+             "buffer_dir": None if out is None else str(Path(out).resolve() / "buffers" / name)}
+            for name in cfg.controllers]
+    res = run_jobs(controller_job, jobs, workers=workers, ray_address=ray_address,
+                   cache_dir=None if out is None else transfer_cache(out), desc="attempts",
+                   units=[len(plan)] * len(jobs), unit="attempt", priority=[name not in PLAIN_CONTROLLERS for name in cfg.controllers],
+                   label=lambda j: j["name"], show_progress=show_progress)
+    runs = [ControllerRun(name, list(attempts)) for name, attempts in zip(cfg.controllers, res)]
+    if stats is not None:
+        stats.update(res.stats(), labels=list(cfg.controllers))
+    return runs
 
 
 def summary_table(runs: list[ControllerRun]) -> str:
@@ -146,13 +226,17 @@ def plot(results: dict[str, Any], path: Path) -> None:
     plt.close(fig)
 
 
-def write_outputs(runs: list[ControllerRun], cfg: TransferConfig, out: Path, wall_s: float) -> dict[str, Any]:
-    """Write ``results.json``, ``summary.md`` and ``transfer.png`` into ``out``; returns the results dict."""
+def write_outputs(runs: list[ControllerRun], cfg: TransferConfig, out: Path, wall_s: float,
+                  jobs: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Write ``results.json``, ``summary.md`` and ``transfer.png`` into ``out``; returns the results dict.
+    ``jobs``: the job statistics of the run (workers, backend, seconds per controller), stored as ``"jobs"``."""
     results = {
         "config": {**cfg.__dict__, "controllers": list(cfg.controllers), "tasks": list(cfg.tasks)},
         "wall_seconds": wall_s,
         "controllers": {run.name: run.attempts for run in runs},
     }
+    if jobs is not None:
+        results["jobs"] = jobs
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "results.json", results, indent=2)
     atomic_write_text(out / "summary.md", summary_table(runs) + "\n")

@@ -2,7 +2,7 @@
 
 Usage::
 
-    python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke]
+    python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N | --ray ADDRESS]
 
 The protocol and the files: :mod:`cascgp_experiments.collect`.
 """
@@ -13,6 +13,7 @@ import argparse
 from dataclasses import asdict
 
 from cascgp_experiments.collect import PRESETS, CollectConfig, collect
+from cascgp_experiments.execution import add_execution_args, check_args, session
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -24,12 +25,15 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--payload-mass", type=float, default=None, help="kg (default 0.8)")
     ap.add_argument("--force", action="store_true", help="collect again even if files exist")
+    add_execution_args(ap)
     a = ap.parse_args(argv)
+    check_args(ap, a)
     base = PRESETS["quick" if a.quick else "smoke" if a.smoke else "full"]
     kw = asdict(base) | {"seed": a.seed}
     if a.payload_mass is not None:
         kw["payload_mass"] = a.payload_mass
-    train, test, info = collect(a.out, CollectConfig(**kw), force=a.force)
+    with session(a.ray, a.workers):
+        train, test, info = collect(a.out, CollectConfig(**kw), force=a.force, workers=a.workers, ray_address=a.ray)
     print(f"train: {train}\ntest: {test}\n{info}")
 
 

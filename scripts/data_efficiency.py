@@ -4,6 +4,7 @@ Usage::
 
     python -m scripts.data_efficiency --out out/study            # full (under an hour, 2 cores)
     python -m scripts.data_efficiency --out out/quick --quick    # a few minutes
+    python -m scripts.data_efficiency --out out/study --ray local  # the same jobs on a local Ray instance
 
 The steps, presets and outputs: :mod:`cascgp_experiments.study`.
 """
@@ -17,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from cascgp_experiments.common import DEFAULT_SARCOS, VARIANTS, limit_threads
-from cascgp_experiments.curves import default_workers
+from cascgp_experiments.execution import add_execution_args, check_args
 from cascgp_experiments.study import PRESETS, run_study
 
 
@@ -32,7 +33,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--no-sarcos", action="store_true", help="skip the SARCOS part")
     ap.add_argument("--no-iterations", action="store_true", help="skip the iteration-count fits")
     ap.add_argument("--models", default=None, help="comma-separated subset of the 12 variants")
-    ap.add_argument("--workers", type=int, default=None, help="processes for the fits (default: min(2, cpus))")
+    add_execution_args(ap)
     ap.add_argument("--restarts", type=int, default=None,
                     help="GP starts per fit (default 10, one warm-started along the grid)")
     ap.add_argument("--subsets", type=int, default=None, help="training subsets used (default 10)")
@@ -69,9 +70,10 @@ def main(argv: list[str] | None = None) -> None:
         sarcos = a.sarcos or (str(DEFAULT_SARCOS) if DEFAULT_SARCOS.exists() else None)
         if a.sarcos and not Path(a.sarcos).exists():
             ap.error(f"--sarcos: file not found: {a.sarcos}")
-    workers = a.workers if a.workers is not None else (1 if preset == "smoke" else default_workers())
+    check_args(ap, a)
     limit_threads(1)
-    res = run_study(a.out, st, models=models, workers=workers, sarcos=sarcos, do_iterations=not a.no_iterations,
+    res = run_study(a.out, st, models=models, workers=a.workers, ray_address=a.ray, sarcos=sarcos,
+                    do_iterations=not a.no_iterations,
                     command=" ".join(["python -m scripts.data_efficiency"] + (argv if argv is not None else sys.argv[1:])))
     t = res["meta"]["timings"]
     print("timings (s): " + ", ".join(f"{k}={v:.1f}" for k, v in t.items()))

@@ -17,25 +17,30 @@ Usage::
     python -m scripts.task_transfer --out out/transfer            # full run
     python -m scripts.task_transfer --out out/demo --quick        # README demo (a few minutes)
 
+    python -m scripts.task_transfer --out out/transfer --workers 2     # two controllers at a time
+    python -m scripts.task_transfer --out out/transfer --ray local     # the same jobs on a local Ray instance
+
 Writes ``results.json`` (every attempt's metrics), ``summary.md`` (the summary table),
-``transfer.png`` (tracking RMSE and marbles in the jar per attempt) to ``--out``, and the
-data buffers under ``--out/buffers``. The loop: :mod:`cascgp.learning`; the Jaco experiment:
-:mod:`cascgp_experiments.transfer`.
+``transfer.png`` (tracking RMSE and marbles in the jar per attempt) to ``--out``, the
+data buffers under ``--out/buffers`` and the job cache (one file per finished controller) under
+``--out/cache/transfer``: the same command started again after a kill resumes. The loop:
+:mod:`cascgp.learning`; the Jaco experiment: :mod:`cascgp_experiments.transfer`; the parallel
+jobs: :mod:`cascgp_experiments.execution`.
 """
 
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 import time
 from pathlib import Path
 
+from cascgp_experiments.execution import add_execution_args, check_args, session
 from cascgp_experiments.transfer import (FULL_CONTROLLERS, FULL_TASKS, QUICK_CONTROLLERS, QUICK_TASKS,
-                                         TransferConfig, run_transfer, write_outputs)
+                                         TransferConfig, claim_output, run_transfer, write_outputs)
 
 
-def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, bool]:
+def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, bool, argparse.Namespace]:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, required=True, help="output folder (created; should be new or empty)")
     p.add_argument("--quick", action="store_true",
@@ -49,7 +54,10 @@ def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, boo
     p.add_argument("--rate", type=float, default=10.0, help="training data rate (Hz)")
     p.add_argument("--cap", type=int, default=500, help="maximum training-set size")
     p.add_argument("--restarts", type=int, default=3, help="GP optimiser restarts per retraining")
-    p.add_argument("--overwrite", action="store_true", help="delete the data buffers of an earlier run in --out")
+    p.add_argument("--overwrite", action="store_true",
+                   help="delete the data buffers and job cache of an earlier run in --out (without it, the same "
+                        "command resumes a stopped run)")
+    add_execution_args(p)
     a = p.parse_args(argv)
     cfg = TransferConfig(
         controllers=tuple(a.controllers.split(",")) if a.controllers else
@@ -60,19 +68,23 @@ def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, boo
         restarts=a.restarts)
     if cfg.attempts < 1:
         p.error("--attempts must be at least 1")
-    return cfg, a.out, a.overwrite
+    check_args(p, a)
+    return cfg, a.out, a.overwrite, a
 
 
 def main(argv: list[str] | None = None) -> None:
-    cfg, out, overwrite = parse_args(argv)
-    buffers = out / "buffers"
-    if buffers.exists() and any(buffers.iterdir()):
-        if not overwrite:
-            sys.exit(f"error: {buffers} holds data from an earlier run; choose a new --out folder or pass --overwrite")
-        shutil.rmtree(buffers)
+    cfg, out, overwrite, a = parse_args(argv)
+    try:
+        state = claim_output(cfg, out, overwrite)
+    except ValueError as exc:
+        sys.exit(f"error: {exc}")
+    if state == "resume":
+        print(f"resuming the run in {out} (finished controllers come from its job cache)", file=sys.stderr)
     t0 = time.perf_counter()
-    runs = run_transfer(cfg, out)
-    write_outputs(runs, cfg, out, time.perf_counter() - t0)
+    jobs: dict = {}
+    with session(a.ray, a.workers):
+        runs = run_transfer(cfg, out, workers=a.workers, ray_address=a.ray, stats=jobs)
+    write_outputs(runs, cfg, out, time.perf_counter() - t0, jobs=jobs)
     print((out / "summary.md").read_text())
     print(f"results: {out / 'results.json'}\nplot:    {out / 'transfer.png'}\n"
           f"wall time {time.perf_counter() - t0:.0f} s")

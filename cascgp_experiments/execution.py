@@ -1,0 +1,547 @@
+"""One execution layer for the experiments: many pure jobs on all local cores, or on a Ray cluster.
+
+A *job* is a call ``fn(**inputs)`` of a module-level function on a dict of inputs (model, subset,
+seed, file paths, settings ...). Jobs are pure functions of their inputs: every random number is
+seeded from them and every job runs with one torch / BLAS thread, so its result is the same
+whichever process, machine or backend runs it, and :func:`run_jobs` returns the results in the
+order of ``jobs`` whatever the order in which they finish.
+
+Backends (the same jobs, the same results):
+
+* ``workers=1``: in this process, one job after the other (torch and BLAS held to one thread while
+  the jobs run, restored afterwards);
+* ``workers=N`` (default: every core this process may use, :func:`default_workers`): a local
+  :class:`concurrent.futures.ProcessPoolExecutor` (``spawn``) of ``N`` processes, each with one
+  torch / BLAS thread (``OMP_NUM_THREADS`` ... and :func:`cascgp_experiments.common.limit_threads`);
+* ``ray_address``: the jobs become Ray tasks of one CPU each on the cluster at that address
+  (``ray.init(address=...)``); ``"local"`` starts a local Ray instance with ``num_cpus=workers``.
+  Ray is an optional extra (``pip install -e '.[ray]'``); nothing else imports it. On a cluster,
+  every node needs the project installed and the jobs' input files (and the transfer's buffer
+  folders) at the same paths, e.g. on a shared file system; only this process writes the cache.
+
+Progress: one tqdm bar for the whole run, counted in *units* (one per job by default). A long job
+reports units as it goes with :func:`report_progress` (a no-op outside :func:`run_jobs`), e.g. one
+per episode; the bar's postfix shows the last note.
+
+Failures: a job that raises is reported on stderr with its inputs and the error, and submitted once
+more; if it fails again :class:`JobError` is raised naming the inputs (after the jobs already
+running have finished and been cached; jobs not yet started are cancelled).
+
+Cache: with ``cache_dir``, every finished job's result is written atomically
+(:func:`cascgp.io.write_json`) to ``cache_dir/<fn>-<hash>.json``, the hash being the SHA-256 of the
+function's name and its inputs (canonical JSON). A run that is killed and started again with the
+same inputs skips the jobs already in the cache. Results then go through JSON (numpy values become
+lists and Python scalars, NaN becomes ``None``) whether they were cached or computed, so the two are
+identical; job inputs and results must be JSON-serialisable (:func:`cascgp.io.json_safe`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import multiprocessing as mp
+import os
+import queue as queue_mod
+import sys
+import threading
+import time
+import traceback
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Callable, Iterator, Mapping, Sequence
+
+from tqdm import tqdm
+
+from cascgp.io import json_safe, read_json, write_json
+
+__all__ = ["run_jobs", "report_progress", "session", "default_workers", "check_workers", "job_key", "JobError",
+           "JobResults", "add_execution_args", "check_args", "THREAD_ENV"]
+
+#: Environment of every worker process: one thread for OpenMP / OpenBLAS / MKL.
+THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+CACHE_FORMAT = "cascgp-job-result"
+CACHE_VERSION = 1
+
+
+class JobError(RuntimeError):
+    """A job failed twice (its first failure was retried once). ``inputs``: the job's inputs;
+    ``error``: the last error's text (with the worker's traceback)."""
+
+    def __init__(self, message: str, inputs: Mapping[str, Any], error: str) -> None:
+        super().__init__(message)
+        self.inputs = dict(inputs)
+        self.error = error
+
+
+class JobResults(list):
+    """The results of :func:`run_jobs`, in the order of the jobs, with run statistics:
+
+    ``n_cached`` (jobs read from the cache), ``job_seconds`` (wall time of each job where it ran; for
+    a cached job the time recorded when it ran), ``wall_s`` (the whole call), ``workers`` and
+    ``backend`` (``"in-process"``, ``"processes"`` or ``"ray"``)."""
+
+    n_cached: int = 0
+    job_seconds: list[float | None]
+    wall_s: float = 0.0
+    workers: int = 1
+    backend: str = "in-process"
+
+    def stats(self) -> dict[str, Any]:
+        """JSON-ready summary: number of jobs, cached jobs, workers, backend, per-job seconds."""
+        secs = [s for s in self.job_seconds if s is not None]
+        return {"n_jobs": len(self), "n_cached": self.n_cached, "workers": self.workers, "backend": self.backend,
+                "wall_s": self.wall_s, "job_seconds": list(self.job_seconds),
+                "job_seconds_sum": float(sum(secs)), "job_seconds_max": float(max(secs)) if secs else None}
+
+
+def default_workers() -> int:
+    """Every core this process may run on (``os.sched_getaffinity`` where available, else ``os.cpu_count``)."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):  # pragma: no cover - not Linux
+        n = os.cpu_count() or 1
+    return max(1, n)
+
+
+def add_execution_args(parser: Any) -> None:
+    """The ``--workers`` and ``--ray`` options, with the same meaning in every command line."""
+    parser.add_argument("--workers", type=int, default=None,
+                        help=f"parallel jobs: local processes with one torch/BLAS thread each, or the CPUs of a "
+                             f"--ray local instance (default: every core, here {default_workers()}; 1: in this "
+                             "process). Results do not depend on it.")
+    parser.add_argument("--ray", default=None, metavar="ADDRESS",
+                        help="submit the jobs to the Ray cluster at ADDRESS ('local': start a local Ray instance "
+                             "with --workers CPUs; 'auto': the cluster this machine belongs to); needs the extra: "
+                             "pip install -e '.[ray]'")
+
+
+def check_args(parser: Any, args: Any) -> None:
+    """Validate ``--workers`` / ``--ray`` (``parser.error`` on a bad value or a missing Ray)."""
+    if args.workers is not None and args.workers < 1:
+        parser.error(f"--workers: expected an integer >= 1, got {args.workers}")
+    if args.ray is not None:
+        try:
+            import ray  # noqa: F401
+        except ImportError:
+            parser.error("--ray needs Ray, an optional extra: pip install -e '.[ray]'")
+
+
+def check_workers(workers: int | None) -> int:
+    if workers is None:
+        return default_workers()
+    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
+        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
+    return workers
+
+
+# --------------------------------------------------------------------------- keys and cache
+def _fn_name(fn: Callable) -> str:
+    return f"{fn.__module__}:{fn.__qualname__}"
+
+
+def _canonical(inputs: Mapping[str, Any]) -> str:
+    try:
+        return json.dumps(json_safe(dict(inputs)), sort_keys=True, separators=(",", ":"), allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"job inputs must be JSON-serialisable to be cached: {inputs!r} ({exc})") from exc
+
+
+def job_key(fn: Callable, inputs: Mapping[str, Any]) -> str:
+    """SHA-256 (hex) of the function's name and the job's inputs (canonical JSON)."""
+    return hashlib.sha256(f"{_fn_name(fn)}\n{_canonical(inputs)}".encode()).hexdigest()
+
+
+def _cache_path(cache_dir: Path, fn: Callable, inputs: Mapping[str, Any]) -> Path:
+    return cache_dir / f"{fn.__name__}-{job_key(fn, inputs)[:32]}.json"
+
+
+def _read_cached(path: Path, fn: Callable, inputs: Mapping[str, Any]) -> dict | None:
+    if not path.exists():
+        return None
+    try:
+        rec = read_json(path)
+    except (OSError, ValueError):
+        return None
+    if (not isinstance(rec, dict) or rec.get("format") != CACHE_FORMAT or rec.get("fn") != _fn_name(fn)
+            or rec.get("inputs") != json.loads(_canonical(inputs)) or "result" not in rec):
+        return None
+    return rec
+
+
+def _normalise(result: Any) -> Any:
+    """What a result becomes after a trip through the cache (JSON)."""
+    return json.loads(json.dumps(json_safe(result)))
+
+
+# --------------------------------------------------------------------------- inside a worker
+_CHANNEL: Any = None          # where report_progress sends (a queue, or a callable in-process)
+_CURRENT: tuple[int, int] | None = None  # (job index, attempt) of the job running in this process
+
+
+def report_progress(units: int = 1, note: str = "") -> None:
+    """Called by a running job: ``units`` more of its work are done (``note``: shown beside the bar).
+    Does nothing when the job is not run by :func:`run_jobs`."""
+    if _CHANNEL is None or _CURRENT is None:
+        return
+    msg = (_CURRENT[0], _CURRENT[1], int(units), str(note))
+    try:
+        if callable(_CHANNEL):
+            _CHANNEL(msg)
+        else:
+            _CHANNEL.put(msg)
+    except Exception:  # noqa: BLE001 - progress must never fail a job
+        pass
+
+
+def _limit_threads() -> None:
+    for k, v in THREAD_ENV.items():
+        os.environ[k] = v
+    from cascgp_experiments.common import limit_threads
+
+    limit_threads(1)
+
+
+def _init_process(channel: Any) -> None:
+    """Initializer of every pool process: one thread, the progress channel."""
+    global _CHANNEL
+    _limit_threads()
+    _CHANNEL = channel
+
+
+def _call(fn: Callable, inputs: dict, index: int, attempt: int, channel: Any = None) -> tuple:
+    """Run one job; never raises: ``("ok", result, seconds)`` or ``("error", text, seconds)``."""
+    global _CURRENT, _CHANNEL
+    if channel is not None:  # Ray: the channel travels with the task
+        _limit_threads()
+        _CHANNEL = channel
+    _CURRENT = (index, attempt)
+    t0 = time.perf_counter()
+    try:
+        result = fn(**inputs)
+        return ("ok", result, time.perf_counter() - t0)
+    except Exception as exc:  # noqa: BLE001 - reported with the inputs by the caller
+        return ("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", time.perf_counter() - t0)
+    finally:
+        _CURRENT = None
+
+
+@contextmanager
+def _one_thread_here() -> Iterator[None]:
+    """Hold torch and BLAS to one thread in this process (as in a worker); restore afterwards."""
+    from threadpoolctl import threadpool_limits
+
+    import torch
+
+    prev = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        with threadpool_limits(1):
+            yield
+    finally:
+        torch.set_num_threads(prev)
+
+
+# --------------------------------------------------------------------------- progress
+class _Progress:
+    """The aggregated bar: units per job; messages of an earlier (failed) attempt are ignored."""
+
+    def __init__(self, bar: tqdm, units: list[int]) -> None:
+        self.bar, self.units = bar, units
+        self.reported = [0] * len(units)
+        self.attempt = [0] * len(units)
+        self.done: set[int] = set()
+        self.lock = threading.Lock()
+
+    def tick(self, msg: tuple) -> None:
+        i, attempt, n, note = msg
+        with self.lock:
+            if i in self.done or attempt != self.attempt[i] or not 0 <= i < len(self.units):
+                return
+            add = max(0, min(n, self.units[i] - self.reported[i]))
+            self.reported[i] += add
+            if add:
+                self.bar.update(add)
+            if note:
+                self.bar.set_postfix_str(note, refresh=False)
+
+    def finish(self, i: int, note: str = "") -> None:
+        with self.lock:
+            self.done.add(i)
+            self.bar.update(self.units[i] - self.reported[i])
+            self.reported[i] = self.units[i]
+            if note:
+                self.bar.set_postfix_str(note)
+
+    def retry(self, i: int) -> None:
+        with self.lock:
+            self.bar.update(-self.reported[i])
+            self.reported[i] = 0
+            self.attempt[i] += 1
+
+
+class _Drain(threading.Thread):
+    """Moves progress messages from a queue to the bar until stopped."""
+
+    def __init__(self, q: Any, progress: _Progress, get: Callable[[], Any]) -> None:
+        super().__init__(daemon=True)
+        self.q, self.progress, self.get = q, progress, get
+        self.stopped = threading.Event()
+
+    def run(self) -> None:
+        while not self.stopped.is_set():
+            try:
+                msg = self.get()
+            except (queue_mod.Empty, EOFError, OSError):
+                continue
+            except Exception:  # noqa: BLE001 - e.g. Ray's Empty, or the queue actor gone
+                if self.stopped.is_set():
+                    return
+                time.sleep(0.1)
+                continue
+            self.progress.tick(msg)
+
+    def stop(self) -> None:
+        self.stopped.set()
+        self.join(timeout=5)
+
+
+# --------------------------------------------------------------------------- the run
+def run_jobs(fn: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], *, workers: int | None = None,
+             ray_address: str | None = None, cache_dir: str | os.PathLike | None = None, desc: str = "jobs",
+             units: Sequence[int] | None = None, priority: Sequence[float] | None = None,
+             label: Callable[[Mapping[str, Any]], str] | None = None, show_progress: bool = True,
+             unit: str | None = None, retries: int = 1) -> JobResults:
+    """Run ``fn(**job)`` for every job; return the results in the order of ``jobs``.
+
+    Args:
+        fn: a module-level function (it is pickled by reference), pure in its inputs.
+        jobs: the inputs of each call (keyword arguments).
+        workers: parallel jobs (default :func:`default_workers`; 1: in this process).
+        ray_address: run on the Ray cluster at this address (``"local"``: a local instance with
+            ``workers`` CPUs) instead of local processes.
+        cache_dir: folder of the job cache (resume); ``None``: no cache.
+        desc: the progress bar's title.
+        units: progress units of each job (default 1 each; see :func:`report_progress`).
+        priority: jobs with a higher priority are submitted first (e.g. the longest first, so that
+            the tail of the run is short); ties keep the order of ``jobs``.
+        label: short text naming a job in the bar and in messages (default: its inputs).
+        show_progress: draw the bar (on stderr).
+        unit: what the bar counts (default ``"job"``, or ``"unit"`` with ``units``).
+        retries: how often a failed job is submitted again (1).
+    """
+    t_start = time.perf_counter()
+    jobs = [dict(j) for j in jobs]
+    n = len(jobs)
+    workers = check_workers(workers)
+    units_l = [max(1, int(u)) for u in units] if units is not None else [1] * n
+    if len(units_l) != n:
+        raise ValueError(f"units: expected {n} values (one per job), got {len(units_l)}")
+    label = label or (lambda job: ", ".join(f"{k}={v!r}" for k, v in job.items() if not isinstance(v, dict)))
+    name = fn.__name__
+    cache = Path(cache_dir) if cache_dir is not None else None
+    results = JobResults([None] * n)
+    results.job_seconds = [None] * n
+    todo: list[int] = []
+    if cache is not None:
+        cache.mkdir(parents=True, exist_ok=True)
+    for i, job in enumerate(jobs):
+        rec = _read_cached(_cache_path(cache, fn, job), fn, job) if cache is not None else None
+        if rec is None:
+            todo.append(i)
+        else:
+            results[i] = rec["result"]
+            results.job_seconds[i] = rec.get("wall_s")
+    results.n_cached = n - len(todo)
+    if priority is not None:
+        pr = list(priority)
+        todo.sort(key=lambda i: -pr[i])
+    todo_set = set(todo)
+    bar = tqdm(total=sum(units_l), initial=sum(units_l[i] for i in range(n) if i not in todo_set),
+               desc=desc, unit=unit or ("job" if units is None else "unit"), disable=not show_progress, file=sys.stderr,
+               dynamic_ncols=True)
+    progress = _Progress(bar, units_l)
+    for i in set(range(n)) - todo_set:
+        progress.done.add(i)
+        progress.reported[i] = units_l[i]
+    failures = [0] * n
+
+    def finished(i: int, out: tuple) -> bool:
+        """Record one job's outcome; True when it is to be submitted again."""
+        status, value, secs = out
+        if status == "ok":
+            if cache is not None:
+                value = _normalise(value)
+                write_json(_cache_path(cache, fn, jobs[i]),
+                           {"format": CACHE_FORMAT, "version": CACHE_VERSION, "fn": _fn_name(fn),
+                            "inputs": jobs[i], "wall_s": secs, "result": value})
+            results[i] = value
+            results.job_seconds[i] = secs
+            progress.finish(i, f"{label(jobs[i])} {secs:.0f}s")
+            return False
+        failures[i] += 1
+        head = value.splitlines()[0] if value else "?"
+        if failures[i] <= retries:
+            tqdm.write(f"{desc}: job {name}({label(jobs[i])}) failed: {head}; inputs: {_short(jobs[i])}; "
+                       f"retrying ({failures[i]}/{retries})", file=sys.stderr)
+            progress.retry(i)
+            return True
+        raise JobError(f"{desc}: job {name}({label(jobs[i])}) failed {failures[i]} times; inputs: "
+                       f"{_short(jobs[i])}\nlast error: {value}", jobs[i], value)
+
+    backend, used = "in-process", 1
+    try:
+        if todo:
+            if ray_address is not None:
+                backend, used = "ray", workers
+                _run_ray(fn, jobs, todo, workers, ray_address, progress, finished)
+            elif min(workers, len(todo)) <= 1:
+                _run_here(fn, jobs, todo, progress, finished)
+            else:
+                backend, used = "processes", min(workers, len(todo))
+                _run_pool(fn, jobs, todo, used, progress, finished)
+    finally:
+        bar.close()
+    results.wall_s = time.perf_counter() - t_start
+    results.workers, results.backend = used, backend
+    return results
+
+
+def _short(job: Mapping[str, Any], limit: int = 600) -> str:
+    s = _canonical(job)
+    return s if len(s) <= limit else s[:limit] + "..."
+
+
+def _run_here(fn, jobs, todo, progress, finished) -> None:
+    global _CHANNEL
+    prev = _CHANNEL
+    _CHANNEL = progress.tick
+    try:
+        with _one_thread_here():
+            for i in todo:
+                while finished(i, _call(fn, jobs[i], i, progress.attempt[i])):
+                    pass
+    finally:
+        _CHANNEL = prev
+
+
+def _run_pool(fn, jobs, todo, workers, progress, finished) -> None:
+    ctx = mp.get_context("spawn")
+    channel = ctx.Queue()
+    drain = _Drain(channel, progress, lambda: channel.get(timeout=0.2))
+    drain.start()
+    error: BaseException | None = None
+    try:
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_process,
+                                 initargs=(channel,)) as pool:
+            running: dict[Future, int] = {pool.submit(_call, fn, jobs[i], i, 0): i for i in todo}
+            while running:
+                done, _ = wait(running, return_when=FIRST_COMPLETED)
+                for fut in done:
+                    i = running.pop(fut)
+                    if fut.cancelled():
+                        continue
+                    try:
+                        again = finished(i, fut.result())
+                    except JobError as exc:
+                        if error is None:
+                            error = exc
+                            for f in running:  # jobs not started yet; the running ones finish and are cached
+                                f.cancel()
+                        continue
+                    if again and error is None:
+                        running[pool.submit(_call, fn, jobs[i], i, progress.attempt[i])] = i
+    finally:
+        drain.stop()
+        channel.close()
+    if error is not None:
+        raise error
+
+
+def _import_ray():
+    try:
+        import ray
+    except ImportError as exc:
+        raise ImportError("--ray needs Ray, an optional extra: pip install -e '.[ray]'") from exc
+    return ray
+
+
+def _ray_connect(address: str, workers: int) -> bool:
+    """Connect to (``"local"``: start) Ray unless connected already; True when this call connected."""
+    import logging
+
+    ray = _import_ray()
+    if ray.is_initialized():
+        return False
+    if address == "local":
+        ray.init(num_cpus=workers, include_dashboard=False, logging_level=logging.WARNING)
+    else:
+        ray.init(address=address, logging_level=logging.WARNING)
+    return True
+
+
+@contextmanager
+def session(ray_address: str | None, workers: int | None = None) -> Iterator[None]:
+    """Keep one Ray connection (``"local"``: one local instance) for several :func:`run_jobs` calls, e.g. the
+    steps of the study; without it each call connects and disconnects. Nothing to do for local processes."""
+    if ray_address is None:
+        yield
+        return
+    started = _ray_connect(ray_address, check_workers(workers))
+    try:
+        yield
+    finally:
+        if started:
+            _import_ray().shutdown()
+
+
+def _run_ray(fn, jobs, todo, workers, address, progress, finished) -> None:
+    ray = _import_ray()
+    from ray.util.queue import Queue as RayQueue
+
+    started = _ray_connect(address, workers)
+    error: BaseException | None = None
+    channel = RayQueue()
+    drain = _Drain(channel, progress, lambda: channel.get(block=True, timeout=0.2))
+    drain.start()
+    try:
+        remote = ray.remote(num_cpus=1, max_retries=0)(_call)
+        running = {remote.remote(fn, jobs[i], i, 0, channel): i for i in todo}
+        while running:
+            done, _ = ray.wait(list(running), num_returns=1)
+            for ref in done:
+                i = running.pop(ref)
+                try:
+                    out = ray.get(ref)
+                except Exception as exc:  # noqa: BLE001 - the worker died (not an error raised by the job)
+                    out = ("error", f"{type(exc).__name__}: {exc}", 0.0)
+                try:
+                    again = finished(i, out)
+                except JobError as exc:
+                    if error is None:
+                        error = exc
+                        for r in running:
+                            ray.cancel(r)
+                    continue
+                if again and error is None:
+                    running[remote.remote(fn, jobs[i], i, progress.attempt[i], channel)] = i
+            if error is not None:
+                # cancelled tasks raise on get; the ones already running may still finish and be cached
+                for ref in list(running):
+                    i = running.pop(ref)
+                    try:
+                        out = ray.get(ref)
+                        if out[0] == "ok":
+                            finished(i, out)
+                    except Exception:  # noqa: BLE001
+                        pass
+    finally:
+        drain.stop()
+        try:
+            channel.shutdown()
+        except Exception:  # noqa: BLE001
+            pass
+        if started:
+            ray.shutdown()
+    if error is not None:
+        raise error

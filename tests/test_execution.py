@@ -1,0 +1,423 @@
+"""The parallel execution layer (cascgp_experiments.execution) and the experiments that use it.
+
+Results must not depend on the worker count or the backend, a failed job is retried once and then
+reported with its inputs, and a killed run resumes from the job cache with the same results.
+
+Fast (default suite): the layer on toy jobs; a tiny study (``--smoke``, two models) and a tiny
+transfer (two controllers, one task) with 1 and 2 workers and ``--ray local``, and killed then
+resumed. Slow (``-m slow``): the same on the real ``--quick`` study and ``--quick`` transfer.
+Tests that need Ray skip where it is not installed (it is an optional extra).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cascgp.io import read_json
+from cascgp_experiments.execution import JobError, job_key, run_jobs
+
+REPO = Path(__file__).resolve().parents[1]
+HERE = Path(__file__).resolve().parent
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    # the repo (scripts) and this folder (the toy jobs below, for Ray workers started from a subprocess)
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO), str(HERE), env.get("PYTHONPATH", "")])
+    env.setdefault("MUJOCO_GL", "egl")
+    return env
+
+
+def _needs_ray():
+    return pytest.importorskip("ray")
+
+
+# --------------------------------------------------------------------------- toy jobs (module level: picklable)
+def seeded_job(x: int, seed: int) -> dict:
+    """Pure in its inputs: numpy and torch random numbers from ``seed``, a Cholesky, a sum."""
+    import torch
+
+    rng = np.random.default_rng(seed)
+    g = torch.Generator().manual_seed(seed)
+    a = torch.randn(40, 40, generator=g, dtype=torch.float64)
+    chol = torch.linalg.cholesky(a @ a.T + 40 * torch.eye(40, dtype=torch.float64))
+    return {"x": x * x, "v": rng.standard_normal(5), "chol": float(chol.sum()), "t": (1, 2)}
+
+
+def flaky_job(x: int, marker_dir: str) -> int:
+    """Fails on its first call for each ``x`` (a marker file remembers), succeeds on the second."""
+    marker = Path(marker_dir) / f"tried_{x}"
+    if not marker.exists():
+        marker.write_text("1")
+        raise RuntimeError(f"transient failure of job {x}")
+    return 10 * x
+
+
+def failing_job(x: int) -> int:
+    if x == 2:
+        raise ValueError(f"job {x} always fails")
+    return x
+
+
+def slow_job(x: int, seconds: float) -> dict:
+    time.sleep(seconds)
+    return {"x": x, "y": float(np.sqrt(x))}
+
+
+def counting_job(x: int, log_dir: str) -> int:
+    (Path(log_dir) / f"ran_{x}_{time.monotonic_ns()}").write_text("")
+    return x + 1
+
+
+# --------------------------------------------------------------------------- the layer
+def test_same_results_with_one_and_two_workers_in_job_order() -> None:
+    jobs = [{"x": x, "seed": 100 + x} for x in range(6)]
+    one = run_jobs(seeded_job, jobs, workers=1, show_progress=False)
+    two = run_jobs(seeded_job, jobs, workers=2, show_progress=False)
+    assert one.backend == "in-process" and two.backend == "processes" and two.workers == 2
+    assert [r["x"] for r in one] == [x * x for x in range(6)]
+    for a, b in zip(one, two):
+        assert a["chol"] == b["chol"] and a["x"] == b["x"]
+        np.testing.assert_array_equal(a["v"], b["v"])
+
+
+def test_ray_local_gives_the_same_results(monkeypatch) -> None:
+    _needs_ray()
+    monkeypatch.setenv("PYTHONPATH", _env()["PYTHONPATH"])  # the Ray workers import this module
+    jobs = [{"x": x, "seed": 100 + x} for x in range(4)]
+    one = run_jobs(seeded_job, jobs, workers=1, show_progress=False)
+    ray = run_jobs(seeded_job, jobs, workers=2, ray_address="local", show_progress=False)
+    assert ray.backend == "ray"
+    for a, b in zip(one, ray):
+        assert a["chol"] == b["chol"]
+        np.testing.assert_array_equal(a["v"], b["v"])
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_failed_job_is_retried_once_and_reported_with_its_inputs(tmp_path: Path, workers: int, capfd) -> None:
+    jobs = [{"x": x, "marker_dir": str(tmp_path)} for x in range(3)]
+    res = run_jobs(flaky_job, jobs, workers=workers, show_progress=False)
+    assert list(res) == [0, 10, 20]
+    err = capfd.readouterr().err
+    for x in range(3):
+        assert f"transient failure of job {x}" in err
+        assert f'"x":{x}' in err  # the inputs
+    assert err.count("retrying (1/1)") == 3
+
+
+@pytest.mark.parametrize("workers", [1, 2])
+def test_second_failure_raises_with_the_inputs(tmp_path: Path, workers: int, capfd) -> None:
+    jobs = [{"x": x} for x in range(4)]
+    with pytest.raises(JobError) as info:
+        run_jobs(failing_job, jobs, workers=workers, cache_dir=tmp_path / "cache", show_progress=False)
+    e = info.value
+    assert e.inputs == {"x": 2} and "always fails" in e.error and "failed 2 times" in str(e)
+    assert '{"x":2}' in str(e)
+    assert "job 2 always fails" in capfd.readouterr().err  # the first failure was reported
+    # the jobs that succeeded are cached: a rerun after fixing nothing computes only the failing one again
+    if workers == 1:  # in-process: the jobs after the failing one never ran
+        assert len(list((tmp_path / "cache").glob("*.json"))) == 2
+
+
+def test_cache_is_keyed_by_the_inputs_and_normalises_results(tmp_path: Path) -> None:
+    log = tmp_path / "log"
+    log.mkdir()
+    jobs = [{"x": x, "log_dir": str(log)} for x in range(4)]
+    first = run_jobs(counting_job, jobs, workers=1, cache_dir=tmp_path / "c", show_progress=False)
+    assert first.n_cached == 0 and len(list(log.iterdir())) == 4
+    again = run_jobs(counting_job, jobs + [{"x": 9, "log_dir": str(log)}], workers=1, cache_dir=tmp_path / "c",
+                     show_progress=False)
+    assert again.n_cached == 4 and list(again) == [1, 2, 3, 4, 10] and len(list(log.iterdir())) == 5
+    assert again.job_seconds[0] == first.job_seconds[0]  # the time recorded when the job ran
+    assert job_key(counting_job, {"x": 1, "log_dir": "a"}) != job_key(counting_job, {"x": 2, "log_dir": "a"})
+    assert job_key(counting_job, {"x": 1, "log_dir": "a"}) == job_key(counting_job, {"log_dir": "a", "x": 1})
+    # a computed result goes through JSON like a cached one: both are the same objects
+    fresh = run_jobs(seeded_job, [{"x": 1, "seed": 1}], workers=1, cache_dir=tmp_path / "s", show_progress=False)
+    cached = run_jobs(seeded_job, [{"x": 1, "seed": 1}], workers=1, cache_dir=tmp_path / "s", show_progress=False)
+    assert cached.n_cached == 1 and fresh[0] == cached[0] and fresh[0]["t"] == [1, 2]
+
+
+def test_workers_must_be_positive() -> None:
+    with pytest.raises(ValueError, match="workers"):
+        run_jobs(counting_job, [], workers=0)
+
+
+_KILL_SCRIPT = """
+import sys
+from cascgp_experiments.execution import run_jobs
+from test_execution import slow_job
+res = run_jobs(slow_job, [{"x": x, "seconds": 0.4} for x in range(8)], workers=1, cache_dir=sys.argv[1],
+               show_progress=False)
+print("cached", res.n_cached)
+"""
+
+
+def _kill_when(proc: subprocess.Popen, ready, timeout: float = 300.0) -> None:
+    """SIGKILL ``proc``'s process group as soon as ``ready()`` is true (fails if it ends first)."""
+    t0 = time.monotonic()
+    while not ready():
+        assert proc.poll() is None, "the run finished before it could be killed"
+        assert time.monotonic() - t0 < timeout, "timed out waiting to kill the run"
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=60)
+
+
+def test_killed_run_resumes_from_the_cache(tmp_path: Path) -> None:
+    cache = tmp_path / "cache"
+    cmd = [sys.executable, "-c", _KILL_SCRIPT, str(cache)]
+    p = subprocess.Popen(cmd, env=_env(), cwd=REPO, start_new_session=True)
+    _kill_when(p, lambda: len(list(cache.glob("slow_job-*.json"))) >= 3)
+    done = len(list(cache.glob("slow_job-*.json")))
+    assert 3 <= done < 8
+    out = subprocess.run(cmd, env=_env(), cwd=REPO, capture_output=True, text=True, timeout=120, check=True)
+    assert out.stdout.strip() == f"cached {done}"
+    resumed = run_jobs(slow_job, [{"x": x, "seconds": 0.4} for x in range(8)], workers=1, cache_dir=cache,
+                       show_progress=False)
+    assert resumed.n_cached == 8
+    assert list(resumed) == [{"x": x, "y": float(np.sqrt(x))} for x in range(8)]
+
+
+# --------------------------------------------------------------------------- experiments: helpers
+def _cli(module: str, *args: str, timeout: float = 1200) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", module, *args], env=_env(), cwd=REPO, capture_output=True,
+                          text=True, timeout=timeout, check=True)
+
+
+def _study_numbers(out: Path) -> dict:
+    """Everything in a study's results.json that is a number of the experiment (not a timing)."""
+    res = read_json(out / "results.json")
+    jaco = res["jaco"]
+    keep = {"n_test_rows": jaco["n_test_rows"], "grid_s": jaco["grid_s"],
+            "models": {m: {k: v[k] for k in ("nrmse_all", "n_train") if k in v} for m, v in jaco["models"].items()},
+            "audit": [{k: r[k] for k in ("model", "subset", "seconds", "n_train", "nll", "nll_cold", "gap")}
+                      for r in jaco["audit"]["records"]],
+            "table": jaco["table"]}
+    return keep
+
+
+def _data_arrays(out: Path) -> dict[str, np.ndarray]:
+    arrays = {}
+    for split in ("train", "test"):
+        with np.load(out / "data" / f"jaco_{split}.npz", allow_pickle=False) as z:
+            arrays.update({f"{split}/{k}": z[k] for k in z.files})
+    return arrays
+
+
+def _assert_same_data(a: Path, b: Path) -> None:
+    x, y = _data_arrays(a), _data_arrays(b)
+    assert sorted(x) == sorted(y)
+    for k in x:
+        assert x[k].dtype == y[k].dtype and x[k].tobytes() == y[k].tobytes(), k
+
+
+def _transfer_numbers(out: Path) -> dict:
+    """The attempts of every controller without their timings."""
+    res = read_json(out / "results.json")
+    return {name: [{k: v for k, v in a.items() if k != "fit_seconds"} for a in attempts]
+            for name, attempts in res["controllers"].items()}
+
+
+def _cache_files(folder: Path, prefix: str) -> list[Path]:
+    return list(folder.glob(f"{prefix}-*.json")) if folder.exists() else []
+
+
+# --------------------------------------------------------------------------- tiny study (fast)
+TINY_STUDY = ("--smoke", "--models", "np-standard,sp-inward-df", "--no-sarcos", "--no-iterations")
+
+
+@pytest.fixture(scope="module")
+def tiny_study_serial(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("study") / "w1"
+    _cli("scripts.data_efficiency", "--out", str(out), *TINY_STUDY, "--workers", "1")
+    return out
+
+
+def test_tiny_study_two_workers_identical(tiny_study_serial: Path, tmp_path: Path) -> None:
+    out = tmp_path / "w2"
+    _cli("scripts.data_efficiency", "--out", str(out), *TINY_STUDY, "--workers", "2")
+    assert read_json(out / "results.json")["jaco"]["jobs"]["backend"] == "processes"
+    _assert_same_data(tiny_study_serial, out)  # collected side by side in an AsyncVectorEnv
+    assert _study_numbers(out) == _study_numbers(tiny_study_serial)
+    assert (out / "table1.md").read_text() == (tiny_study_serial / "table1.md").read_text()
+
+
+def test_tiny_study_ray_local_identical(tiny_study_serial: Path, tmp_path: Path) -> None:
+    _needs_ray()
+    out = tmp_path / "ray"
+    _cli("scripts.data_efficiency", "--out", str(out), *TINY_STUDY, "--ray", "local", "--workers", "2")
+    assert read_json(out / "results.json")["jaco"]["jobs"]["backend"] == "ray"
+    _assert_same_data(tiny_study_serial, out)  # one job per motion on Ray
+    assert _study_numbers(out) == _study_numbers(tiny_study_serial)
+
+
+def test_tiny_study_killed_and_resumed_identical(tiny_study_serial: Path, tmp_path: Path) -> None:
+    out = tmp_path / "killed"
+    # first the data (so that the kill lands among the fits), then a run killed after its first fit job
+    _cli("scripts.collect_jaco_data", "--out", str(out / "data"), "--smoke")
+    cache = out / "cache" / "jaco"
+    p = subprocess.Popen([sys.executable, "-m", "scripts.data_efficiency", "--out", str(out), *TINY_STUDY,
+                          "--workers", "1"],
+                         env=_env(), cwd=REPO, start_new_session=True, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL)
+    _kill_when(p, lambda: len(_cache_files(cache, "curve_job")) >= 1)
+    n_done = len(_cache_files(cache, "curve_job"))
+    assert 1 <= n_done < 4 and not (out / "results.json").exists()
+    _cli("scripts.data_efficiency", "--out", str(out), *TINY_STUDY, "--workers", "2")
+    res = read_json(out / "results.json")
+    assert res["jaco"]["n_cached_jobs"] == n_done
+    assert _study_numbers(out) == _study_numbers(tiny_study_serial)
+
+
+# --------------------------------------------------------------------------- tiny transfer (fast)
+TINY_TRANSFER = ("--controllers", "sp-inward,rbd", "--tasks", "front", "--attempts", "2", "--no-revisit",
+                 "--restarts", "1", "--cap", "200")
+
+
+@pytest.fixture(scope="module")
+def tiny_transfer_serial(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("transfer") / "w1"
+    _cli("scripts.task_transfer", "--out", str(out), *TINY_TRANSFER, "--workers", "1")
+    return out
+
+
+def test_tiny_transfer_two_workers_identical(tiny_transfer_serial: Path, tmp_path: Path) -> None:
+    out = tmp_path / "w2"
+    run = _cli("scripts.task_transfer", "--out", str(out), *TINY_TRANSFER, "--workers", "2")
+    assert read_json(out / "results.json")["jobs"]["backend"] == "processes"
+    assert _transfer_numbers(out) == _transfer_numbers(tiny_transfer_serial)
+    assert (out / "summary.md").read_text() == (tiny_transfer_serial / "summary.md").read_text()
+    assert (out / "summary.md").read_text() in run.stdout
+    # the buffers are written by the workers, the same episodes
+    assert sorted(p.name for p in (out / "buffers" / "sp-inward").iterdir()) == \
+        sorted(p.name for p in (tiny_transfer_serial / "buffers" / "sp-inward").iterdir())
+
+
+def test_tiny_transfer_ray_local_identical(tiny_transfer_serial: Path, tmp_path: Path) -> None:
+    _needs_ray()
+    out = tmp_path / "ray"
+    _cli("scripts.task_transfer", "--out", str(out), *TINY_TRANSFER, "--ray", "local", "--workers", "2")
+    assert read_json(out / "results.json")["jobs"]["backend"] == "ray"
+    assert _transfer_numbers(out) == _transfer_numbers(tiny_transfer_serial)
+
+
+def test_tiny_transfer_killed_and_resumed_identical(tiny_transfer_serial: Path, tmp_path: Path) -> None:
+    out = tmp_path / "killed"
+    cache = out / "cache" / "transfer"
+    args = [sys.executable, "-m", "scripts.task_transfer", "--out", str(out), *TINY_TRANSFER, "--workers", "1"]
+    # one worker: sp-inward (a learning controller, submitted first), then rbd; killed once sp-inward is cached
+    p = subprocess.Popen(args, env=_env(), cwd=REPO, start_new_session=True, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL)
+    _kill_when(p, lambda: len(_cache_files(cache, "controller_job")) >= 1)
+    assert len(_cache_files(cache, "controller_job")) == 1 and not (out / "results.json").exists()
+    run = subprocess.run(args, env=_env(), cwd=REPO, capture_output=True, text=True, timeout=600, check=True)
+    assert "resuming" in run.stderr
+    res = read_json(out / "results.json")
+    assert res["jobs"]["n_cached"] == 1
+    assert _transfer_numbers(out) == _transfer_numbers(tiny_transfer_serial)
+    # the buffer of the controller that was cut off was rebuilt from no data: two episodes, as uninterrupted
+    for name in ("sp-inward",):
+        assert sorted(p.name for p in (out / "buffers" / name).iterdir()) == \
+            sorted(p.name for p in (tiny_transfer_serial / "buffers" / name).iterdir())
+
+
+def test_transfer_refuses_other_settings_in_the_same_folder(tiny_transfer_serial: Path, tmp_path: Path) -> None:
+    import shutil
+
+    out = tmp_path / "copy"
+    shutil.copytree(tiny_transfer_serial, out)
+    bad = subprocess.run([sys.executable, "-m", "scripts.task_transfer", "--out", str(out), *TINY_TRANSFER,
+                          "--seed", "5"], env=_env(), cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert bad.returncode != 0 and "earlier run with other settings" in bad.stderr
+
+
+def test_ray_option_without_ray_is_a_clear_error(tmp_path: Path) -> None:
+    fake = tmp_path / "noray" / "ray"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text("raise ImportError('no ray here')\n")
+    env = _env()
+    env["PYTHONPATH"] = os.pathsep.join([str(tmp_path / "noray"), env["PYTHONPATH"]])
+    run = subprocess.run([sys.executable, "-m", "scripts.task_transfer", "--out", str(tmp_path / "o"), "--ray",
+                          "local"], env=env, cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 2 and "pip install -e '.[ray]'" in run.stderr
+
+
+# --------------------------------------------------------------------------- the --quick runs (slow)
+@pytest.fixture(scope="module")
+def quick_study_serial(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("quick_study") / "w1"
+    _cli("scripts.data_efficiency", "--out", str(out), "--quick", "--workers", "1")
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", ["workers2", "ray"])
+def test_quick_study_identical_across_backends(quick_study_serial: Path, tmp_path: Path, backend: str) -> None:
+    extra = ["--workers", "2"] if backend == "workers2" else ["--ray", "local", "--workers", "2"]
+    if backend == "ray":
+        _needs_ray()
+    out = tmp_path / backend
+    _cli("scripts.data_efficiency", "--out", str(out), "--quick", *extra)
+    _assert_same_data(quick_study_serial, out)
+    assert _study_numbers(out) == _study_numbers(quick_study_serial)
+    res, ref = read_json(out / "results.json"), read_json(quick_study_serial / "results.json")
+    assert res.get("sarcos", {}).get("models") == ref.get("sarcos", {}).get("models")
+    assert res["iterations"]["models"].keys() == ref["iterations"]["models"].keys()
+
+
+@pytest.mark.slow
+def test_quick_study_killed_and_resumed_identical(quick_study_serial: Path, tmp_path: Path) -> None:
+    out = tmp_path / "killed"
+    cache = out / "cache" / "jaco"
+    args = [sys.executable, "-m", "scripts.data_efficiency", "--out", str(out), "--quick", "--workers", "2"]
+    p = subprocess.Popen(args, env=_env(), cwd=REPO, start_new_session=True, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL)
+    _kill_when(p, lambda: len(_cache_files(cache, "curve_job")) >= 10)
+    n_done = len(_cache_files(cache, "curve_job"))
+    assert n_done < 36
+    _cli("scripts.data_efficiency", "--out", str(out), "--quick", "--workers", "2")
+    assert read_json(out / "results.json")["jaco"]["n_cached_jobs"] >= n_done
+    assert _study_numbers(out) == _study_numbers(quick_study_serial)
+
+
+@pytest.fixture(scope="module")
+def quick_transfer_serial(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("quick_transfer") / "w1"
+    _cli("scripts.task_transfer", "--quick", "--overwrite", "--out", str(out), "--workers", "1")
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("backend", ["workers2", "ray"])
+def test_quick_transfer_identical_across_backends(quick_transfer_serial: Path, tmp_path: Path, backend: str) -> None:
+    extra = ["--workers", "2"] if backend == "workers2" else ["--ray", "local", "--workers", "2"]
+    if backend == "ray":
+        _needs_ray()
+    out = tmp_path / backend
+    _cli("scripts.task_transfer", "--quick", "--overwrite", "--out", str(out), *extra)
+    assert _transfer_numbers(out) == _transfer_numbers(quick_transfer_serial)
+    assert (out / "summary.md").read_text() == (quick_transfer_serial / "summary.md").read_text()
+
+
+@pytest.mark.slow
+def test_quick_transfer_killed_and_resumed_identical(quick_transfer_serial: Path, tmp_path: Path) -> None:
+    out = tmp_path / "killed"
+    cache = out / "cache" / "transfer"
+    args = [sys.executable, "-m", "scripts.task_transfer", "--quick", "--out", str(out), "--workers", "1"]
+    p = subprocess.Popen(args, env=_env(), cwd=REPO, start_new_session=True, stdout=subprocess.DEVNULL,
+                         stderr=subprocess.DEVNULL)
+    _kill_when(p, lambda: len(_cache_files(cache, "controller_job")) >= 1)
+    assert not (out / "results.json").exists()
+    run = subprocess.run(args, env=_env(), cwd=REPO, capture_output=True, text=True, timeout=1200, check=True)
+    assert "resuming" in run.stderr
+    assert read_json(out / "results.json")["jobs"]["n_cached"] >= 1
+    assert _transfer_numbers(out) == _transfer_numbers(quick_transfer_serial)
+    assert (out / "summary.md").read_text() == (quick_transfer_serial / "summary.md").read_text()
