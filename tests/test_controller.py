@@ -151,7 +151,7 @@ def test_output_is_always_finite_and_within_limits(q, qd, t, which):
 
 
 @settings(max_examples=50, deadline=None)
-@given(scale=st.floats(min_value=1.0, max_value=1e8), gate=st.booleans(),
+@given(scale=st.floats(min_value=1.0, max_value=1e8), gate=st.sampled_from([False, "wiener", "variance"]),
        bad=st.sampled_from([None, np.nan, np.inf, -np.inf]))
 def test_far_out_of_range_states_with_a_fitted_gp_model(scale, gate, bad, fitted_planar_model, arm3_rbd):
     """A real fitted cascade (gated or not) queried far outside its training data, or with non-finite
@@ -179,30 +179,27 @@ def fitted_planar_model(arm3_train):
     return make_model("np-inward", data.dof, gp_config=GPFitConfig(n_restarts=2, max_iter=200)).fit(data)
 
 
-def test_gated_feedforward_trusts_the_model_near_its_data_and_the_rbd_far_away(fitted_planar_model, arm3_rbd,
-                                                                               arm3_train):
-    """w = clip(1 - v/p): ~1 at a training point (the model's mean), ~0 far away (the nominal torque)."""
+@pytest.mark.parametrize("rule", ["wiener", "variance"])
+def test_gated_feedforward_follows_its_rule(rule, fitted_planar_model, arm3_rbd, arm3_train):
+    """tau = tau_RBD + w d with d = mu - tau_RBD: w ~ 1 at a training point (the model), and for the variance
+    rule w ~ 0 far away (the nominal torque); the weights equal the documented formulas."""
     model = fitted_planar_model
-    ctrl = FeedforwardController(model, 0.0, 0.0, np.full(3, 1e6), fallback=arm3_rbd, gate=True)
+    ctrl = FeedforwardController(model, 0.0, 0.0, np.full(3, 1e6), fallback=arm3_rbd, gate=rule)
+    assert ctrl.name.endswith({"wiener": "-gated", "variance": "-vgated"}[rule])
     r = 10
-    q, qd, qdd = arm3_train.q[r], arm3_train.qd[r], arm3_train.qdd[r]
-
-    def ref(t, q=q, qd=qd, qdd=qdd):
-        return q, qd, qdd
-
-    tau = ctrl(0.0, q, qd, ref)
-    assert ctrl.name.endswith("gated")
-    assert np.all(ctrl.last_gate > 0.9)
-    mean, var = model.predict(q, qd, qdd, propagate=True)
-    nominal = arm3_rbd.inverse_dynamics(q, qd, qdd)
-    np.testing.assert_allclose(tau, nominal + ctrl.last_gate * (mean - nominal), rtol=1e-9, atol=1e-9)
-    np.testing.assert_allclose(ctrl.last_gate, np.clip(1 - var / model.signal_var, 0, 1), rtol=1e-7, atol=1e-9)
-
-    far = (q + 50.0, qd + 50.0, qdd + 50.0)
-    tau_far = ctrl(0.0, far[0], far[1], lambda t: far)
-    assert np.all(ctrl.last_gate < 0.05)
-    np.testing.assert_allclose(tau_far, arm3_rbd.inverse_dynamics(*far), atol=0.05 * np.abs(
-        model.predict(*far)[0] - arm3_rbd.inverse_dynamics(*far)).max() + 1e-9)
+    state = (arm3_train.q[r], arm3_train.qd[r], arm3_train.qdd[r])
+    for query in (state, tuple(x + 50.0 for x in state)):
+        tau = ctrl(0.0, query[0], query[1], lambda t, query=query: query)
+        mean, var = model.predict(*query, propagate=True)
+        nominal = arm3_rbd.inverse_dynamics(*query)
+        d = mean - nominal
+        w = d**2 / (d**2 + var) if rule == "wiener" else np.clip(1 - var / model.signal_var, 0, 1)
+        np.testing.assert_allclose(ctrl.last_gate, w, rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(tau, nominal + w * d, rtol=1e-9, atol=1e-6)
+        if query is state:
+            assert np.all(ctrl.last_gate > 0.9)
+        elif rule == "variance":
+            assert np.all(ctrl.last_gate < 0.05)
 
 
 def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
@@ -210,3 +207,5 @@ def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
         FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], gate=True)
     with pytest.raises(ValueError, match="gate: needs a fitted cascgp model"):
         FeedforwardController(AffineRBD(), KP, KD, LIMITS, gate=True)
+    with pytest.raises(ValueError, match="gate: expected"):
+        FeedforwardController(AffineRBD(), KP, KD, LIMITS, gate="sometimes")
