@@ -17,6 +17,7 @@ from gymnasium.error import ResetNeeded
 
 import jaco_env  # noqa: F401
 from jaco_env.envs import JacoPayloadEnv, JacoPourEnv
+from jaco_env.oracle import OracleController, PDController
 from jaco_env.tasks import DEFAULT_TASKS, PouringTask
 
 REPO = Path(__file__).resolve().parents[1]
@@ -227,3 +228,28 @@ def test_render_without_close_exits_cleanly() -> None:
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0 and out.stdout.strip() == "(24, 32, 3)"
     assert out.stderr == ""
+
+
+# ------------------------------------------------------------------ reference controllers
+@pytest.mark.parametrize("cls", [PDController, OracleController])
+@pytest.mark.parametrize("field", ["kp", "kd"])
+@pytest.mark.parametrize("bad", [np.inf, np.nan, -1.0, np.ones(5), "1"])
+def test_reference_controller_gains_are_checked(cls, field, bad) -> None:
+    with pytest.raises((ValueError, TypeError), match=field):
+        cls(**{field: bad})
+
+
+@pytest.mark.parametrize("cls", [PDController, lambda: OracleController(1.0)])
+def test_reference_controllers_never_output_nan(cls) -> None:
+    ctrl = cls()
+    ref = DEFAULT_TASKS["front"].reference
+    for q, qd in ((np.full(6, np.nan), np.zeros(6)), (np.zeros(6), np.full(6, np.inf)),
+                  (np.full(6, 1e308), np.full(6, -1e308))):
+        tau = ctrl(0.0, q, qd, ref)
+        assert tau.shape == (6,) and np.all(np.isfinite(tau))
+        assert np.all(np.abs(tau) <= jaco_env.robot.TORQUE_LIMITS)
+    assert ctrl.n_bad_measurements == 2
+    with pytest.raises(ValueError, match="q "):
+        ctrl(0.0, np.zeros(5), np.zeros(6), ref)
+    with pytest.raises(TypeError, match="qd"):
+        ctrl(0.0, np.zeros(6), np.zeros(6, dtype=complex), ref)
