@@ -186,13 +186,17 @@ class PouringTask:
 
         Scalar t gives three (N_JOINTS,) arrays; an array (T,) gives three (T, N_JOINTS) arrays. Before 0 the
         start pose and after ``duration`` the final pose are held (zero velocity/acceleration).
+        A ``t`` that is not real (str, bool, complex) raises ``TypeError``, a NaN/inf one ``ValueError``.
         """
         if self._segments is None:
             self._build()
         scalar = np.ndim(t) == 0
-        tt = np.atleast_1d(np.asarray(t, dtype=float))
+        raw = np.asarray(t)
+        if raw.dtype.kind not in "iuf":  # a string, bool or complex t is refused, not cast
+            raise TypeError(f"PouringTask.reference: t must be a real number or array (s), got {t!r}")
+        tt = np.atleast_1d(raw.astype(float))
         if tt.ndim != 1 or not np.all(np.isfinite(tt)):
-            raise ValueError("PouringTask.reference: t must be a finite scalar or 1-D array")
+            raise ValueError(f"PouringTask.reference: t must be a finite scalar or 1-D array, got {t!r}")
         n = robot.N_JOINTS
         q = np.empty((len(tt), n))
         qd = np.zeros((len(tt), n))
