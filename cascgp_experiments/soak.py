@@ -8,8 +8,9 @@ One **cycle** (repeated until the time budget is spent, at least once):
    (``reset`` option, or drawn by the env) and random actions (uniform within the bounds, sometimes far
    outside them: the env clips), then ``close``;
 2. each episode's measurements (``jaco_env.split_obs``) become a :class:`~cascgp.data.DynamicsData` appended
-   to a :class:`~cascgp.buffer.DataBuffer` on disk; every ``buffer_episodes`` episodes the folder is reopened
-   (all episodes must load back) and replaced by a fresh one, so that the data held stay bounded;
+   to a :class:`~cascgp.buffer.DataBuffer` on disk; once it holds ``buffer_episodes`` episodes, at the end of
+   the cycle, the folder is reopened (all episodes must load back) and replaced by a fresh one, so that the
+   data held stay bounded;
 3. a retrain: ``make_model(model, 6, gp_config=GPFitConfig(n_restarts=1, max_iter=30))`` fitted on
    ``buffer.training_set(max_samples=200)``, its predictions on the newest episode (``predict`` and
    ``predict_one``), and a save / ``load_model`` round trip that must give the same predictions.
@@ -67,7 +68,7 @@ class SoakConfig:
         warmup_cycles: cycles before the RSS baseline is taken (0: at the start of the first cycle).
         max_steps: longest episode (control steps); each episode runs a random 10 .. max_steps steps.
         max_marbles: ``JacoPour-v0`` gets a random 1 .. max_marbles marbles per make.
-        buffer_episodes: episodes per buffer folder before it is reopened and replaced.
+        buffer_episodes: episodes per buffer folder before it is reopened and replaced (at the end of a cycle).
         model: the cascgp model retrained every cycle.
         max_samples: training-set size cap (``DataBuffer.training_set``).
         fault: inject a failure (one of :data:`FAULTS`) to test the checks; ``None`` in a real run.
@@ -286,8 +287,6 @@ class _Soak:
         self._last_episode = data
         self.res.samples_appended += data.n_samples
         self._buffer_count += 1
-        if self._buffer_count >= self.cfg.buffer_episodes:
-            self._rotate_buffer()
 
     def _env_round(self, env_id: str) -> None:
         kwargs: dict[str, Any] = {"control_mode": str(self.rng.choice(["torque", "velocity"]))}
@@ -357,6 +356,8 @@ class _Soak:
                 for env_id in self.rng.permutation(["JacoPour-v0", "JacoPayload-v0"]):
                     self._env_round(str(env_id))
                 self._retrain()
+                if self._buffer_count >= cfg.buffer_episodes:  # after the retrain: every retrain has data
+                    self._rotate_buffer()
                 res.cycles += 1
                 gc.collect()
                 rss = self._sample_rss()
