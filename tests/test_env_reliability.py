@@ -18,6 +18,7 @@ from gymnasium.error import ResetNeeded
 import jaco_env  # noqa: F401
 from jaco_env.envs import JacoPayloadEnv, JacoPourEnv
 from jaco_env.oracle import OracleController, PDController
+from jaco_env.sensors import SensorNoise
 from jaco_env.tasks import DEFAULT_TASKS, PouringTask
 
 REPO = Path(__file__).resolve().parents[1]
@@ -162,6 +163,10 @@ def test_constructor_numbers_refuse_bools_and_strings() -> None:
         JacoPourEnv(n_marbles=5, payload_range=("0.6", "1.5"))
     with pytest.raises(TypeError, match="tracking_cost_weight"):
         JacoPourEnv(n_marbles=5, tracking_cost_weight=True)
+    with pytest.raises(TypeError, match="SensorNoise.q_std"):
+        SensorNoise(q_std=True)
+    with pytest.raises(ValueError, match="SensorNoise.tau_std"):
+        SensorNoise(tau_std=float("nan"))
 
 
 # ------------------------------------------------------------------ a rejected reset changes nothing
