@@ -73,13 +73,18 @@ def test_repeated_make_close_keeps_memory_flat() -> None:
 
 
 def test_scene_folder_removed_at_exit(tmp_path: Path) -> None:
-    """The exported scene lives in one folder per process, removed at exit (also by vector-env workers)."""
+    """The exported scene lives in one folder per process, removed at exit (also by vector-env workers); the
+    folder of a killed process is removed by the next process that exports a scene."""
     code = (
         "import gymnasium as gym, numpy as np, jaco_env, os\n"
         "env = gym.make('JacoPayload-v0'); print(os.path.dirname(env.unwrapped.fullpath)); env.close()\n"
         "v = gym.make_vec('JacoPayload-v0', num_envs=2, vectorization_mode='async'); v.reset(seed=0)\n"
         "v.step(np.zeros((2, 6), dtype=np.float32)); v.close()\n"
     )
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    stale = tmp_path / f"jaco_env_{int(dead.stdout)}_killed"  # left by a process killed by a signal
+    stale.mkdir()
+    (stale / "scene.xml").write_text("<mujoco/>")
     env = {**os.environ, "TMPDIR": str(tmp_path), "MUJOCO_GL": "egl"}
     out = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True,
                          timeout=300)

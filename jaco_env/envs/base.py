@@ -93,6 +93,26 @@ def _forget_exports() -> None:
 os.register_at_fork(after_in_child=_forget_exports)
 
 
+def _remove_folders_of_dead_processes() -> None:
+    """Remove the scene folders of killed processes (``jaco_env_<pid>_*`` whose process is gone):
+    a process killed by a signal never runs its exit handlers."""
+    root = tempfile.gettempdir()
+    try:
+        names = os.listdir(root)
+    except OSError:
+        return
+    for name in names:
+        parts = name.split("_")
+        if len(parts) < 4 or parts[:2] != ["jaco", "env"] or not parts[2].isdigit():
+            continue
+        try:
+            os.kill(int(parts[2]), 0)
+        except ProcessLookupError:
+            shutil.rmtree(os.path.join(root, name), ignore_errors=True)
+        except (PermissionError, OverflowError, ValueError):
+            pass  # another user's live process, or not a pid
+
+
 def _write_once(folder: str, name: str, contents: bytes) -> str:
     path = os.path.join(folder, name)
     if path not in _exported:
@@ -111,15 +131,17 @@ def export_scene(root: mjcf.RootElement) -> str:
     The asset files keep ``dm_control``'s content-hashed names and the XML is named by the hash of
     its text, so one configuration always gets the same path (MuJoCo's mesh cache, keyed by path,
     hits) and every scene shares the mesh files. Files are written once and never rewritten. The
-    folder (``$TMPDIR/jaco_env_*``) is removed at exit by ``multiprocessing.util.Finalize``, which
-    runs at interpreter exit in the main process and at the end of ``multiprocessing`` workers.
+    folder (``$TMPDIR/jaco_env_<pid>_*``) is removed at exit by ``multiprocessing.util.Finalize``,
+    which runs at interpreter exit in the main process and at the end of ``multiprocessing``
+    workers; the folders of processes killed by a signal are removed when the next one is created.
     """
     global _export_dir
     xml = root.to_xml_string()
     assets = root.get_assets()
     with _export_lock:
         if _export_dir is None or not os.path.isdir(_export_dir):
-            _export_dir = tempfile.mkdtemp(prefix="jaco_env_")
+            _remove_folders_of_dead_processes()
+            _export_dir = tempfile.mkdtemp(prefix=f"jaco_env_{os.getpid()}_")
             _exported.clear()
             multiprocessing.util.Finalize(None, shutil.rmtree, args=(_export_dir,),
                                           kwargs={"ignore_errors": True}, exitpriority=0)
