@@ -16,6 +16,7 @@ module              owns
 ``gains``           recommended PD gains
 ``oracle``          reference controllers (oracle, PD) for the episode runner
 ``excitation``      sum-of-sinusoids motions for data collection
+``checks``          input checks shared by the envs and controllers (real numbers, real arrays)
 ==================  ==========================================================================
 
 Headless

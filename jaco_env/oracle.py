@@ -6,6 +6,15 @@ attributes ``dof`` and ``name``, ``start(env, info)`` called right after ``env.r
 ``__call__(t, q, qd, reference) -> tau`` with ``reference(t) -> (q_d, qd_d, qdd_d)``. Both clip
 their output to the Kinova torque limits.
 
+Safety guarantees (tested, as ``cascgp.controller.FeedforwardController``'s): the output is always
+finite and within the torque limits, or the call raises a clear error naming the field. Gains must
+be finite and non-negative (``ValueError`` naming ``kp``/``kd``); ``t`` must be a finite real number
+and ``q``, ``qd`` and each of the reference's three arrays real arrays of shape (6,)
+(``TypeError``/``ValueError`` naming them). A non-finite measurement or reference entry contributes
+no feedback on that joint (counted in ``n_bad_measurements``); a finite but absurd error saturates
+at the limits; a non-finite feedforward (e.g. the oracle's inverse dynamics of an absurd reference)
+is replaced by zero (counted in ``n_fallbacks``).
+
 * :class:`OracleController` -- computed-torque feedforward from MuJoCo's own inverse
   dynamics (``mj_inverse``) of the full true scene: arm, welded hand, bottle and payload,
   with the true armature, joint damping and dry friction, plus PD feedback (paper eq. 2
@@ -44,11 +53,24 @@ import mujoco
 import numpy as np
 
 from jaco_env import robot, scene
+from jaco_env.checks import is_real_number, real_array
 from jaco_env.gains import DEFAULT_KD, DEFAULT_KP
 
 Reference = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 _N = robot.N_JOINTS
+_BIG = 1e300  # stands in for an overflowed feedback term; far beyond any actuator limit
+
+
+def _as_gain(value, name: str) -> np.ndarray:
+    """A gain as a (6,) array of finite non-negative numbers (scalars broadcast); errors name ``name``."""
+    a = np.asarray(value) if not isinstance(value, str) else value
+    if isinstance(a, np.ndarray) and a.ndim == 0 and a.dtype.kind in "iuf":
+        a = np.full(_N, float(a))
+    gain = real_array(a, (_N,), name)
+    if np.any(gain < 0):
+        raise ValueError(f"{name} must be non-negative, got {gain.tolist()}")
+    return gain
 
 
 @functools.lru_cache(maxsize=1)
@@ -87,22 +109,51 @@ class PDController:
 
     dof = _N
     name = "pd"
-    n_fallbacks = 0
 
     def __init__(self, kp: np.ndarray = DEFAULT_KP, kd: np.ndarray = DEFAULT_KD):
-        self.kp = np.asarray(kp, float)
-        self.kd = np.asarray(kd, float)
+        self.kp = _as_gain(kp, "kp")
+        self.kd = _as_gain(kd, "kd")
+        self.n_fallbacks = 0
+        self.n_bad_measurements = 0
 
     def start(self, env: Any, info: dict[str, Any]) -> None:
-        """Called by the episode runner after ``env.reset``; PD keeps no episode state."""
+        """Called by the episode runner after ``env.reset``: zero the counters."""
+        self.n_fallbacks = 0
+        self.n_bad_measurements = 0
 
     def feedforward(self, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray) -> np.ndarray:
         return np.zeros(_N)
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, reference: Reference) -> np.ndarray:
-        """Joint torques for the measured ``(q, qd)`` at time ``t`` (s since reset)."""
-        q_d, qd_d, qdd_d = reference(t)
-        tau = self.feedforward(q_d, qd_d, qdd_d) + self.kp * (q_d - q) + self.kd * (qd_d - qd)
+        """Joint torques for the measured ``(q, qd)`` at time ``t`` (s since reset); always finite and
+        within the torque limits (module docstring: what raises, what falls back)."""
+        if not is_real_number(t):
+            raise TypeError(f"t must be a real number (s), got {type(t).__name__} {t!r}")
+        if not np.isfinite(t):
+            raise ValueError(f"t must be finite, got {t!r}")
+        q = real_array(q, (_N,), "q (measured joint positions)", finite=False)
+        qd = real_array(qd, (_N,), "qd (measured joint velocities)", finite=False)
+        ref = reference(t)
+        if not isinstance(ref, (tuple, list)) or len(ref) != 3:
+            raise ValueError(f"reference(t) must return (q_d, qd_d, qdd_d), got {type(ref).__name__}")
+        q_d, qd_d, qdd_d = (real_array(r, (_N,), f"reference(t)[{i}] ({n})", finite=False)
+                            for i, (r, n) in enumerate(zip(ref, ("q_d", "qd_d", "qdd_d"))))
+        bad = ~(np.isfinite(q) & np.isfinite(qd) & np.isfinite(q_d) & np.isfinite(qd_d))
+        if np.any(bad):
+            self.n_bad_measurements += 1
+        with np.errstate(over="ignore", invalid="ignore"):
+            p_term = np.nan_to_num(self.kp * (q_d - q), nan=0.0, posinf=_BIG, neginf=-_BIG)
+            d_term = np.nan_to_num(self.kd * (qd_d - qd), nan=0.0, posinf=_BIG, neginf=-_BIG)
+        ff = np.zeros(_N)
+        if np.all(np.isfinite(q_d) & np.isfinite(qd_d) & np.isfinite(qdd_d)):
+            with np.errstate(over="ignore", invalid="ignore"):
+                ff = np.asarray(self.feedforward(q_d, qd_d, qdd_d), dtype=float)
+        if not np.all(np.isfinite(ff)):
+            self.n_fallbacks += 1
+            ff = np.zeros(_N)
+        with np.errstate(over="ignore", invalid="ignore"):
+            # (ff + P) + D, as before the checks; saturated terms (1e300) cannot make inf - inf.
+            tau = ff + np.where(bad, 0.0, p_term) + np.where(bad, 0.0, d_term)
         return np.clip(tau, -robot.TORQUE_LIMITS, robot.TORQUE_LIMITS)
 
 
@@ -124,6 +175,14 @@ class OracleController(PDController):
     def __init__(self, payload_mass: float | None = None, n_marbles: int = 0, kp: np.ndarray = DEFAULT_KP,
                  kd: np.ndarray = DEFAULT_KD, *, follow_marbles: bool = True):
         super().__init__(kp, kd)
+        if not isinstance(n_marbles, (int, np.integer)) or isinstance(n_marbles, (bool, np.bool_)) or n_marbles < 0:
+            raise ValueError(f"n_marbles must be a non-negative integer, got {n_marbles!r}")
+        if payload_mass is not None:
+            lo = scene.BOTTLE_MASS + n_marbles * scene.MARBLE_MASS
+            if not is_real_number(payload_mass):
+                raise TypeError(f"payload_mass must be a real number (kg) or None, got {payload_mass!r}")
+            if not lo <= payload_mass <= scene.MAX_PAYLOAD:
+                raise ValueError(f"payload_mass must be in [{lo:.3f}, {scene.MAX_PAYLOAD}] kg, got {payload_mass!r}")
         self.n_marbles = int(n_marbles)
         self.follow_marbles = follow_marbles
         self.model: mujoco.MjModel | None = None
@@ -144,6 +203,7 @@ class OracleController(PDController):
 
     def start(self, env: Any, info: dict[str, Any]) -> None:
         """Build the rigid model for this episode's payload and, on a pouring env, follow its marbles."""
+        super().start(env, info)
         n_marbles = int(info.get("n_marbles", self.n_marbles))
         self._build(float(info["payload_mass"]), n_marbles)
         follow = self.follow_marbles and n_marbles > 0 and hasattr(env, "marbles_in_bottle_frame")

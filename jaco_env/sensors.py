@@ -23,6 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from jaco_env.checks import is_real_number
+
 from jaco_env.robot import N_JOINTS
 
 OBS_Q = slice(0, N_JOINTS)
@@ -68,7 +70,9 @@ class SensorNoise:
     def __post_init__(self) -> None:
         for name in ("q_std", "qd_std", "tau_std"):
             v = getattr(self, name)
-            if not isinstance(v, (int, float, np.floating)) or not np.isfinite(v) or v < 0:
+            if not is_real_number(v):
+                raise TypeError(f"SensorNoise.{name} must be a real number, got {type(v).__name__} {v!r}")
+            if not np.isfinite(v) or v < 0:
                 raise ValueError(f"SensorNoise.{name} must be a finite number >= 0, got {v!r}")
 
     @classmethod

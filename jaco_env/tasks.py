@@ -37,6 +37,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from jaco_env import robot, scene
+from jaco_env.checks import is_real_number
 from jaco_env.kinematics import HOME_MOUTH, home_pose, solve_ik, target_rotation
 from jaco_env.trajectory import Segment, line_path, segment_duration, spline_path
 
@@ -83,6 +84,9 @@ class PouringTask:
         if self.jar_pos.shape != (3,) or not np.all(np.isfinite(self.jar_pos)):
             raise ValueError(f"PouringTask.jar_pos must be 3 finite numbers, got {self.jar_pos!r}")
         if self.payload_mass is not None:
+            if not is_real_number(self.payload_mass):
+                raise TypeError(f"PouringTask.payload_mass must be a real number (kg) or None, got "
+                                f"{type(self.payload_mass).__name__} {self.payload_mass!r}")
             pm = float(self.payload_mass)
             if not np.isfinite(pm) or pm <= 0 or pm > scene.MAX_PAYLOAD:
                 raise ValueError(
@@ -182,13 +186,17 @@ class PouringTask:
 
         Scalar t gives three (N_JOINTS,) arrays; an array (T,) gives three (T, N_JOINTS) arrays. Before 0 the
         start pose and after ``duration`` the final pose are held (zero velocity/acceleration).
+        A ``t`` that is not real (str, bool, complex) raises ``TypeError``, a NaN/inf one ``ValueError``.
         """
         if self._segments is None:
             self._build()
         scalar = np.ndim(t) == 0
-        tt = np.atleast_1d(np.asarray(t, dtype=float))
+        raw = np.asarray(t)
+        if raw.dtype.kind not in "iuf":  # a string, bool or complex t is refused, not cast
+            raise TypeError(f"PouringTask.reference: t must be a real number or array (s), got {t!r}")
+        tt = np.atleast_1d(raw.astype(float))
         if tt.ndim != 1 or not np.all(np.isfinite(tt)):
-            raise ValueError("PouringTask.reference: t must be a finite scalar or 1-D array")
+            raise ValueError(f"PouringTask.reference: t must be a finite scalar or 1-D array, got {t!r}")
         n = robot.N_JOINTS
         q = np.empty((len(tt), n))
         qd = np.zeros((len(tt), n))

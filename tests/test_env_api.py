@@ -181,7 +181,10 @@ def test_out_of_range_action_is_clipped():
         ({"task": "moon"}, ValueError, "unknown task 'moon'"),
         ({"task": 3}, TypeError, "task must be"),
         ({"payload_mass": 2.5}, ValueError, "payload_mass"),
+        ({"payload_mass": 5.0}, ValueError, "payload_mass"),
         ({"payload_mass": "heavy"}, TypeError, "payload_mass"),
+        ({"payload_mass": "1.2"}, TypeError, "payload_mass"),
+        ({"payload_mass": True}, TypeError, "payload_mass"),
         ({"colour": "red"}, ValueError, "unknown reset option"),
     ],
 )

@@ -14,6 +14,7 @@ import numpy as np
 from gymnasium.utils import EzPickle
 
 from jaco_env import robot, scene
+from jaco_env.checks import real_array
 from jaco_env.envs.base import JacoMujocoEnv, check_mass, check_options
 from jaco_env.kinematics import home_pose
 from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
@@ -29,11 +30,13 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
     Same robot, actuators, sensors and bottle as :class:`JacoPourEnv`; the bottle holds a
     rigid extra mass instead of marbles. Total payload in the hand (bottle + extra):
     ``payload_mass`` (constructor, default 0.8 kg) or ``reset(options={"payload_mass": m})``,
-    in [0.2, 1.6] kg; reported in ``info["payload_mass"]``, never observed.
+    a real number in [0.2, 1.6] kg (a string or bool raises ``TypeError``); reported in
+    ``info["payload_mass"]``, never observed.
 
     ## Action Space
     As ``JacoPour-v0`` (torque mode: N m; velocity mode: rad/s; clipped; NaN/inf/wrong shape
-    raise ``ValueError``).
+    raise ``ValueError``, non-real values (str, bool, complex) ``TypeError``; the simulation is
+    not touched).
 
     ## Observation Space
     ``Box(-inf, inf, (19,), float64)``: entries 0-18 of ``JacoPour-v0`` (measured q, qd, tau,
@@ -43,7 +46,8 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
     Always 0 (this environment is for data collection).
 
     ## Starting State
-    At rest at the home pose ``jaco_env.kinematics.home_pose()`` or ``options["q0"]`` (6 angles).
+    At rest at the home pose ``jaco_env.kinematics.home_pose()`` or ``options["q0"]`` (6 finite
+    real angles). A rejected option raises before the simulation is touched.
 
     ## Info
     ``time, payload_mass, unstable`` and ``qacc``: the true joint accelerations at the sample
@@ -93,10 +97,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
             parsed["payload_mass"] = check_mass(opts["payload_mass"], scene.BOTTLE_MASS, scene.MAX_PAYLOAD,
                                                 "options['payload_mass']")
         if "q0" in opts:
-            q0 = np.asarray(opts["q0"], dtype=float)
-            if q0.shape != (robot.N_JOINTS,) or not np.all(np.isfinite(q0)):
-                raise ValueError(f"options['q0'] must be {robot.N_JOINTS} finite joint angles, got {opts['q0']!r}")
-            parsed["q0"] = q0
+            parsed["q0"] = real_array(opts["q0"], (robot.N_JOINTS,), "options['q0'] (joint angles, rad)")
         return parsed
 
     def reset_model(self) -> np.ndarray:
@@ -105,7 +106,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
         self._set_payload(opts.get("payload_mass", self.default_payload), self._fixed_mass)
         self._reset_arm(opts["q0"] if "q0" in opts else home_pose())
         mujoco.mj_forward(self.model, self.data)
-        return self._get_obs()
+        return self._start_episode()
 
     def _get_reset_info(self) -> dict[str, Any]:
         return self._info()

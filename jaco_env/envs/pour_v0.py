@@ -15,6 +15,7 @@ import numpy as np
 from gymnasium.utils import EzPickle
 
 from jaco_env import scene
+from jaco_env.checks import is_real_number
 from jaco_env.envs.base import JacoMujocoEnv, check_mass, check_options
 from jaco_env.sensors import POUR_OBS_DIM, SensorNoise
 from jaco_env.tasks import DEFAULT_TASKS, PouringTask, get_task
@@ -52,7 +53,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
 
     ## Action Space
     ``Box(-limit, limit, (6,), float32)``. Out-of-range actions are **clipped** to the bounds;
-    NaN/inf or a wrong shape raise ``ValueError`` (the simulation is not touched).
+    NaN/inf or a wrong shape raise ``ValueError``, values that are not real numbers (strings,
+    bools, complex numbers, None) ``TypeError`` (the simulation is not touched).
 
     | Num | torque mode (default): joint torque (N m) | velocity mode: joint velocity command (rad/s) |
     |-----|-------------------------------------------|-----------------------------------------------|
@@ -100,6 +102,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
 
     ## Episode End
     - Termination: when ``time >= task.duration`` (the pour, return and settling are over).
+      Calling ``step`` after ``terminated = True`` logs a Gymnasium warning (once per episode)
+      and keeps simulating (the final pose is held by the reference); call ``reset``.
     - Truncation: the registered time limit (``max_episode_steps=2400``, 60 s at 40 Hz), or an
       unstable simulation (NaN, joint speed > 50 rad/s, marble speed > 20 m/s or a MuJoCo
       warning): then ``info["unstable"] = True`` and the last finite observation is returned.
@@ -115,10 +119,14 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
     render_mode=None, width=480, height=480, camera_name=None, tracking_cost_weight=W_TRACK,
     pour_reward_weight=W_POUR)``. ``task``: default task name or
     ``PouringTask``; ``None`` draws one of ``DEFAULT_TASKS`` per reset. ``reset(options=
-    {"task": name_or_task, "payload_mass": kg})`` overrides both for one episode.
+    {"task": name_or_task, "payload_mass": kg})`` overrides both for one episode. Every option is
+    checked before the simulation is touched (a rejected ``reset`` changes no state): unknown keys
+    and out-of-range or unreachable values raise ``ValueError``, wrong types (e.g. a mass given as
+    a string or bool) ``TypeError``; a task's reference is built (IK) at that check.
     Physics step: ``control_dt / ceil(control_dt / 2 ms)`` (1.92 ms at 40 Hz).
     Rendering: ``rgb_array`` works headless with ``MUJOCO_GL=egl`` (set by ``import jaco_env``
-    when no display is found) or ``osmesa``; ``human`` needs a display.
+    when no display is found) or ``osmesa``; ``human`` needs a display. ``render()`` before the
+    first ``reset()`` raises ``gymnasium.error.ResetNeeded``; an env left unclosed is closed at exit.
 
     ## Version History
     - v0: initial version. (Pre-release revisions: jar inner radius 27 mm, pour 5 cm above it, shorter tasks, CG
@@ -147,21 +155,31 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
     ):
         EzPickle.__init__(self, control_mode, control_freq, sensor_noise, n_marbles, task, payload_range,
                           render_mode, width, height, camera_name, tracking_cost_weight, pour_reward_weight)
-        if not isinstance(n_marbles, (int, np.integer)) or not 1 <= n_marbles <= 60:
+        if not isinstance(n_marbles, (int, np.integer)) or isinstance(n_marbles, (bool, np.bool_)):
+            raise TypeError(f"n_marbles must be an integer, got {type(n_marbles).__name__} {n_marbles!r}")
+        if not 1 <= n_marbles <= 60:
             raise ValueError(f"n_marbles must be an integer in [1, 60], got {n_marbles!r}")
         for name, w in (("tracking_cost_weight", tracking_cost_weight), ("pour_reward_weight", pour_reward_weight)):
-            if not isinstance(w, (int, float, np.floating)) or not np.isfinite(w) or w < 0:
+            if not is_real_number(w):
+                raise TypeError(f"{name} must be a real number, got {type(w).__name__} {w!r}")
+            if not np.isfinite(w) or w < 0:
                 raise ValueError(f"{name} must be a finite number >= 0, got {w!r}")
         self._tracking_cost_weight = float(tracking_cost_weight)
         self._pour_reward_weight = float(pour_reward_weight)
         self._fixed_mass = scene.BOTTLE_MASS + n_marbles * scene.MARBLE_MASS
+        if not (isinstance(payload_range, (tuple, list)) and len(payload_range) == 2
+                and all(is_real_number(x) for x in payload_range)):
+            raise TypeError(f"payload_range must be two real numbers (low, high) in kg, got {payload_range!r}")
         lo, hi = (float(x) for x in payload_range)
         if not (self._fixed_mass < lo <= hi <= scene.MAX_PAYLOAD):
             raise ValueError(
                 f"payload_range must satisfy {self._fixed_mass:.3f} < low <= high <= {scene.MAX_PAYLOAD} kg "
                 f"(bottle + marbles weigh {self._fixed_mass:.3f} kg), got {payload_range!r}")
         self.payload_range = (lo, hi)
-        self.default_task = None if task is None else get_task(task)
+        self.default_task = None if task is None else self._check_task(get_task(task), "task")
+        for t in DEFAULT_TASKS.values() if task is None else ():
+            if t.payload_mass is not None:  # drawn per reset: check now, not halfway through one
+                check_mass(t.payload_mass, self._fixed_mass + 1e-3, scene.MAX_PAYLOAD, f"task {t.name!r} payload_mass")
         JacoMujocoEnv.__init__(self, control_mode=control_mode, control_freq=control_freq,
                                sensor_noise=sensor_noise, n_marbles=n_marbles, render_mode=render_mode,
                                width=width, height=height, camera_name=camera_name)
@@ -225,11 +243,20 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
             d.qpos[a + 3:a + 7] = [1.0, 0.0, 0.0, 0.0]
 
     # ------------------------------------------------------------------ gym API
+    def _check_task(self, task: PouringTask, what: str) -> PouringTask:
+        """``task`` if this env can run it: its reference is built (an unreachable jar raises
+        ``ValueError`` here, not halfway through a reset) and its payload fits the marbles."""
+        task.reference(0.0)
+        if task.payload_mass is not None:
+            check_mass(task.payload_mass, self._fixed_mass + 1e-3, scene.MAX_PAYLOAD,
+                       f"{what} {task.name!r} payload_mass (total in the hand)")
+        return task
+
     def _parse_options(self, options: dict | None) -> dict:
         opts = check_options(options, ("task", "payload_mass"))
         parsed: dict[str, Any] = {}
         if "task" in opts:
-            parsed["task"] = get_task(opts["task"])
+            parsed["task"] = self._check_task(get_task(opts["task"]), "options['task']")
         if "payload_mass" in opts:
             parsed["payload_mass"] = check_mass(opts["payload_mass"], self._fixed_mass + 1e-3, scene.MAX_PAYLOAD,
                                                 "options['payload_mass'] (total in the hand)")
@@ -245,8 +272,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         if "payload_mass" in opts:
             mass = opts["payload_mass"]
         elif task.payload_mass is not None:
-            mass = check_mass(task.payload_mass, self._fixed_mass + 1e-3, scene.MAX_PAYLOAD,
-                              f"task {task.name!r} payload_mass")
+            mass = task.payload_mass  # checked by _check_task or in __init__
         else:
             mass = float(self.np_random.uniform(*self.payload_range))
         self.task = task
@@ -257,7 +283,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         self._place_marbles()
         mujoco.mj_forward(self.model, self.data)
         self._in_jar = 0
-        return self._get_obs()
+        return self._start_episode()
 
     def _get_reset_info(self) -> dict[str, Any]:
         return self._info({"reward_tracking": 0.0, "reward_pour": 0.0}, tracking_error=0.0)
@@ -291,6 +317,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         a = self._validate_action(action)
         if self._last_obs is None:
             raise RuntimeError("call reset() before step()")
+        self._warn_if_terminated()
         no_reward = {"reward_tracking": 0.0, "reward_pour": 0.0}
         if self._unstable:
             return self._last_obs.copy(), 0.0, False, True, self._info(no_reward, 0.0)
@@ -307,6 +334,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         obs = self._get_obs()
         self._last_obs = obs
         terminated = self.time >= self.task.duration - 1e-9
+        self._terminated = self._terminated or terminated
         if self.render_mode == "human":
             self.render()
         return obs, reward, terminated, False, self._info(reward_info, err)
