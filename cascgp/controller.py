@@ -196,7 +196,7 @@ class FeedforwardController:
 
     def feedforward(self, t: float, reference: Reference) -> np.ndarray:
         """The feedforward torque at time ``t`` (finite, not yet clipped)."""
-        return self._feedforward(t, *reference(t), reference)
+        return self._feedforward(t, *self._reference(reference, t), reference)
 
     def _feedforward(
         self, t: float, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, reference: Reference
@@ -254,14 +254,13 @@ class FeedforwardController:
         return nominal + w * d
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, reference: Reference) -> np.ndarray:
-        """Joint torques for the measured state ``(q, qd)`` at time ``t``; always finite and within limits."""
-        q, qd = np.asarray(q), np.asarray(qd)
-        if q.dtype.kind not in "fiu" or qd.dtype.kind not in "fiu":
-            raise TypeError(f"q and qd must be real numeric arrays, got dtypes {q.dtype} and {qd.dtype}")
-        q, qd = q.astype(float, copy=False), qd.astype(float, copy=False)
-        if q.shape != (self.dof,) or qd.shape != (self.dof,):
-            raise ValueError(f"q and qd must have shape ({self.dof},), got {q.shape} and {qd.shape}")
-        q_d, qd_d, qdd_d = reference(t)  # once per tick; shared with the feedforward
+        """Joint torques for the measured state ``(q, qd)`` at time ``t``; always finite and within limits.
+        Malformed arguments (``t`` not a real number, ``q``/``qd`` not real ``(N,)`` arrays) or a reference
+        that does not return three real ``(N,)`` arrays raise ``TypeError``/``ValueError`` naming them."""
+        if isinstance(t, (bool, np.bool_)) or not isinstance(t, (int, float, np.integer, np.floating)):
+            raise TypeError(f"t: expected a real number (s), got {type(t).__name__}")
+        q, qd = self._measured("q", q), self._measured("qd", qd)
+        q_d, qd_d, qdd_d = self._reference(reference, t)  # once per tick; shared with the feedforward
         bad = ~(np.isfinite(q) & np.isfinite(qd) & np.isfinite(q_d) & np.isfinite(qd_d))
         if np.any(bad):
             self.n_bad_measurements += 1
@@ -273,6 +272,31 @@ class FeedforwardController:
         feedback = np.where(bad, 0.0, p_term + d_term)
         tau = self._feedforward(t, q_d, qd_d, qdd_d, reference) + feedback
         return np.clip(tau, -self.torque_limits, self.torque_limits)
+
+    def _measured(self, name: str, x: Any) -> np.ndarray:
+        try:
+            a = np.asarray(x)
+        except (TypeError, ValueError) as exc:  # ragged nested sequences
+            raise TypeError(f"{name}: expected a real numeric array of shape ({self.dof},) ({exc})") from None
+        if a.dtype.kind not in "fiu":
+            raise TypeError(f"{name}: expected a real numeric array, got dtype {a.dtype}")
+        if a.shape != (self.dof,):
+            raise ValueError(f"{name}: expected shape ({self.dof},), got {a.shape}")
+        return a.astype(float, copy=False)
+
+    def _reference(self, reference: Reference, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        out = reference(t)
+        if not isinstance(out, (tuple, list)) or len(out) != 3:
+            raise ValueError("reference: expected reference(t) to return (q_d, qd_d, qdd_d)")
+        parts = []
+        for nm, x in zip(("q_d", "qd_d", "qdd_d"), out):
+            a = np.asarray(x)
+            if a.dtype.kind not in "fiu":
+                raise TypeError(f"reference: {nm} must be a real numeric array, got dtype {a.dtype}")
+            if a.shape != (self.dof,):
+                raise ValueError(f"reference: {nm} must have shape ({self.dof},), got {a.shape}")
+            parts.append(a.astype(float, copy=False))
+        return parts[0], parts[1], parts[2]
 
     def start(self, env: Any, info: dict[str, Any]) -> None:
         """Start of an episode (:class:`Controller` protocol): zero the counters; with ``online``, open a

@@ -313,8 +313,7 @@ _FIELD = {"t": r"\bt\b", "q": r"\bq\b", "qd": r"\bqd\b", "reference": r"referenc
 
 
 def _ff_known_finding(value) -> bool:
-    """A list that is not six numbers: cascgp's FeedforwardController passes a list ``t`` to the reference
-    (a (1, 6) output) and a ragged ``q`` to NumPy (an error naming no field). Reported; xfail test below."""
+    """A list that is not six numbers (a list ``t``, a ragged ``q``): FeedforwardController's own test below."""
     return isinstance(value, list) and (len(value) != N or any(isinstance(x, list) for x in value))
 
 
@@ -328,9 +327,9 @@ def test_controller_output_is_valid_or_the_error_names_the_field(controllers, na
     reference, ref_expected, ref_kind, parts = data.draw(_reference(), label="reference")
     if name.startswith("ff"):
         # FeedforwardController checks q and qd itself and leaves t and the reference's output to the
-        # reference; it refuses object arrays even of reals (stricter: fine). Its known gaps (malformed
-        # reference output, object arrays from the reference, list t, ragged q) are kept out of this
-        # domain and pinned by the xfail test below.
+        # reference; it refuses object arrays even of reals (stricter: fine). Malformed reference output,
+        # object arrays from the reference, a list t and a ragged q have their own test below (found by this
+        # fuzz set, fixed in cascgp.controller).
         if ref_kind == "malformed" or ref_expected is not OK:
             reference, ref_expected, ref_kind = DEFAULT_TASKS["front"].reference, OK, "task"
         elif ref_kind == "constant":
@@ -364,11 +363,9 @@ _Z = np.zeros(N)
 
 
 @pytest.mark.filterwarnings("ignore::numpy.exceptions.ComplexWarning")
-@pytest.mark.xfail(reason="issue 12 findings in cascgp.controller (owned by the lead): FeedforwardController "
-                          "does not check t or what reference(t) returns", strict=False)
 @pytest.mark.parametrize("case", ["complex reference", "short reference", "object reference", "list t",
                                   "ragged q"])
-def test_feedforward_controller_known_gaps(controllers, case) -> None:
+def test_feedforward_controller_refuses_malformed_t_q_and_reference(controllers, case) -> None:
     t, q, reference = 0.0, _Z, _FRONT
     if case == "complex reference":
         reference = lambda t: (np.full(N, 0.1 + 0.5j), _Z, _Z)  # noqa: E731
