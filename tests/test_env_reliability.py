@@ -263,3 +263,13 @@ def test_reference_controllers_never_output_nan(cls) -> None:
         ctrl(0.0, np.zeros(5), np.zeros(6), ref)
     with pytest.raises(TypeError, match="qd"):
         ctrl(0.0, np.zeros(6), np.zeros(6, dtype=complex), ref)
+
+
+@pytest.mark.parametrize("env_cls", ["JacoPayloadEnv", "JacoPourEnv"])
+def test_unwrapped_step_before_reset_raises_reset_needed(env_cls: str) -> None:
+    import jaco_env.envs as envs
+
+    env = getattr(envs, env_cls)()
+    with pytest.raises(ResetNeeded, match="reset"):
+        env.step(np.zeros(6, dtype=np.float32))
+    env.close()

@@ -11,6 +11,7 @@ from typing import Any
 
 import mujoco
 import numpy as np
+from gymnasium import error
 from gymnasium.utils import EzPickle
 
 from jaco_env import robot, scene
@@ -118,7 +119,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
     def step(self, action):
         a = self._validate_action(action)
         if self._last_obs is None:
-            raise RuntimeError("call reset() before step()")
+            raise error.ResetNeeded("Cannot call `env.step()` before calling `env.reset()`")
         if not self._unstable:
             self._step_count += 1
             if self._simulate(a):

@@ -12,6 +12,7 @@ from typing import Any
 
 import mujoco
 import numpy as np
+from gymnasium import error
 from gymnasium.utils import EzPickle
 
 from jaco_env import scene
@@ -316,7 +317,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
     def step(self, action):
         a = self._validate_action(action)
         if self._last_obs is None:
-            raise RuntimeError("call reset() before step()")
+            raise error.ResetNeeded("Cannot call `env.step()` before calling `env.reset()`")
         self._warn_if_terminated()
         no_reward = {"reward_tracking": 0.0, "reward_pour": 0.0}
         if self._unstable:
