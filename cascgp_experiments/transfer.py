@@ -269,6 +269,23 @@ def summary_table(runs: list[ControllerRun]) -> str:
     return "\n".join(lines)
 
 
+def per_task_table(results: dict[str, Any]) -> str:
+    """Markdown: per controller and task, tracking RMSE (rad) and marbles in the jar on the first and on the last
+    training attempt (the revisit is in :func:`summary_table`), from ``results.json`` alone."""
+    tasks = list(results["config"]["tasks"])
+    head = "| controller | " + " | ".join(f"{t}: first | {t}: last" for t in tasks) + " | mean in jar |"
+    lines = [head, "|---|" + "---|---|" * len(tasks) + "---|"]
+    for name, attempts in results["controllers"].items():
+        cells = []
+        for task in tasks:
+            tr = [a for a in attempts if a["task"] == task and a["phase"] == "train"]
+            for a in (tr[0], tr[-1]):
+                cells.append(f"{a['tracking_rmse']:.3f} ({a['in_jar']:.0%})")
+        jar = np.mean([a["in_jar"] for a in attempts])
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {jar:.2f} |")
+    return "\n".join(lines)
+
+
 def plot(results: dict[str, Any], path: Path) -> None:
     """Tracking RMSE and fraction of marbles in the jar against attempt number (from the JSON alone)."""
     import matplotlib
