@@ -262,14 +262,13 @@ class FeedforwardController:
         q, qd = self._measured("q", q), self._measured("qd", qd)
         q_d, qd_d, qdd_d = self._reference(reference, t)  # once per tick; shared with the feedforward
         bad = ~(np.isfinite(q) & np.isfinite(qd) & np.isfinite(q_d) & np.isfinite(qd_d))
-        if np.any(bad):
-            self.n_bad_measurements += 1
+        self.n_bad_measurements += bool(np.any(bad))
         with np.errstate(over="ignore", invalid="ignore"):
             # A finite but absurd error saturates with its sign (overflow to +-inf is capped
             # before the sum so that P and D terms of opposite sign cannot make inf - inf).
-            p_term = np.nan_to_num(self.kp * (q_d - q), nan=0.0, posinf=_BIG, neginf=-_BIG)
-            d_term = np.nan_to_num(self.kd * (qd_d - qd), nan=0.0, posinf=_BIG, neginf=-_BIG)
-        feedback = np.where(bad, 0.0, p_term + d_term)
+            terms = np.nan_to_num(np.stack([self.kp * (q_d - q), self.kd * (qd_d - qd)]), nan=0.0,
+                                  posinf=_BIG, neginf=-_BIG)
+        feedback = np.where(bad, 0.0, terms.sum(axis=0))
         tau = self._feedforward(t, q_d, qd_d, qdd_d, reference) + feedback
         return np.clip(tau, -self.torque_limits, self.torque_limits)
 

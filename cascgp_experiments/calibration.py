@@ -22,10 +22,21 @@ from cascgp.models import make_model
 from cascgp.rbd import load_nominal
 from cascgp_experiments.common import NOMINAL_URDF
 
-__all__ = ["CASCADES", "calibration"]
+__all__ = ["CASCADES", "calibration", "study_data"]
 
 #: The cascades whose variance can be propagated (derivative-based states, as the controller uses).
 CASCADES = ("np-inward", "np-outward", "sp-inward", "sp-outward")
+
+
+def study_data(folder: str | Path | None, out: str | Path) -> tuple[DynamicsData, DynamicsData]:
+    """The study's ``jaco_train.npz``/``jaco_test.npz`` from ``folder``; without one, the quick collection
+    preset recorded into ``<out>/data`` (:mod:`cascgp_experiments.collect`)."""
+    if folder:
+        return tuple(DynamicsData.load(Path(folder) / f"jaco_{s}.npz") for s in ("train", "test"))
+    from cascgp_experiments.collect import PRESETS, collect
+
+    train, test, _ = collect(Path(out) / "data", PRESETS["quick"])
+    return train, test
 
 
 def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float, ...] = (10.0, 30.0),

@@ -45,19 +45,14 @@ def main(argv: list[str] | None = None) -> None:
     import torch
 
     torch.set_num_threads(1)
-    from cascgp.data import DynamicsData
     from cascgp.io import write_json
     from cascgp.models import make_model
     from cascgp.rbd import load_nominal
+    from cascgp_experiments.calibration import study_data
     from cascgp_experiments.common import NOMINAL_URDF
 
     out = Path(a.out)
-    if a.data:
-        train, test = (DynamicsData.load(Path(a.data) / f"jaco_{s}.npz") for s in ("train", "test"))
-    else:
-        from cascgp_experiments.collect import PRESETS, collect
-
-        train, test, _ = collect(out / "data", PRESETS["quick"])
+    train, test = study_data(a.data, out)
     data = train.subsample(10.0)
     data = data.take(np.arange(min(a.n, data.n_samples)))
     rbd = load_nominal(NOMINAL_URDF)

@@ -30,17 +30,11 @@ def main(argv: list[str] | None = None) -> None:
     import torch
     from tqdm import tqdm
 
-    from cascgp.data import DynamicsData
-    from cascgp_experiments.calibration import CASCADES, calibration, summary_table, write
+    from cascgp_experiments.calibration import CASCADES, calibration, study_data, summary_table, write
 
     torch.set_num_threads(1)
     out = Path(a.out)
-    if a.data:
-        train, test = (DynamicsData.load(Path(a.data) / f"jaco_{s}.npz") for s in ("train", "test"))
-    else:
-        from cascgp_experiments.collect import PRESETS, collect
-
-        train, test, _ = collect(out / "data", PRESETS["quick"])
+    train, test = study_data(a.data, out)
     t0 = time.perf_counter()
     bar = tqdm(total=len(CASCADES) * len(a.seconds) * min(a.subsets, 10), desc="calibration fits")
     res = calibration(train, test, seconds=tuple(a.seconds), n_subsets=a.subsets, n_restarts=a.restarts,
