@@ -152,13 +152,23 @@ def test_output_is_always_finite_and_within_limits(q, qd, t, which):
 
 @settings(max_examples=50, deadline=None)
 @given(scale=st.floats(min_value=1.0, max_value=1e8), gate=st.sampled_from([False, "wiener", "variance"]),
-       bad=st.sampled_from([None, np.nan, np.inf, -np.inf]))
-def test_far_out_of_range_states_with_a_fitted_gp_model(scale, gate, bad, fitted_planar_model, arm3_rbd):
-    """A real fitted cascade (gated or not) queried far outside its training data, or with non-finite
-    measurements, stays finite and clipped."""
-    model = fitted_planar_model
+       bad=st.sampled_from([None, np.nan, np.inf, -np.inf]), online=st.booleans())
+def test_far_out_of_range_states_with_a_fitted_gp_model(scale, gate, bad, online, fitted_planar_model, arm3_rbd):
+    """A real fitted cascade (gated or not, learning online or not) queried far outside its training data, or
+    with non-finite measurements, stays finite and clipped; absurd online samples are refused, never raised."""
+    import copy
+
+    model = copy.deepcopy(fitted_planar_model) if online else fitted_planar_model
     limits = np.full(model.dof, 5.0)
-    ctrl = FeedforwardController(model, 10.0, 1.0, limits, fallback=arm3_rbd, gate=gate)
+    ctrl = FeedforwardController(model, 10.0, 1.0, limits, fallback=arm3_rbd, gate=gate,
+                                 online=4 if online else None, online_every=1)
+    if online:
+        ctrl.start(None, {})
+        value = scale if bad is None else bad
+        for k in range(6):
+            ctrl.observe(np.full(model.dof, value * (k % 2)), np.full(model.dof, -value), np.full(model.dof, value),
+                         0.1 * k)
+        assert ctrl.n_online_samples + ctrl.n_online_rejected == 4
     if bad is not None:
         tau = ctrl(0.0, np.full(model.dof, bad), np.full(model.dof, bad), lambda t: (np.zeros(3),) * 3)
         assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= limits)
