@@ -29,9 +29,13 @@ Protocol (paper section IV-B-1, simulated):
 Files: ``<out>/jaco_train.npz`` and ``<out>/jaco_test.npz`` (:meth:`DynamicsData.save`), reused when
 present with the same settings (``meta["collection"]``).
 
-Parallel: ``workers`` motions of a split run side by side in a Gymnasium ``AsyncVectorEnv`` (one process
-each), or each motion is a job on a Ray cluster (:mod:`cascgp_experiments.execution`); every motion is
-seeded on its own, so the files are the same whatever the worker count or the backend (tested).
+Parallel: every motion is one job of :mod:`cascgp_experiments.execution` (``workers`` local processes,
+or a Ray cluster); ``vector_env=True`` runs the motions of a split side by side in a Gymnasium
+``AsyncVectorEnv`` instead. Every motion is seeded on its own, so the files are the same whatever the
+worker count or the backend (tested). Jobs are the default because an env step here is cheap (about
+0.3 ms), so the vector env's lockstep (one round trip to every sub-process per step) costs more than
+it gains: on the 2-core machine, shared with other work, the full collection took 21 s serially and
+86 s with a 2-env ``AsyncVectorEnv`` (``docs/bench/parallel_study_max5.json``, ``collect_s``).
 
 Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N]
 [--ray ADDRESS]``.
@@ -219,34 +223,53 @@ def qdd_error_stats(qdd_est: np.ndarray, qdd_true: np.ndarray) -> dict:
             "n": int(len(err))}
 
 
-def _collect_split(cfg: CollectConfig, split: str, workers: int = 1, ray_address: str | None = None
-                   ) -> DynamicsData:
-    """The motions of one split: one after the other (``workers=1``), ``workers`` at a time in a Gymnasium
-    ``AsyncVectorEnv``, or as jobs on a Ray cluster; the records are the same in every case."""
-    count = cfg.n_subsets if split == "train" else cfg.n_test
-    seconds = cfg.subset_seconds if split == "train" else cfg.test_seconds
-    seeds = [motion_seed(cfg, split, k) for k in range(count)]
-    desc = f"collect {split} ({count} x {seconds:g} s)"
-    if ray_address is not None:
+def _motions(cfg: CollectConfig) -> list[tuple[str, int, int, float]]:
+    """Every motion of the collection: ``(split, k, seed, seconds)``, training motions first."""
+    out = []
+    for split, count, seconds in (("train", cfg.n_subsets, cfg.subset_seconds), ("test", cfg.n_test, cfg.test_seconds)):
+        out += [(split, k, motion_seed(cfg, split, k), seconds) for k in range(count)]
+    return out
+
+
+def _record_all(cfg: CollectConfig, workers: int, ray_address: str | None, vector_env: bool
+                ) -> dict[str, list[DynamicsData]]:
+    """The records of every motion, by split. ``workers=1``: one after the other in this process;
+    otherwise one job per motion (:func:`motion_job`) on ``workers`` local processes or on Ray; with
+    ``vector_env``, the motions of a split run ``workers`` at a time in one Gymnasium ``AsyncVectorEnv``
+    instead. The records are the same in every case."""
+    motions = _motions(cfg)
+    parts: dict[str, list[DynamicsData]] = {"train": [], "test": []}
+    if ray_address is None and workers <= 1:
+        for split in ("train", "test"):
+            mine = [m for m in motions if m[0] == split]
+            for _, k, seed, seconds in tqdm(mine, desc=f"collect {split} ({len(mine)} x {mine[0][3]:g} s)",
+                                            unit="motion"):
+                parts[split].append(record_motion(seed, seconds, cfg, segment=k,
+                                                  desc=f"{split} {k + 1}/{len(mine)}"))
+    elif ray_address is None and vector_env:
+        with tqdm(total=sum(sum(_steps(m[3], cfg)) for m in motions), desc=f"collect, {workers} at a time",
+                  unit="step", unit_scale=True, mininterval=1.0) as bar:
+            for split in ("train", "test"):
+                mine = [m for m in motions if m[0] == split]
+                for b in range(0, len(mine), workers):
+                    batch = mine[b:b + workers]
+                    parts[split] += record_motions_vector([m[2] for m in batch], batch[0][3], cfg,
+                                                          segments=[m[1] for m in batch], bar=bar)
+    else:
         from cascgp_experiments.execution import run_jobs
 
-        n_warm, n_steps = _steps(seconds, cfg)
-        parts = list(run_jobs(motion_job, [{"seed": s, "duration": seconds, "cfg": asdict(cfg), "segment": k}
-                                           for k, s in enumerate(seeds)],
-                              workers=workers, ray_address=ray_address, desc=desc, units=[n_warm + n_steps] * count, unit="step",
-                              label=lambda j: f"seed {j['seed']}"))
-    elif workers <= 1 or count == 1:
-        parts = []
-        for k in tqdm(range(count), desc=desc, unit="motion"):
-            parts.append(record_motion(seeds[k], seconds, cfg, segment=k, desc=f"{split} {k + 1}/{count}"))
-    else:
-        n_warm, n_steps = _steps(seconds, cfg)
-        parts = []
-        with tqdm(total=count * (n_warm + n_steps), desc=desc + f", {min(workers, count)} at a time", unit="step",
-                  unit_scale=True, mininterval=1.0) as bar:
-            for b in range(0, count, workers):
-                ks = list(range(b, min(b + workers, count)))
-                parts += record_motions_vector([seeds[k] for k in ks], seconds, cfg, segments=ks, bar=bar)
+        res = run_jobs(motion_job, [{"seed": seed, "duration": seconds, "cfg": asdict(cfg), "segment": k}
+                                    for _, k, seed, seconds in motions],
+                       workers=workers, ray_address=ray_address, desc=f"collect ({len(motions)} motions)",
+                       units=[sum(_steps(m[3], cfg)) for m in motions], unit="step",
+                       label=lambda j: f"seed {j['seed']}")
+        for (split, *_), data in zip(motions, res):
+            parts[split].append(data)
+    return parts
+
+
+def _assemble(cfg: CollectConfig, split: str, parts: list[DynamicsData]) -> DynamicsData:
+    """One split's file from its motions' records (pooled q̈ error statistics in ``meta``)."""
     meta = {**parts[0].meta, "split": split, "seeds": [p.meta["seed"] for p in parts],
             "collection": asdict(cfg), "qdd_error_per_motion": [p.meta["qdd_error"] for p in parts]}
     # Pooled over the motions (weighted by rows).
@@ -260,11 +283,13 @@ def _collect_split(cfg: CollectConfig, split: str, workers: int = 1, ray_address
 
 
 def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: bool = False, workers: int | None = None,
-            ray_address: str | None = None) -> tuple[DynamicsData, DynamicsData, dict]:
+            ray_address: str | None = None, vector_env: bool = False) -> tuple[DynamicsData, DynamicsData, dict]:
     """Collect (or reuse) ``<out>/jaco_train.npz`` and ``<out>/jaco_test.npz``.
 
-    ``workers``: motions simulated at once (``None``: every core); ``ray_address``: run the motions
-    on a Ray cluster (:mod:`cascgp_experiments.execution`). The data do not depend on either.
+    ``workers``: motions simulated at once (``None``: every core), one job per motion on local processes
+    or, with ``ray_address``, on a Ray cluster (:mod:`cascgp_experiments.execution`); ``vector_env``:
+    the motions of a split ``workers`` at a time in a Gymnasium ``AsyncVectorEnv`` instead (slower here:
+    see the module's notes). The data do not depend on any of these.
     Returns ``(train, test, info)`` with ``info = {"reused": bool, "wall_s": float}``.
     """
     from cascgp_experiments.execution import check_workers
@@ -277,9 +302,10 @@ def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: boo
         if all(d.meta.get("collection") == asdict(cfg) for d in loaded.values()):
             return loaded["train"], loaded["test"], {"reused": True, "wall_s": 0.0}
     t0 = time.perf_counter()
+    parts = _record_all(cfg, workers, ray_address, vector_env)
     data = {}
     for split in ("train", "test"):
-        data[split] = _collect_split(cfg, split, workers, ray_address)
+        data[split] = _assemble(cfg, split, parts[split])
         data[split].save(paths[split])
     return data["train"], data["test"], {"reused": False, "wall_s": time.perf_counter() - t0}
 

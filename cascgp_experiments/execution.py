@@ -25,7 +25,9 @@ per episode; the bar's postfix shows the last note.
 
 Failures: a job that raises is reported on stderr with its inputs and the error, and submitted once
 more; if it fails again :class:`JobError` is raised naming the inputs (after the jobs already
-running have finished and been cached; jobs not yet started are cancelled).
+running have finished and been cached; jobs not yet started are cancelled). A worker process that
+dies (a crash in native code, the out-of-memory killer) ends the run with a ``RuntimeError`` naming a
+job it was running; the finished jobs are in the cache, so running the command again resumes.
 
 Cache: with ``cache_dir``, every finished job's result is written atomically
 (:func:`cascgp.io.write_json`) to ``cache_dir/<fn>-<hash>.json``, the hash being the SHA-256 of the
@@ -47,6 +49,7 @@ import threading
 import time
 import traceback
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterator, Mapping, Sequence
@@ -195,11 +198,16 @@ def report_progress(units: int = 1, note: str = "") -> None:
 
 
 def _limit_threads() -> None:
+    """One thread in this worker process: the environment for libraries loaded later (torch reads
+    ``OMP_NUM_THREADS`` when it is imported), threadpoolctl for those already loaded; torch is not
+    imported here for jobs that do not need it (the collection's)."""
     for k, v in THREAD_ENV.items():
         os.environ[k] = v
-    from cascgp_experiments.common import limit_threads
+    from threadpoolctl import threadpool_limits
 
-    limit_threads(1)
+    threadpool_limits(1)
+    if "torch" in sys.modules:
+        sys.modules["torch"].set_num_threads(1)
 
 
 def _init_process(channel: Any) -> None:
@@ -442,7 +450,17 @@ def _run_pool(fn, jobs, todo, workers, progress, finished) -> None:
                     if fut.cancelled():
                         continue
                     try:
-                        again = finished(i, fut.result())
+                        out = fut.result()
+                    except BrokenProcessPool as exc:
+                        lost = [i] + [j for j in running.values()]
+                        raise RuntimeError(
+                            f"a worker process died (crashed or killed, e.g. out of memory) while these jobs were "
+                            f"running or waiting: " + "; ".join(f"{fn.__name__}({_short(jobs[j], 300)})"
+                                                                for j in lost[:8])
+                            + ("; ..." if len(lost) > 8 else "")
+                            + ". The finished jobs are cached (with a cache folder): run again to resume") from exc
+                    try:
+                        again = finished(i, out)
                     except JobError as exc:
                         if error is None:
                             error = exc

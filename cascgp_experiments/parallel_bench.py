@@ -30,6 +30,7 @@ from cascgp.io import read_json, write_json
 
 #: name -> (module, arguments; ``{out}`` is the run's output folder)
 CASES: dict[str, tuple[str, list[str]]] = {
+    "collect-full": ("scripts.collect_jaco_data", ["--out", "{out}", "--force"]),
     "transfer-quick": ("scripts.task_transfer", ["--quick", "--overwrite", "--out", "{out}"]),
     "transfer-full": ("scripts.task_transfer", ["--overwrite", "--out", "{out}"]),
     "study-max5": ("scripts.data_efficiency", ["--out", "{out}", "--max-seconds", "5", "--no-iterations"]),
@@ -41,6 +42,11 @@ CASES: dict[str, tuple[str, list[str]]] = {
 
 def job_stats(module: str, out: Path) -> tuple[dict[str, Any], Any]:
     """(job statistics, the experiment's numbers) of one run's results JSON."""
+    if module == "scripts.collect_jaco_data":  # no job statistics; the numbers are the files' arrays
+        from cascgp_experiments.curves import npz_digest
+
+        return ({"n_jobs": 0, "job_seconds_sum": 0.0, "job_seconds_max": 0.0, "backend": "", "workers": None},
+                {s: npz_digest(out / f"jaco_{s}.npz") for s in ("train", "test")})
     res = read_json(out / "results.json")
     if module == "scripts.task_transfer":
         numbers = {n: [{k: v for k, v in a.items() if k != "fit_seconds"} for a in att]
@@ -88,6 +94,8 @@ def markdown(rows: list[dict[str, Any]]) -> str:
     lines += ["", "| case | jobs | longest job (s) | serial part (s) | estimated wall, 2 / 8 / 32 / all-jobs cores (s) |",
               "|---|---|---|---|---|"]
     for name, base in first.items():
+        if not base["n_jobs"]:
+            continue
         est = [cluster_estimate(base, k) for k in (2, 8, 32, max(1, base["n_jobs"]))]
         lines.append(f"| {name} | {base['n_jobs']} | {base['job_seconds_max']:.0f} "
                      f"| {max(0.0, base['wall_s'] - base['job_seconds_sum']):.0f} | "

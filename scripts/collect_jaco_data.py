@@ -2,7 +2,7 @@
 
 Usage::
 
-    python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N | --ray ADDRESS]
+    python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N | --ray ADDRESS] [--vector-env]
 
 The protocol and the files: :mod:`cascgp_experiments.collect`.
 """
@@ -25,6 +25,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--payload-mass", type=float, default=None, help="kg (default 0.8)")
     ap.add_argument("--force", action="store_true", help="collect again even if files exist")
+    ap.add_argument("--vector-env", action="store_true",
+                    help="run the motions of a split --workers at a time in one Gymnasium AsyncVectorEnv instead of "
+                         "one job per motion (same data; slower here, the env steps are cheap)")
     add_execution_args(ap)
     a = ap.parse_args(argv)
     check_args(ap, a)
@@ -33,7 +36,8 @@ def main(argv: list[str] | None = None) -> None:
     if a.payload_mass is not None:
         kw["payload_mass"] = a.payload_mass
     with session(a.ray, a.workers):
-        train, test, info = collect(a.out, CollectConfig(**kw), force=a.force, workers=a.workers, ray_address=a.ray)
+        train, test, info = collect(a.out, CollectConfig(**kw), force=a.force, workers=a.workers, ray_address=a.ray,
+                                    vector_env=a.vector_env)
     print(f"train: {train}\ntest: {test}\n{info}")
 
 

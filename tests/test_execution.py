@@ -259,6 +259,13 @@ def test_tiny_study_ray_local_identical(tiny_study_serial: Path, tmp_path: Path)
     assert _study_numbers(out) == _study_numbers(tiny_study_serial)
 
 
+def test_collection_in_a_vector_env_identical(tiny_study_serial: Path, tmp_path: Path) -> None:
+    from cascgp_experiments.collect import PRESETS, collect
+
+    collect(tmp_path / "vec" / "data", PRESETS["smoke"], workers=2, vector_env=True)
+    _assert_same_data(tiny_study_serial, tmp_path / "vec")
+
+
 def test_tiny_study_killed_and_resumed_identical(tiny_study_serial: Path, tmp_path: Path) -> None:
     out = tmp_path / "killed"
     # first the data (so that the kill lands among the fits), then a run killed after its first fit job
@@ -421,3 +428,15 @@ def test_quick_transfer_killed_and_resumed_identical(quick_transfer_serial: Path
     assert read_json(out / "results.json")["jobs"]["n_cached"] >= 1
     assert _transfer_numbers(out) == _transfer_numbers(quick_transfer_serial)
     assert (out / "summary.md").read_text() == (quick_transfer_serial / "summary.md").read_text()
+
+
+def dying_job(x: int) -> int:
+    if x == 1:
+        os._exit(3)  # a worker process that dies (as in a native crash)
+    time.sleep(0.2)
+    return x
+
+
+def test_dead_worker_process_is_a_clear_error(tmp_path: Path) -> None:
+    with pytest.raises(RuntimeError, match=r"a worker process died .* dying_job\(.*\"x\":1"):
+        run_jobs(dying_job, [{"x": x} for x in range(2)], workers=2, cache_dir=tmp_path, show_progress=False)
