@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import json
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from cascgp_experiments.soak import SoakConfig, run_soak
-from scripts import soak as soak_cli
 
 # One short cycle: a few short episodes per env, one retrain.
 TINY = dict(minutes=1e-4, max_steps=20, max_marbles=3, progress_s=0.0)
@@ -47,17 +49,25 @@ def test_memory_growth_beyond_the_bound_fails(tmp_path: Path) -> None:
     assert not res.passed and "resident memory grew by" in res.failure and "bound of 40 MiB" in res.failure
 
 
-def test_cli_exit_codes_and_argument_errors(tmp_path: Path, capsys) -> None:
-    assert soak_cli.main(["--minutes", "0.0001", "--max-steps", "20", "--out", str(tmp_path / "ok")]) == 0
-    assert "soak PASSED" in capsys.readouterr().out
-    assert soak_cli.main(["--minutes", "0.0001", "--max-steps", "20", "--fault", "nan-obs",
-                          "--out", str(tmp_path / "bad")]) == 1
-    assert "soak FAILED: non-finite observation" in capsys.readouterr().err
-    for bad in (["--minutes", "0"], ["--minutes", "nan"], ["--minutes", "1", "--rss-bound-mib", "-5"]):
-        with pytest.raises(SystemExit) as exc:
-            soak_cli.main(bad + ["--out", str(tmp_path / "x")])
-        assert exc.value.code == 2
-        assert re.search(r"--(minutes|rss-bound-mib) must be", capsys.readouterr().err)
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _soak_cli(args: list[str]) -> subprocess.CompletedProcess:
+    """The command line, as a user runs it (tests do not import scripts/)."""
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    return subprocess.run([sys.executable, "-m", "scripts.soak", *args], cwd=REPO, env=env, capture_output=True,
+                          text=True, timeout=300)
+
+
+def test_cli_exit_codes_and_argument_errors(tmp_path: Path) -> None:
+    ok = _soak_cli(["--minutes", "0.0001", "--max-steps", "20", "--out", str(tmp_path / "ok")])
+    assert ok.returncode == 0 and "soak PASSED" in ok.stdout, ok.stderr
+    bad = _soak_cli(["--minutes", "0.0001", "--max-steps", "20", "--fault", "nan-obs", "--out", str(tmp_path / "b")])
+    assert bad.returncode == 1 and "soak FAILED: non-finite observation" in bad.stderr
+    for args in (["--minutes", "0"], ["--minutes", "nan"], ["--minutes", "1", "--rss-bound-mib", "-5"]):
+        r = _soak_cli(args + ["--out", str(tmp_path / "x")])
+        assert r.returncode == 2
+        assert re.search(r"--(minutes|rss-bound-mib) must be", r.stderr)
 
 
 def test_config_errors_name_the_field() -> None:
