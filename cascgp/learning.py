@@ -142,7 +142,8 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
                    config: RetrainConfig = RetrainConfig(), *, reset_options: dict[str, Any] | None = None,
                    model_factory: ModelFactory = default_model_factory, buffer_dir: str | Path | None = None,
                    on_attempt: AttemptCallback | None = None,
-                   episode_callback: EpisodeCallback | None = None) -> ControllerRun:
+                   episode_callback: EpisodeCallback | None = None,
+                   paired: Sequence[str] = ()) -> ControllerRun:
     """Run every attempt of ``plan`` with one controller; a learning controller is refitted after every
     ``"train"`` attempt on all data so far.
 
@@ -158,14 +159,24 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
         on_attempt: called with ``(name, record)`` after every attempt (e.g. a progress bar).
         episode_callback: ``episode_callback(name, i, attempt)`` may return a runner callback for attempt ``i``
             (e.g. a video recorder, :mod:`cascgp_experiments.video`).
+        paired: controllers evaluated *on the same model* after every attempt, for paired comparisons
+            (e.g. ``("sp-inward-gated",)`` next to ``"sp-inward"``: the gate's own effect, free of the
+            differences in data and fits that separate two independent learners). Each must be ``name``'s
+            model with other suffixes; each runs one episode with the attempt's seed and task, adds nothing
+            to the buffer, and leaves the model as it found it (an online window it opens is closed).
 
     Returns:
         The run; each record holds ``attempt``, ``task``, ``task_attempt``, ``phase``, ``n_train`` (rows the
         controller's model was fitted on), the episode's :meth:`EpisodeResult.summary` and, after a refit,
-        ``fit_seconds``.
+        ``fit_seconds``; with ``paired``, ``record["paired"][p]`` is controller ``p``'s episode summary.
     """
     base, _, _ = parse_controller(name)
     learns = base not in PLAIN_CONTROLLERS
+    paired = tuple(paired)
+    for p in paired:
+        if parse_controller(p)[0] != base or base in PLAIN_CONTROLLERS:
+            raise ValueError(f"paired: {p!r} is not a variant of {name!r}'s model (expected {base!r} with "
+                             "other '-gated'/'-vgated'/'-online' suffixes)")
     buffer = DataBuffer(buffer_dir) if learns else None
     if buffer is not None and len(buffer):
         raise ValueError(f"buffer folder {buffer_dir} already holds data; use an empty --out folder")
@@ -182,6 +193,9 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
                   "n_train": 0 if model is None else int(model.n_train), **result.summary()}
         if controller.online:
             record["online_samples"] = controller.n_online_samples
+        if paired:
+            record["paired"] = _paired_episodes(paired, env, model, rbd, feedback, seed=config.seed * 1000 + i,
+                                                options={"task": task, **options}, meta={"attempt": i, "phase": phase})
         if learns and phase == "train":
             buffer.append(result.data)
             t0 = time.perf_counter()
@@ -192,6 +206,20 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
         if on_attempt is not None:
             on_attempt(name, record)
     return run
+
+
+def _paired_episodes(names: Sequence[str], env: Any, model: Any | None, rbd: Any, feedback: Feedback, *,
+                     seed: int, options: dict[str, Any], meta: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """One episode of each controller in ``names`` on ``model`` (see :func:`run_controller`'s ``paired``)."""
+    out = {}
+    for p in names:
+        if model is not None and hasattr(model, "stop_online"):
+            model.stop_online()  # an earlier online episode must not leak into this one
+        controller = make_controller(p, rbd, model, feedback)
+        out[p] = run_episode(env, controller, seed=seed, options=options, meta=meta).summary()
+    if model is not None and hasattr(model, "stop_online"):
+        model.stop_online()
+    return out
 
 
 def run_controllers(names: Sequence[str], make_env: Callable[[], Any], plan: Sequence[Attempt], rbd: Any,

@@ -118,13 +118,14 @@ def video_attempts(plan: list[Attempt]) -> tuple[int, ...]:
 
 
 def controller_job(config: dict[str, Any], name: str, buffer_dir: str | None,
-                   video: dict[str, Any] | None = None) -> list[dict[str, Any]]:
+                   video: dict[str, Any] | None = None, paired: list[str] | None = None) -> list[dict[str, Any]]:
     """One job of :func:`run_transfer`: every attempt of one controller, on its own env (the attempts of a
     learning controller are sequential: its data accumulate). ``buffer_dir`` belongs to this job: it is
     emptied first, so a retried or resumed job starts again from no data. ``video``: a
     :class:`VideoOptions` as a dict; the chosen attempts of this controller are written to
-    ``<folder>/<controller>/<attempt>.mp4`` (rendering does not change the simulation). Returns the
-    attempt records."""
+    ``<folder>/<controller>/<attempt>.mp4`` (rendering does not change the simulation). ``paired``: controllers
+    evaluated on this controller's model after every attempt (:func:`cascgp.learning.run_controller`). Returns
+    the attempt records."""
     from cascgp_experiments.execution import report_progress
 
     cfg = TransferConfig.from_dict(config)
@@ -159,7 +160,7 @@ def controller_job(config: dict[str, Any], name: str, buffer_dir: str | None,
     try:
         run = run_controller(name, env, cfg.plan(), rbd, jaco_feedback(), cfg.retrain(),
                              reset_options=cfg.reset_options(), buffer_dir=buffer_dir, on_attempt=progress,
-                             episode_callback=episode_callback)
+                             episode_callback=episode_callback, paired=tuple(paired or ()))
     finally:
         env.close()
     return run.attempts

@@ -101,6 +101,7 @@ class CascadedGPModel:
         self.n_train = 0
         self._post: list[Any] = []
         self._fast: FastPath | None = None
+        self._fast_offline: FastPath | None = None
         self._fast_var: FastVariance | None = None
         self._online: Any = None
 
@@ -240,7 +241,7 @@ class CascadedGPModel:
     def _cache(self) -> None:
         """Posterior factors per joint and the padded arrays of the single-query path."""
         self._post = [self.banks[k].posterior(b) for k, b in self.where]
-        self._fast = FastPath.build(self._post, self.specs, self.order)
+        self._fast = self._fast_offline = FastPath.build(self._post, self.specs, self.order)
         self._fast_var = None
         self._online = None
 
@@ -390,6 +391,14 @@ class CascadedGPModel:
         self._online = OnlineWindow(self, window)
         self._fast = self._online.fast
         self._fast_var = None
+
+    def stop_online(self) -> None:
+        """Drop the online window (:meth:`start_online`): predictions are again those of the fitted model.
+        Does nothing when no window is open."""
+        if getattr(self, "_online", None) is not None:
+            self._online = None
+            self._fast = self._fast_offline
+            self._fast_var = None
 
     def add_sample(self, q: Any, qd: Any, qdd: Any, tau: Any) -> None:
         """Add one measured sample ``(q, qd, qdd, tau)``, each (N,), to every joint (see :meth:`start_online`).
