@@ -17,7 +17,7 @@ $(STAMP): pyproject.toml
 	touch $@
 
 demo: $(STAMP)
-	$(VENV)/bin/python -m scripts.task_transfer --quick --overwrite --out out/demo
+	$(VENV)/bin/python -m scripts.task_transfer --quick --overwrite --out out/demo --video out/demo/video
 
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest

@@ -17,6 +17,9 @@ controller falls back to the rigid-body feedforward (or to zero when no RBD mode
 is given) and counts the event in :attr:`FeedforwardController.n_fallbacks`. A
 non-finite measurement contributes no feedback on that joint (counted in
 :attr:`FeedforwardController.n_bad_measurements`).
+
+:class:`Controller` is the protocol every controller run by :func:`cascgp.episodes.run_episode`
+follows (this one, and e.g. ``jaco_env.oracle``'s oracle and PD controllers).
 """
 
 from __future__ import annotations
@@ -28,6 +31,29 @@ import numpy as np
 _BIG = 1e300  # stands in for an overflowed feedback term; far beyond any actuator limit
 
 Reference = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+class Controller(Protocol):
+    """What the episode runner (:func:`cascgp.episodes.run_episode`) needs of a controller.
+
+    ``start(env, info)`` is called right after ``env.reset`` with the unwrapped environment and
+    the reset's ``info`` (reset per-episode state, read e.g. the payload); then every control
+    tick ``__call__(t, q, qd, reference)`` returns the joint command for the measured state at
+    time ``t``, with ``reference(t) -> (q_d, qd_d, qdd_d)``. A controller may count the ticks on
+    which it fell back in ``n_fallbacks`` (the runner reads ``getattr(controller, "n_fallbacks", 0)``).
+    A controller that learns from the measurements may define ``observe(q, qd, tau, t)``: the runner
+    calls it after every step with the new measured joint state, torque and time.
+    """
+
+    @property
+    def dof(self) -> int: ...
+
+    @property
+    def name(self) -> str: ...
+
+    def start(self, env: Any, info: dict[str, Any]) -> None: ...
+
+    def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, reference: Reference) -> np.ndarray: ...
 
 
 class InverseDynamics(Protocol):
@@ -56,7 +82,40 @@ class FeedforwardController:
         kd: derivative gains (N m s / rad), scalar or per joint.
         torque_limits: symmetric actuator limits (N m), per joint.
         fallback: rigid-body model used when ``model`` returns a non-finite torque
-            (defaults to ``model`` itself if that is a rigid-body model, else zero).
+            (defaults to ``model`` itself if that is a rigid-body model, else zero); with ``gate``
+            it is also the nominal model the feedforward falls back toward.
+        gate: trust the learned model only where it is confident (needs a cascgp model with
+            ``predict_one_var`` and a nominal model: ``fallback``, or an SP model's own ``rbd``):
+            ``False``, ``"wiener"`` (or ``True``) or ``"variance"``; see below.
+        online: learn inside the episode: at :meth:`start` the model opens an online window of this many
+            samples (:meth:`cascgp.models.CascadedGPModel.start_online`, hyperparameters held) and every
+            ``online_every``-th measurement (:meth:`observe`) enters it. ``None``: offline only.
+        online_every: ticks between online samples (4 at 40 Hz control gives the 10 Hz of the training sets).
+
+    Gated feedforward: the learned correction :math:`d_j = \mu_j - \tau_{RBD,j}` (the model's mean torque
+    minus the nominal torque) is shrunk toward zero by a weight :math:`w_j \in [0, 1]`,
+
+    .. math::
+
+        \tau_{ff,j} = \tau_{RBD,j} + w_j\, d_j, \qquad
+        w_j^{\text{wiener}} = \frac{d_j^2}{d_j^2 + v_j}, \qquad
+        w_j^{\text{variance}} = \operatorname{clip}\Big(1 - \frac{v_j}{p_j},\ 0,\ 1\Big),
+
+    with :math:`v_j` the model's latent variance propagated through the cascade
+    (:meth:`cascgp.models.CascadedGPModel.predict_one_var`) and :math:`p_j` its prior (signal) variance.
+    One rule for every joint, task and model, no threshold to tune:
+
+    * ``"wiener"`` (default): the Wiener (minimum mean-square-error) gain of a correction of size :math:`d_j`
+      estimated with noise variance :math:`v_j`: a correction well above its uncertainty is kept, one
+      within its uncertainty is shrunk. Near the data (:math:`v \to 0`) it is the learned model.
+    * ``"variance"``: the fraction of the prior uncertainty the data have removed at this point. It shrinks
+      any correction, however large, as soon as the query leaves the training data; measured on the task
+      transfer it gave up most of what the model had learned (README, "uncertainty-aware feedforward"),
+      because the GP posterior mean already reverts toward its prior away from data and this gate shrinks
+      it a second time. Kept for comparison.
+
+    For an SP model the correction is the learned residual, for an NP model the difference to the RBD.
+    The weights of the last tick are in :attr:`last_gate`.
 
     The controller is called every control tick with the time, the measured state and
     the task's reference ``reference(t) -> (q_d, qd_d, qdd_d)``. Derivative-free models
@@ -70,6 +129,9 @@ class FeedforwardController:
         kd: float | np.ndarray,
         torque_limits: np.ndarray,
         fallback: InverseDynamics | None = None,
+        gate: bool | str = False,
+        online: int | None = None,
+        online_every: int = 4,
     ) -> None:
         limits = np.asarray(torque_limits)
         if limits.dtype.kind not in "fiu" or limits.ndim != 1 or limits.size == 0 or \
@@ -87,6 +149,36 @@ class FeedforwardController:
         if fallback is None and model is not None and hasattr(model, "inverse_dynamics"):
             fallback = model
         self.fallback = fallback
+        if gate is True:
+            gate = "wiener"
+        if gate not in (False, None, "wiener", "variance"):
+            raise ValueError(f"gate: expected False, True, 'wiener' or 'variance', got {gate!r}")
+        self.gate: str | None = gate or None
+        self.last_gate: np.ndarray | None = None
+        if self.gate:
+            if not hasattr(model, "predict_one_var"):
+                raise ValueError("gate: needs a fitted cascgp model (with predict_one_var), got "
+                                 f"{type(model).__name__}")
+            self._nominal = fallback if fallback is not None else getattr(model, "rbd", None)
+            if self._nominal is None:
+                raise ValueError("gate: needs a nominal rigid-body model to fall back toward: pass fallback=... "
+                                 "(an SP model's own rbd is used when there is none)")
+            self._prior = np.asarray(model.signal_var, dtype=float)
+        if online is not None:
+            if not hasattr(model, "start_online"):
+                raise ValueError(f"online: needs a fitted cascgp model, got {type(model).__name__}")
+            if isinstance(online, bool) or not isinstance(online, (int, np.integer)) or online < 1:
+                raise ValueError(f"online: expected None or a window of >= 1 samples, got {online!r}")
+            if model.feature_kind != "db":
+                raise ValueError(f"online: model {model.name!r}: online updates support derivative-based models only")
+        if isinstance(online_every, bool) or not isinstance(online_every, (int, np.integer)) or online_every < 1:
+            raise ValueError(f"online_every: expected an integer >= 1, got {online_every!r}")
+        self.online = None if online is None else int(online)
+        self.online_every = int(online_every)
+        self._recent: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._n_observed = 0
+        self.n_online_samples = 0
+        self.n_online_rejected = 0
         self._uses_history = getattr(model, "feature_kind", "db") == "df"
         self._delta = float(getattr(model, "df_delta", 0.0) or 0.0)
         self.n_fallbacks = 0
@@ -98,11 +190,13 @@ class FeedforwardController:
         """Short description of the feedforward source."""
         if self.model is None:
             return "pd"
-        return str(getattr(self.model, "name", type(self.model).__name__))
+        name = str(getattr(self.model, "name", type(self.model).__name__))
+        gate = {"wiener": "-gated", "variance": "-vgated"}.get(self.gate, "")
+        return name + gate + ("-online" if self.online else "")
 
     def feedforward(self, t: float, reference: Reference) -> np.ndarray:
         """The feedforward torque at time ``t`` (finite, not yet clipped)."""
-        return self._feedforward(t, *reference(t), reference)
+        return self._feedforward(t, *self._reference(reference, t), reference)
 
     def _feedforward(
         self, t: float, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, reference: Reference
@@ -132,6 +226,8 @@ class FeedforwardController:
                 q_hist = None
                 if self._uses_history:
                     q_hist = np.stack([reference(t - self._delta)[0], reference(t - 2.0 * self._delta)[0]])
+                if self.gate:
+                    return self._gated(q_d, qd_d, qdd_d, q_hist)
                 return np.asarray(model.predict_one(q_d, qd_d, qdd_d, q_hist=q_hist), dtype=float)
             return np.asarray(model.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
         except Exception as exc:  # noqa: BLE001
@@ -141,26 +237,97 @@ class FeedforwardController:
             self.last_model_error = f"{type(exc).__name__}: {exc}"
             return None
 
+    def _gated(self, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, q_hist: np.ndarray | None
+               ) -> np.ndarray:
+        """The gated feedforward (see the class docstring)."""
+        mean, var = self.model.predict_one_var(q_d, qd_d, qdd_d, q_hist=q_hist)
+        nominal = np.asarray(self._nominal.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
+        d = mean - nominal
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+            if self.gate == "wiener":
+                d2 = d * d
+                w = np.where(d2 + var > 0.0, d2 / (d2 + var), 1.0)
+            else:
+                w = np.clip(1.0 - var / self._prior, 0.0, 1.0)
+        w = np.where(np.isfinite(w), w, 0.0)
+        self.last_gate = w
+        return nominal + w * d
+
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, reference: Reference) -> np.ndarray:
-        """Joint torques for the measured state ``(q, qd)`` at time ``t``; always finite and within limits."""
-        q, qd = np.asarray(q), np.asarray(qd)
-        if q.dtype.kind not in "fiu" or qd.dtype.kind not in "fiu":
-            raise TypeError(f"q and qd must be real numeric arrays, got dtypes {q.dtype} and {qd.dtype}")
-        q, qd = q.astype(float, copy=False), qd.astype(float, copy=False)
-        if q.shape != (self.dof,) or qd.shape != (self.dof,):
-            raise ValueError(f"q and qd must have shape ({self.dof},), got {q.shape} and {qd.shape}")
-        q_d, qd_d, qdd_d = reference(t)  # once per tick; shared with the feedforward
+        """Joint torques for the measured state ``(q, qd)`` at time ``t``; always finite and within limits.
+        Malformed arguments (``t`` not a real number, ``q``/``qd`` not real ``(N,)`` arrays) or a reference
+        that does not return three real ``(N,)`` arrays raise ``TypeError``/``ValueError`` naming them."""
+        if isinstance(t, (bool, np.bool_)) or not isinstance(t, (int, float, np.integer, np.floating)):
+            raise TypeError(f"t: expected a real number (s), got {type(t).__name__}")
+        q, qd = self._measured("q", q), self._measured("qd", qd)
+        q_d, qd_d, qdd_d = self._reference(reference, t)  # once per tick; shared with the feedforward
         bad = ~(np.isfinite(q) & np.isfinite(qd) & np.isfinite(q_d) & np.isfinite(qd_d))
-        if np.any(bad):
-            self.n_bad_measurements += 1
+        self.n_bad_measurements += bool(np.any(bad))
         with np.errstate(over="ignore", invalid="ignore"):
             # A finite but absurd error saturates with its sign (overflow to +-inf is capped
             # before the sum so that P and D terms of opposite sign cannot make inf - inf).
-            p_term = np.nan_to_num(self.kp * (q_d - q), nan=0.0, posinf=_BIG, neginf=-_BIG)
-            d_term = np.nan_to_num(self.kd * (qd_d - qd), nan=0.0, posinf=_BIG, neginf=-_BIG)
-        feedback = np.where(bad, 0.0, p_term + d_term)
+            terms = np.nan_to_num(np.stack([self.kp * (q_d - q), self.kd * (qd_d - qd)]), nan=0.0,
+                                  posinf=_BIG, neginf=-_BIG)
+        feedback = np.where(bad, 0.0, terms.sum(axis=0))
         tau = self._feedforward(t, q_d, qd_d, qdd_d, reference) + feedback
         return np.clip(tau, -self.torque_limits, self.torque_limits)
+
+    def _measured(self, name: str, x: Any) -> np.ndarray:
+        try:
+            a = np.asarray(x)
+        except (TypeError, ValueError) as exc:  # ragged nested sequences
+            raise TypeError(f"{name}: expected a real numeric array of shape ({self.dof},) ({exc})") from None
+        if a.dtype.kind not in "fiu":
+            raise TypeError(f"{name}: expected a real numeric array, got dtype {a.dtype}")
+        if a.shape != (self.dof,):
+            raise ValueError(f"{name}: expected shape ({self.dof},), got {a.shape}")
+        return a.astype(float, copy=False)
+
+    def _reference(self, reference: Reference, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        out = reference(t)
+        if not isinstance(out, (tuple, list)) or len(out) != 3:
+            raise ValueError("reference: expected reference(t) to return (q_d, qd_d, qdd_d)")
+        parts = []
+        for nm, x in zip(("q_d", "qd_d", "qdd_d"), out):
+            a = np.asarray(x)
+            if a.dtype.kind not in "fiu":
+                raise TypeError(f"reference: {nm} must be a real numeric array, got dtype {a.dtype}")
+            if a.shape != (self.dof,):
+                raise ValueError(f"reference: {nm} must have shape ({self.dof},), got {a.shape}")
+            parts.append(a.astype(float, copy=False))
+        return parts[0], parts[1], parts[2]
+
+    def start(self, env: Any, info: dict[str, Any]) -> None:
+        """Start of an episode (:class:`Controller` protocol): zero the counters; with ``online``, open a
+        fresh online window on the model (samples of earlier episodes enter only through retraining)."""
+        self.reset_counters()
+        self._recent, self._n_observed = [], 0
+        self.n_online_samples = self.n_online_rejected = 0
+        if self.online:
+            self.model.start_online(self.online)
+
+    def observe(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, t: float) -> None:
+        """A new measurement (called by the runner after every step). With ``online``, every
+        ``online_every``-th call adds the sample of the *previous* tick to the model: its q and qd,
+        q̈ by central differences of the measured qd (as the recorded episodes), and the torque measured
+        over the period that started at that tick (reported now). A sample the model refuses (e.g.
+        non-finite) is counted in ``n_online_rejected``, never raised."""
+        if not self.online:
+            return
+        self._recent = (self._recent + [(float(t), np.array(q, float), np.array(qd, float),
+                                         np.array(tau, float))])[-3:]
+        self._n_observed += 1
+        if self._n_observed % self.online_every or len(self._recent) < 3:
+            return
+        (t0, _, qd0, _), (t1, q1, qd1, _), (t2, _, qd2, tau2) = self._recent
+        try:
+            with np.errstate(all="ignore"):  # a non-finite difference is refused by add_sample below
+                qdd1 = (qd2 - qd0) / (t2 - t0)
+            self.model.add_sample(q1, qd1, qdd1, tau2)
+            self.n_online_samples += 1
+        except Exception as exc:  # noqa: BLE001 - learning must never stop the control loop
+            self.n_online_rejected += 1
+            self.last_model_error = f"online: {type(exc).__name__}: {exc}"
 
     def reset_counters(self) -> None:
         """Zero the fallback and bad-measurement counters (e.g. at the start of an episode)."""

@@ -24,6 +24,9 @@ message names the field and the first bad row.  An empty record (``T = 0``) is r
 Files are ``.npz`` archives (``numpy.savez``) written atomically (temporary file in the same
 folder, then :func:`os.replace`) and re-validated on load.  Format version:
 :data:`FORMAT_VERSION`.
+
+(A little over 400 lines: one record type with its validation, derivatives, slicing and file
+format.)
 """
 
 from __future__ import annotations

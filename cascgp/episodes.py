@@ -1,10 +1,13 @@
-"""Run a :class:`~cascgp.controller.FeedforwardController` in an episode and record what the robot measured.
+"""The one episode runner: run a controller in an episode and record what the robot measured.
 
-This is the one piece of glue between the learning library and a simulated (or real)
-robot. It does not import any environment package: it works with any Gymnasium
+:func:`run_episode` runs any :class:`~cascgp.controller.Controller` (the learned-feedforward
+:class:`~cascgp.controller.FeedforwardController`, or e.g. ``jaco_env.oracle``'s oracle and PD
+controllers). This is the one piece of glue between the learning library and a simulated (or
+real) robot. It does not import any environment package: it works with any Gymnasium
 environment whose observation starts with the measured ``[q, qd, tau, t]`` of an
 N-DOF arm and whose unwrapped environment exposes ``task.reference(t)`` (e.g.
-``JacoPour-v0``). The recorded data contain measurements only, as on a real robot:
+``JacoPour-v0``; ``jaco_env.split_obs`` is that layout for the Jaco). The recorded data
+contain measurements only, as on a real robot:
 
 ==================  ===========================================================
 recorded            source
@@ -20,11 +23,11 @@ recorded            source
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
-from cascgp.controller import FeedforwardController
+from cascgp.controller import Controller
 from cascgp.data import DynamicsData
 
 
@@ -73,6 +76,7 @@ class EpisodeResult:
 
 
 def _split_obs(obs: np.ndarray, dof: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """``(q, qd, tau, t)`` of an observation that starts with ``[q, qd, tau, t]`` of ``dof`` joints."""
     obs = np.asarray(obs, dtype=float)
     if obs.ndim != 1 or obs.shape[0] < 3 * dof + 1:
         raise ValueError(f"observation must be a flat vector starting with [q, qd, tau, t] of {dof} joints, "
@@ -82,42 +86,53 @@ def _split_obs(obs: np.ndarray, dof: int) -> tuple[np.ndarray, np.ndarray, np.nd
 
 def run_episode(
     env: Any,
-    controller: FeedforwardController,
+    controller: Controller,
     *,
     seed: int | None = None,
     options: dict[str, Any] | None = None,
     smoothing: int | None = None,
     meta: dict[str, Any] | None = None,
+    callback: Callable[[Any, dict[str, Any]], None] | None = None,
 ) -> EpisodeResult:
     """Run ``controller`` on ``env`` from ``reset(seed, options)`` until the episode ends.
 
     Args:
         env: a Gymnasium environment (see the module docstring for what it must offer).
-        controller: the controller; its counters are reset at the start.
+        controller: the controller; ``controller.start(env.unwrapped, info)`` is called right after
+            the reset, then ``controller(t, q, qd, task.reference)`` every tick (its output is sent
+            to ``env.step`` as float32).
         seed, options: passed to ``env.reset`` (e.g. ``options={"task": "front", "payload_mass": 1.0}``).
         smoothing: optional smoothing window for the numerical differentiation of ``qd``.
         meta: extra metadata stored in the record.
+        callback: optional ``callback(env.unwrapped, info)`` called after every step (e.g. to log
+            extra metrics from the simulator's state).
     """
     dof = controller.dof
     obs, info = env.reset(seed=seed, options=options)
-    task = env.unwrapped.task
+    unwrapped = env.unwrapped
+    task = unwrapped.task
     reference = task.reference
-    controller.reset_counters()
+    controller.start(unwrapped, info)
+    observe = getattr(controller, "observe", None)  # controllers that learn from what the robot measures
     ts, qs, qds, taus, errors = [], [], [], [], []
     total, steps, unstable = 0.0, 0, False
     while True:
         q, qd, _, t = _split_obs(obs, dof)
         action = controller(t, q, qd, reference)
-        obs, reward, terminated, truncated, info = env.step(action.astype(np.float32))
+        obs, reward, terminated, truncated, info = env.step(np.asarray(action, dtype=np.float32))
         ts.append(t)
         qs.append(q)
         qds.append(qd)
         taus.append(_split_obs(obs, dof)[2])
+        if observe is not None:
+            observe(*_split_obs(obs, dof))
         if "tracking_error" in info:
             errors.append(float(info["tracking_error"]))
         total += float(reward)
         steps += 1
         unstable = unstable or bool(info.get("unstable", False))
+        if callback is not None:
+            callback(unwrapped, info)
         if terminated or truncated:
             break
     t_arr, q_arr = np.asarray(ts), np.asarray(qs)
@@ -134,5 +149,6 @@ def run_episode(
     spilled = info["marbles_spilled"] / n_marbles if n_marbles else float("nan")
     return EpisodeResult(
         data=data, tracking_rmse=tracking, joint_rmse=joint_rmse, in_jar=float(in_jar), spilled=float(spilled),
-        episode_return=total, steps=steps, unstable=unstable, n_fallbacks=controller.n_fallbacks, info=dict(info),
+        episode_return=total, steps=steps, unstable=unstable, n_fallbacks=int(getattr(controller, "n_fallbacks", 0)),
+        info=dict(info),
     )

@@ -47,6 +47,8 @@ BOMB_RATIO = 100
 _ZIP_MAGIC = (b"PK\x03\x04", b"PK\x05\x06")  # local file header; empty archive
 _TMP = re.compile(r"^\.(?P<name>.+)\.(?P<host>[0-9a-f]{8})-(?P<pid>\d+)\.[^.]+\.tmp$")
 _HOST = f"{zlib.crc32(socket.gethostname().encode()):08x}"
+_UMASK = os.umask(0o022)  # read the process umask once (os.umask can only read it by setting it) ...
+os.umask(_UMASK)  # ... and put it back
 
 
 def _pid_alive(pid: int) -> bool:
@@ -95,6 +97,7 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], None], *,
     remove_stale_temporaries(folder)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_HOST}-{os.getpid()}.", suffix=".tmp", dir=folder)
     try:
+        os.fchmod(fd, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the mode open() would
         with os.fdopen(fd, "wb") as f:
             write(f)
             f.flush()

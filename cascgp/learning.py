@@ -7,8 +7,12 @@ gains and torque limits (:class:`Feedback`) and, optionally, a model factory and
 (for the Jaco 2 pouring env, :mod:`cascgp_experiments.transfer` does).
 
 Controllers: ``"pd"`` (feedback only), ``"rbd"`` (nominal rigid-body feedforward) and any model name
-of :mod:`cascgp.models`. Before a learning controller has any data, an SP model is its RBD mean (RBD
-feedforward) and an NP model is zero (PD). After every ``"train"`` attempt of a learning controller,
+of :mod:`cascgp.models`, optionally suffixed ``-gated`` (the feedforward falls back toward the RBD where
+the model is unsure: :class:`cascgp.controller.FeedforwardController` ``gate="wiener"``; ``-vgated``:
+``gate="variance"``) and ``-online`` (new
+samples enter the model during each attempt, window :data:`ONLINE_WINDOW`, hyperparameters held until
+the next refit), e.g. ``"sp-inward-gated-online"``. Before a learning controller has any data, an SP
+model is its RBD mean (RBD feedforward) and an NP model is zero (PD). After every ``"train"`` attempt of a learning controller,
 the measured episode joins a :class:`cascgp.buffer.DataBuffer` and a new model is fitted on
 everything seen so far (subsampled to ``rate_hz``, at most ``cap`` rows), warm-started from the
 previous model's hyperparameters.
@@ -32,11 +36,17 @@ from cascgp.episodes import EpisodeResult, run_episode
 from cascgp.gp import GPFitConfig
 from cascgp.models import MODEL_NAMES, make_model
 
-__all__ = ["PLAIN_CONTROLLERS", "Attempt", "Feedback", "RetrainConfig", "ControllerRun", "check_controller",
-           "make_controller", "attempt_plan", "default_model_factory", "run_controller", "run_controllers"]
+__all__ = ["PLAIN_CONTROLLERS", "ONLINE_WINDOW", "Attempt", "Feedback", "RetrainConfig", "ControllerRun",
+           "check_controller", "parse_controller", "make_controller", "attempt_plan", "default_model_factory",
+           "run_controller", "run_controllers"]
 
 #: Controllers that never learn.
 PLAIN_CONTROLLERS = ("pd", "rbd")
+#: Online samples a ``-online`` controller keeps per joint during an attempt (15 s at 10 Hz).
+ONLINE_WINDOW = 150
+#: ``episode_callback(controller_name, attempt_index, attempt)`` -> a runner callback for that episode or None
+#: (e.g. a video recorder).
+EpisodeCallback = Callable[[str, int, "Attempt"], Any]
 
 #: One attempt: (task, attempt index within the task, phase). Only ``"train"`` attempts feed the buffer.
 Attempt = tuple[str, int, str]
@@ -73,23 +83,45 @@ class ControllerRun:
     attempts: list[dict[str, Any]] = field(default_factory=list)
 
 
+def parse_controller(name: str) -> tuple[str, str | None, bool]:
+    """``"sp-inward-gated-online"`` -> ``("sp-inward", "wiener", True)``: the base controller or model name,
+    the gate (``-gated``: ``"wiener"``, ``-vgated``: ``"variance"``, else None; see
+    :class:`cascgp.controller.FeedforwardController`), online. ``ValueError`` naming the controller for anything
+    unknown (suffixes apply to models only; online needs derivative-based states)."""
+    if not isinstance(name, str):
+        raise ValueError(f"controller: expected a name, got {name!r}")
+    base, online = (name[: -len("-online")], True) if name.endswith("-online") else (name, False)
+    gate = None
+    for suffix, rule in (("-vgated", "variance"), ("-gated", "wiener")):
+        if base.endswith(suffix):
+            base, gate = base[: -len(suffix)], rule
+            break
+    if base not in PLAIN_CONTROLLERS and base not in MODEL_NAMES or (base in PLAIN_CONTROLLERS and (gate or online)):
+        raise ValueError(f"unknown controller {name!r}; expected 'pd', 'rbd' or one of {list(MODEL_NAMES)}, "
+                         "a model name optionally followed by '-gated' and/or '-online'")
+    if online and base.endswith("-df"):
+        raise ValueError(f"unknown controller {name!r}: '-online' needs a derivative-based model (not '-df')")
+    return base, gate, online
+
+
 def check_controller(name: str) -> None:
-    """``ValueError`` unless ``name`` is ``"pd"``, ``"rbd"`` or a model name of :mod:`cascgp.models`."""
-    if name not in PLAIN_CONTROLLERS and name not in MODEL_NAMES:
-        raise ValueError(f"unknown controller {name!r}; expected 'pd', 'rbd' or one of {list(MODEL_NAMES)}")
+    """``ValueError`` unless ``name`` is ``"pd"``, ``"rbd"`` or a model name (with optional suffixes,
+    :func:`parse_controller`)."""
+    parse_controller(name)
 
 
 def make_controller(name: str, rbd: Any, model: Any | None, feedback: Feedback) -> FeedforwardController:
     """The controller for ``name`` given the current (possibly unfitted/None) learned model."""
-    check_controller(name)
-    if name == "pd":
+    base, gate, online = parse_controller(name)
+    if base == "pd":
         feedforward = None
-    elif name == "rbd":
+    elif base == "rbd":
         feedforward = rbd
     elif model is not None and model.fitted:
-        feedforward = model
+        return FeedforwardController(model, feedback.kp, feedback.kd, feedback.torque_limits, fallback=rbd,
+                                     gate=gate or False, online=ONLINE_WINDOW if online else None)
     else:  # no data yet: an SP model's mean is the RBD model, an NP model's mean is zero
-        feedforward = rbd if name.startswith("sp") else None
+        feedforward = rbd if base.startswith("sp") else None
     return FeedforwardController(feedforward, feedback.kp, feedback.kd, feedback.torque_limits, fallback=rbd)
 
 
@@ -109,7 +141,9 @@ def default_model_factory(name: str, rbd: Any, gp_config: GPFitConfig) -> Any:
 def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedback: Feedback,
                    config: RetrainConfig = RetrainConfig(), *, reset_options: dict[str, Any] | None = None,
                    model_factory: ModelFactory = default_model_factory, buffer_dir: str | Path | None = None,
-                   on_attempt: AttemptCallback | None = None) -> ControllerRun:
+                   on_attempt: AttemptCallback | None = None,
+                   episode_callback: EpisodeCallback | None = None,
+                   paired: Sequence[str] = ()) -> ControllerRun:
     """Run every attempt of ``plan`` with one controller; a learning controller is refitted after every
     ``"train"`` attempt on all data so far.
 
@@ -123,13 +157,26 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
         config: seeds and refit settings.
         buffer_dir: folder that persists the buffer (must be empty); ``None``: in memory.
         on_attempt: called with ``(name, record)`` after every attempt (e.g. a progress bar).
+        episode_callback: ``episode_callback(name, i, attempt)`` may return a runner callback for attempt ``i``
+            (e.g. a video recorder, :mod:`cascgp_experiments.video`).
+        paired: controllers evaluated *on the same model* after every attempt, for paired comparisons
+            (e.g. ``("sp-inward-gated",)`` next to ``"sp-inward"``: the gate's own effect, free of the
+            differences in data and fits that separate two independent learners). Each must be ``name``'s
+            model with other suffixes; each runs one episode with the attempt's seed and task, adds nothing
+            to the buffer, and leaves the model as it found it (an online window it opens is closed).
 
     Returns:
         The run; each record holds ``attempt``, ``task``, ``task_attempt``, ``phase``, ``n_train`` (rows the
         controller's model was fitted on), the episode's :meth:`EpisodeResult.summary` and, after a refit,
-        ``fit_seconds``.
+        ``fit_seconds``; with ``paired``, ``record["paired"][p]`` is controller ``p``'s episode summary.
     """
-    learns = name not in PLAIN_CONTROLLERS
+    base, _, _ = parse_controller(name)
+    learns = base not in PLAIN_CONTROLLERS
+    paired = tuple(paired)
+    for p in paired:
+        if parse_controller(p)[0] != base or base in PLAIN_CONTROLLERS:
+            raise ValueError(f"paired: {p!r} is not a variant of {name!r}'s model (expected {base!r} with "
+                             "other '-gated'/'-vgated'/'-online' suffixes)")
     buffer = DataBuffer(buffer_dir) if learns else None
     if buffer is not None and len(buffer):
         raise ValueError(f"buffer folder {buffer_dir} already holds data; use an empty --out folder")
@@ -138,21 +185,41 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
     run = ControllerRun(name)
     for i, (task, k, phase) in enumerate(plan):
         controller = make_controller(name, rbd, model, feedback)
+        callback = episode_callback(name, i, (task, k, phase)) if episode_callback is not None else None
         result: EpisodeResult = run_episode(
             env, controller, seed=config.seed * 1000 + i, options={"task": task, **options},
-            meta={"attempt": i, "phase": phase})
+            meta={"attempt": i, "phase": phase}, callback=callback)
         record = {"attempt": i, "task": task, "task_attempt": k, "phase": phase,
                   "n_train": 0 if model is None else int(model.n_train), **result.summary()}
+        if controller.online:
+            record["online_samples"] = controller.n_online_samples
+        if paired:
+            record["paired"] = _paired_episodes(paired, env, model, rbd, feedback, seed=config.seed * 1000 + i,
+                                                options={"task": task, **options}, meta={"attempt": i, "phase": phase})
         if learns and phase == "train":
             buffer.append(result.data)
             t0 = time.perf_counter()
-            new = model_factory(name, rbd, GPFitConfig(n_restarts=config.restarts, seed=config.seed + i))
+            new = model_factory(base, rbd, GPFitConfig(n_restarts=config.restarts, seed=config.seed + i))
             model = new.fit(buffer.training_set(config.rate_hz, config.cap), init=model)
             record["fit_seconds"] = time.perf_counter() - t0
         run.attempts.append(record)
         if on_attempt is not None:
             on_attempt(name, record)
     return run
+
+
+def _paired_episodes(names: Sequence[str], env: Any, model: Any | None, rbd: Any, feedback: Feedback, *,
+                     seed: int, options: dict[str, Any], meta: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """One episode of each controller in ``names`` on ``model`` (see :func:`run_controller`'s ``paired``)."""
+    out = {}
+    for p in names:
+        if model is not None and hasattr(model, "stop_online"):
+            model.stop_online()  # an earlier online episode must not leak into this one
+        controller = make_controller(p, rbd, model, feedback)
+        out[p] = run_episode(env, controller, seed=seed, options=options, meta=meta).summary()
+    if model is not None and hasattr(model, "stop_online"):
+        model.stop_online()
+    return out
 
 
 def run_controllers(names: Sequence[str], make_env: Callable[[], Any], plan: Sequence[Attempt], rbd: Any,

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.stats import norm
 
-__all__ = ["rmse", "nrmse"]
+__all__ = ["rmse", "nrmse", "interval_coverage"]
 
 
 def _pair(pred: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -45,3 +46,19 @@ def nrmse(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
         j = int(np.flatnonzero(rng <= 0)[0])
         raise ValueError(f"target: column {j} is constant (zero range); nRMSE is undefined")
     return np.sqrt(np.mean((p - y) ** 2, axis=0)) / rng
+
+
+def interval_coverage(mean: np.ndarray, var: np.ndarray, target: np.ndarray, level: float = 0.95) -> np.ndarray:
+    r"""Fraction of targets inside the central Gaussian interval of probability ``level``, per joint:
+    :math:`|y - \mu| \le z_{(1+\text{level})/2}\,\sqrt{v}` (1.96 standard deviations for 95 %).
+
+    ``var`` must be the variance of a *measurement* (latent variance plus noise) to compare with measured
+    targets. A calibrated model gives about ``level``. Shapes as :func:`rmse`; ``var`` >= 0."""
+    p, y = _pair(mean, target)
+    v, _ = _pair(var, target)
+    if (v < 0).any():
+        raise ValueError("var: negative variance")
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level: expected a probability in (0, 1), got {level!r}")
+    z = float(norm.ppf(0.5 + 0.5 * level))
+    return np.mean(np.abs(y - p) <= z * np.sqrt(v), axis=0)

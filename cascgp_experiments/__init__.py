@@ -20,5 +20,10 @@ transfer             the task-transfer experiment on ``JacoPour-v0`` (uses :mod:
 nominal_urdf         the Jaco 2 nominal URDF (uses :mod:`cascgp.urdf_export`)
 residual             what the nominal model misses on the simulated Jaco 2
 parallel_bench       wall time of the experiments with 1 vs N workers (``scripts.bench_parallel``)
+calibration          coverage of the cascade's predictive intervals on held-out episodes (issue 10)
+gate_eval            multi-seed, paired evaluation of the gated and online feedforward (issue 10)
+soak                 the long-run reliability soak (episodes, resets, make/close, retrains; memory)
+video                MP4 videos of episodes: captioned recorder (runner callback), side by side
+                     comparison of controllers (imageio + imageio-ffmpeg, extra ``video``)
 ===================  ============================================================================
 """

@@ -19,7 +19,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import gymnasium as gym  # noqa: E402
 
-import jaco_env  # noqa: E402,F401
+import jaco_env  # noqa: E402
 from cascgp.data import DynamicsData, SavGol  # noqa: E402
 from cascgp.rbd import load_nominal  # noqa: E402
 from cascgp_experiments.common import NOMINAL_URDF  # noqa: E402
@@ -38,11 +38,12 @@ def breakdown(seconds: float, seed: int, rate_hz: float = 100.0) -> dict[str, li
     rows, qacc = [], []
     for k in range(int(seconds * rate_hz)):
         obs, _, _, _, info = env.step(np.asarray(command(k / rate_hz), dtype=np.float32))
-        rows.append(obs[:19].copy())
+        rows.append(jaco_env.split_obs(obs))
         qacc.append(info["qacc"])
     env.close()
-    rows, qacc = np.array(rows), np.array(qacc)
-    data = DynamicsData.from_measurements(rows[:, 18], rows[:, :6], rows[:, 6:12], rows[:, 12:18],
+    t, q, qd, tau = (np.array([r[i] for r in rows]) for i in (3, 0, 1, 2))
+    qacc = np.array(qacc)
+    data = DynamicsData.from_measurements(t, q, qd, tau,
                                           smoothing=SavGol(9, 2))
     rbd = load_nominal(NOMINAL_URDF)
     residual = data.tau - rbd.inverse_dynamics(data.q, data.qd, data.qdd)

@@ -40,9 +40,11 @@ from cascgp.rbd import load_nominal  # noqa: E402
 from cascgp_experiments.common import NOMINAL_URDF, save_figure  # noqa: E402
 
 ENV_ID = "JacoPour-v0"
-FULL_CONTROLLERS = ("pd", "rbd", "sp-standard", "sp-inward", "sp-outward", "np-inward")
+FULL_CONTROLLERS = ("pd", "rbd", "sp-standard", "sp-inward", "sp-outward", "np-inward", "sp-inward-gated",
+                    "sp-inward-gated-online")
 FULL_TASKS = ("front", "left", "right", "far")
-QUICK_CONTROLLERS = ("pd", "rbd", "sp-inward")
+#: The README demo: PD, RBD and the best of the uncertainty-aware controllers (issue 10; README table).
+QUICK_CONTROLLERS = ("pd", "rbd", "sp-inward-gated-online")
 QUICK_TASKS = ("front", "left")
 
 
@@ -91,28 +93,96 @@ class TransferConfig:
         return cls(**{**d, "controllers": tuple(d["controllers"]), "tasks": tuple(d["tasks"])})
 
 
-def controller_job(config: dict[str, Any], name: str, buffer_dir: str | None) -> list[dict[str, Any]]:
+@dataclass(frozen=True)
+class VideoOptions:
+    """What ``--video DIR`` records: the attempts ``attempts`` (plan indices) of ``controllers``, rendered at
+    ``width`` x ``height`` every ``fps`` frames per second (``shadow_size`` 0: no shadows, ~10x faster)."""
+
+    folder: str
+    controllers: tuple[str, ...]
+    attempts: tuple[int, ...]
+    fps: float = 10.0
+    width: int = 320
+    height: int = 240
+    shadow_size: int = 0
+
+
+def video_attempts(plan: list[Attempt]) -> tuple[int, ...]:
+    """The attempts worth watching: the first and the last training attempt of every task, and the revisit."""
+    chosen = set()
+    for task in dict.fromkeys(t for t, _, _ in plan):
+        idx = [i for i, (t, _, ph) in enumerate(plan) if t == task and ph == "train"]
+        chosen.update(idx[:1] + idx[-1:])
+    chosen.update(i for i, (_, _, ph) in enumerate(plan) if ph == "revisit")
+    return tuple(sorted(chosen))
+
+
+def controller_job(config: dict[str, Any], name: str, buffer_dir: str | None,
+                   video: dict[str, Any] | None = None, paired: list[str] | None = None) -> list[dict[str, Any]]:
     """One job of :func:`run_transfer`: every attempt of one controller, on its own env (the attempts of a
     learning controller are sequential: its data accumulate). ``buffer_dir`` belongs to this job: it is
-    emptied first, so a retried or resumed job starts again from no data. Returns the attempt records."""
+    emptied first, so a retried or resumed job starts again from no data. ``video``: a
+    :class:`VideoOptions` as a dict; the chosen attempts of this controller are written to
+    ``<folder>/<controller>/<attempt>.mp4`` (rendering does not change the simulation). ``paired``: controllers
+    evaluated on this controller's model after every attempt (:func:`cascgp.learning.run_controller`). Returns
+    the attempt records."""
     from cascgp_experiments.execution import report_progress
 
     cfg = TransferConfig.from_dict(config)
     if buffer_dir is not None:
         shutil.rmtree(buffer_dir, ignore_errors=True)
     rbd = load_nominal(NOMINAL_URDF)
-    env = cfg.make_env()
+    opts = VideoOptions(**{**video, "controllers": tuple(video["controllers"]),
+                           "attempts": tuple(video["attempts"])}) if video else None
+    recording = opts is not None and name in opts.controllers
+    if recording:
+        from cascgp_experiments.video import EpisodeRecorder, every_for_fps, make_video_env, write_mp4
+
+        env = make_video_env(opts.width, opts.height, shadow_size=opts.shadow_size, n_marbles=cfg.n_marbles)
+    else:
+        env = cfg.make_env()
+    recorders: dict[int, Any] = {}
+
+    def episode_callback(name: str, i: int, attempt: Attempt) -> Any:
+        if not recording or i not in opts.attempts:
+            return None
+        recorders[i] = EpisodeRecorder(name, task=attempt[0], attempt=attempt[1] + 1,
+                                       every=every_for_fps(env.unwrapped.control_dt, opts.fps))
+        return recorders[i]
 
     def progress(name: str, record: dict[str, Any]) -> None:
+        rec = recorders.pop(record["attempt"], None)
+        if rec is not None and rec.frames:
+            write_mp4(rec.frames, Path(opts.folder) / name / f"{record['attempt']:02d}.mp4", rec.fps)
         report_progress(1, f"{name} {record['task']}#{record['task_attempt']} "
                            f"rmse={record['tracking_rmse']:.3f} jar={record['in_jar']:.2f}")
 
     try:
         run = run_controller(name, env, cfg.plan(), rbd, jaco_feedback(), cfg.retrain(),
-                             reset_options=cfg.reset_options(), buffer_dir=buffer_dir, on_attempt=progress)
+                             reset_options=cfg.reset_options(), buffer_dir=buffer_dir, on_attempt=progress,
+                             episode_callback=episode_callback, paired=tuple(paired or ()))
     finally:
         env.close()
     return run.attempts
+
+
+def compose_videos(opts: VideoOptions, plan: list[Attempt]) -> list[Path]:
+    """Side-by-side clips, ``<folder>/<attempt>_<task>_attempt<k>.mp4``: the controllers of ``opts`` left to
+    right (RBD first when recorded), each captioned with its running RMSE and marbles in the jar."""
+    import imageio.v3 as iio
+
+    from cascgp_experiments.video import side_by_side, write_mp4
+
+    folder = Path(opts.folder)
+    made = []
+    for i in opts.attempts:
+        parts = [folder / name / f"{i:02d}.mp4" for name in opts.controllers]
+        if not all(p.exists() for p in parts):
+            continue
+        clips = [list(iio.imiter(p)) for p in parts]
+        task, k, _ = plan[i]
+        made.append(write_mp4(side_by_side(*clips), folder / f"{i:02d}_{task}_attempt{k + 1}.mp4", opts.fps))
+    return made
 
 
 def transfer_cache(out: Path) -> Path:
@@ -147,8 +217,8 @@ def claim_output(cfg: TransferConfig, out: Path, overwrite: bool = False) -> str
 
 
 def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bool = True, *,
-                 workers: int | None = None, ray_address: str | None = None, stats: dict[str, Any] | None = None
-                 ) -> list[ControllerRun]:
+                 workers: int | None = None, ray_address: str | None = None, stats: dict[str, Any] | None = None,
+                 video: VideoOptions | None = None) -> list[ControllerRun]:
     """Run the whole experiment: one job per controller (:func:`controller_job`) through
     :func:`cascgp_experiments.execution.run_jobs` (``workers`` local processes, ``None``: every core, or
     the Ray cluster at ``ray_address``); the attempts do not depend on either.
@@ -156,8 +226,9 @@ def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bo
     ``out`` (if given) receives the data buffers under ``out/buffers/<controller>`` and the job cache
     under ``out/cache/transfer`` (:func:`claim_output` checks it: buffers of a run with other settings are
     refused with ``ValueError``): a killed run started again with the same settings resumes with the
-    controllers that had not finished. ``stats`` (a dict), if given, receives
-    the job statistics (:meth:`cascgp_experiments.execution.JobResults.stats`)."""
+    controllers that had not finished. ``stats`` (a dict), if given, receives the job statistics
+    (:meth:`cascgp_experiments.execution.JobResults.stats`). ``video``: record the chosen attempts
+    (:func:`controller_job`) and compose the side-by-side clips (:func:`compose_videos`)."""
     from cascgp_experiments.execution import run_jobs
 
     for name in cfg.controllers:
@@ -169,11 +240,16 @@ def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bo
     jobs = [{"config": config, "name": name,
              "buffer_dir": None if out is None else str(Path(out).resolve() / "buffers" / name)}
             for name in cfg.controllers]
+    if video is not None:  # only then: the job cache keys of runs without video stay the same
+        for job in jobs:
+            job["video"] = {**asdict(video), "controllers": list(video.controllers), "attempts": list(video.attempts)}
     res = run_jobs(controller_job, jobs, workers=workers, ray_address=ray_address,
                    cache_dir=None if out is None else transfer_cache(out), desc="attempts",
                    units=[len(plan)] * len(jobs), unit="attempt", priority=[name not in PLAIN_CONTROLLERS for name in cfg.controllers],
                    label=lambda j: j["name"], show_progress=show_progress)
     runs = [ControllerRun(name, list(attempts)) for name, attempts in zip(cfg.controllers, res)]
+    if video is not None:
+        compose_videos(video, plan)
     if stats is not None:
         stats.update(res.stats(), labels=list(cfg.controllers))
     return runs
@@ -194,6 +270,23 @@ def summary_table(runs: list[ControllerRun]) -> str:
         lines.append(f"| {run.name} | {fmt(train[0], 'tracking_rmse', '.4f')} | {fmt(train[-1], 'tracking_rmse', '.4f')} "
                      f"| {fmt(revisit, 'tracking_rmse', '.4f')} | {mean_jar:.2f} | {fmt(train[-1], 'in_jar', '.2f')} "
                      f"| {fmt(revisit, 'in_jar', '.2f')} |")
+    return "\n".join(lines)
+
+
+def per_task_table(results: dict[str, Any]) -> str:
+    """Markdown: per controller and task, tracking RMSE (rad) and marbles in the jar on the first and on the last
+    training attempt (the revisit is in :func:`summary_table`), from ``results.json`` alone."""
+    tasks = list(results["config"]["tasks"])
+    head = "| controller | " + " | ".join(f"{t}: first | {t}: last" for t in tasks) + " | mean in jar |"
+    lines = [head, "|---|" + "---|---|" * len(tasks) + "---|"]
+    for name, attempts in results["controllers"].items():
+        cells = []
+        for task in tasks:
+            tr = [a for a in attempts if a["task"] == task and a["phase"] == "train"]
+            for a in (tr[0], tr[-1]):
+                cells.append(f"{a['tracking_rmse']:.3f} ({a['in_jar']:.0%})")
+        jar = np.mean([a["in_jar"] for a in attempts])
+        lines.append(f"| {name} | " + " | ".join(cells) + f" | {jar:.2f} |")
     return "\n".join(lines)
 
 

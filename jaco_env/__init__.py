@@ -1,6 +1,25 @@
-"""Simulated Kinova Jaco 2 pouring environments (Gymnasium + MuJoCo).
+"""Simulated Kinova Jaco 2 pouring environments (Gymnasium + MuJoCo; never imports torch).
 
-Importing the package registers ``JacoPour-v0`` and ``JacoPayload-v0``. Headless
+Importing the package registers ``JacoPour-v0`` and ``JacoPayload-v0`` (:mod:`jaco_env.envs`).
+
+==================  ==========================================================================
+module              owns
+==================  ==========================================================================
+``robot``           the arm: joint names, limits, actuator figures, the bare-arm MJCF, quaternions
+``scene``           the composed scene (bottle, payload, marbles, jar, actuators), model names,
+                    the payload inertia
+``sensors``         sensor noise and the observation layout (:func:`split_obs`)
+``kinematics``      forward kinematics, IK, the home pose
+``trajectory``      joint-space paths and quintic time scaling
+``tasks``           pouring tasks, their reference trajectories, the default task catalogue
+``envs``            the environments (``base``, ``pour_v0``, ``payload_v0``)
+``gains``           recommended PD gains
+``oracle``          reference controllers (oracle, PD) for the episode runner
+``excitation``      sum-of-sinusoids motions for data collection
+``checks``          input checks shared by the envs and controllers (real numbers, real arrays)
+==================  ==========================================================================
+
+Headless
 rendering: when no display is available (no ``DISPLAY``/``WAYLAND_DISPLAY``) and
 ``MUJOCO_GL`` is unset, ``MUJOCO_GL=egl`` is set before MuJoCo is imported (use
 ``MUJOCO_GL=osmesa`` on machines without EGL).
@@ -21,14 +40,25 @@ from gymnasium.envs.registration import register, registry  # noqa: E402
 
 from jaco_env import robot  # noqa: E402
 from jaco_env.gains import DEFAULT_KD, DEFAULT_KP  # noqa: E402
-from jaco_env.sensors import SensorNoise  # noqa: E402
+from jaco_env.sensors import (  # noqa: E402
+    MEASUREMENT_DIM,
+    OBS_JAR,
+    OBS_Q,
+    OBS_QD,
+    OBS_TAU,
+    OBS_TIME,
+    POUR_OBS_DIM,
+    SensorNoise,
+    split_obs,
+)
 
-__all__ = ["robot", "SensorNoise", "DEFAULT_KP", "DEFAULT_KD"]
+__all__ = ["robot", "SensorNoise", "DEFAULT_KP", "DEFAULT_KD", "split_obs", "OBS_Q", "OBS_QD", "OBS_TAU",
+           "OBS_TIME", "OBS_JAR", "MEASUREMENT_DIM", "POUR_OBS_DIM"]
 
 #: 60 s at the default 40 Hz control rate.
 MAX_EPISODE_STEPS = 2400
 
-if "JacoPour-v0" not in registry:
-    register(id="JacoPour-v0", entry_point="jaco_env.envs:JacoPourEnv", max_episode_steps=MAX_EPISODE_STEPS)
-if "JacoPayload-v0" not in registry:
-    register(id="JacoPayload-v0", entry_point="jaco_env.envs:JacoPayloadEnv", max_episode_steps=MAX_EPISODE_STEPS)
+for _id, _entry in (("JacoPour-v0", "jaco_env.envs.pour_v0:JacoPourEnv"),
+                    ("JacoPayload-v0", "jaco_env.envs.payload_v0:JacoPayloadEnv")):
+    if _id not in registry:
+        register(id=_id, entry_point=_entry, max_episode_steps=MAX_EPISODE_STEPS)

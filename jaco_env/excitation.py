@@ -61,7 +61,7 @@ class SumOfSinusoids:
     def __post_init__(self) -> None:
         self.q0 = np.asarray(self.q0, dtype=float).copy()
         if self.q0.shape != (robot.N_JOINTS,) or not np.all(np.isfinite(self.q0)):
-            raise ValueError(f"q0 must be 6 finite joint angles, got {self.q0!r}")
+            raise ValueError(f"q0 must be {robot.N_JOINTS} finite joint angles, got {self.q0!r}")
         lo_f, hi_f = self.freq_range
         if not 0 < lo_f <= hi_f:
             raise ValueError(f"freq_range must satisfy 0 < low <= high, got {self.freq_range!r}")
@@ -113,7 +113,7 @@ def make_command(seed: int = 0, duration: float | None = None, q0: np.ndarray | 
     if duration is not None and not duration > 0:
         raise ValueError(f"duration must be > 0 s, got {duration!r}")
     if q0 is None:
-        from jaco_env.tasks import home_pose
+        from jaco_env.kinematics import home_pose
 
         q0 = home_pose()
     return SumOfSinusoids(q0, seed=seed, **kwargs).velocity

@@ -1,4 +1,19 @@
-"""Reference controllers at the control rate on the measured observation (NumPy + MuJoCo, no torch).
+"""Reference controllers at the control rate (NumPy + MuJoCo, no torch): the oracle and PD only.
+
+Both follow the controller protocol of the one episode runner, :func:`cascgp.episodes.run_episode`
+(``cascgp.controller.Controller``; structurally: this package never imports ``cascgp``):
+attributes ``dof`` and ``name``, ``start(env, info)`` called right after ``env.reset``, and
+``__call__(t, q, qd, reference) -> tau`` with ``reference(t) -> (q_d, qd_d, qdd_d)``. Both clip
+their output to the Kinova torque limits.
+
+Safety guarantees (tested, as ``cascgp.controller.FeedforwardController``'s): the output is always
+finite and within the torque limits, or the call raises a clear error naming the field. Gains must
+be finite and non-negative (``ValueError`` naming ``kp``/``kd``); ``t`` must be a finite real number
+and ``q``, ``qd`` and each of the reference's three arrays real arrays of shape (6,)
+(``TypeError``/``ValueError`` naming them). A non-finite measurement or reference entry contributes
+no feedback on that joint (counted in ``n_bad_measurements``); a finite but absurd error saturates
+at the limits; a non-finite feedforward (e.g. the oracle's inverse dynamics of an absurd reference)
+is replaced by zero (counted in ``n_fallbacks``).
 
 * :class:`OracleController` -- computed-torque feedforward from MuJoCo's own inverse
   dynamics (``mj_inverse``) of the full true scene: arm, welded hand, bottle and payload,
@@ -7,13 +22,14 @@
 
       tau = ID_true(q_d, qd_d, qdd_d) + Kp (q_d - q_meas) + Kd (qd_d - qd_meas)
 
-  The marbles are free bodies in the environment; the oracle lumps them into the payload as a
-  rigid point mass. By default at their resting centroid in the bottle; when bound to the
-  environment (:meth:`OracleController.bind`, done by :func:`run_episode`) it reads the
-  marbles still in the bottle each control step (privileged state) and lumps exactly those at
-  their current centroid, so that the pile sliding to the mouth and the marbles leaving the
-  bottle are modelled quasi-statically. Everything else is exact, so the oracle is the best
-  feedforward a learned model of the arm's inverse dynamics can reach.
+  :meth:`OracleController.start` builds the rigid model (:func:`rigid_scene_model`) from the
+  episode's ``info["payload_mass"]`` and ``info["n_marbles"]``. The marbles are free bodies in
+  the environment; the oracle lumps them into the payload as a rigid point mass. Without an
+  environment to follow, at their resting centroid in the bottle; started on a ``JacoPour-v0``
+  it reads the marbles still in the bottle each control step (privileged state) and lumps
+  exactly those at their current centroid, so that the pile sliding to the mouth and the
+  marbles leaving the bottle are modelled quasi-statically. Everything else is exact, so the
+  oracle is the best feedforward a learned model of the arm's inverse dynamics can reach.
 
   Tracking error during the tip (investigated): the oracle's error rises from ~0.014 rad to
   ~0.05-0.08 rad (peak) while the bottle tips. Ablations on task "front" (payload 1.2 kg):
@@ -26,24 +42,35 @@
   error.
 * :class:`PDController` -- the same PD feedback without any feedforward (payload unknown, no
   gravity compensation).
-
-Both clip their output to the Kinova torque limits and evaluate the reference at the
-observation's time stamp.
 """
 
 from __future__ import annotations
 
 import functools
-from typing import Callable
+from typing import Any, Callable
 
 import mujoco
 import numpy as np
 
 from jaco_env import robot, scene
+from jaco_env.checks import is_real_number, real_array
 from jaco_env.gains import DEFAULT_KD, DEFAULT_KP
-from jaco_env.tasks import PouringTask
 
-_PAYLOAD_BODY = "jaco_arm/jaco_hand/payload"
+Reference = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+_N = robot.N_JOINTS
+_BIG = 1e300  # stands in for an overflowed feedback term; far beyond any actuator limit
+
+
+def _as_gain(value, name: str) -> np.ndarray:
+    """A gain as a (6,) array of finite non-negative numbers (scalars broadcast); errors name ``name``."""
+    a = np.asarray(value) if not isinstance(value, str) else value
+    if isinstance(a, np.ndarray) and a.ndim == 0 and a.dtype.kind in "iuf":
+        a = np.full(_N, float(a))
+    gain = real_array(a, (_N,), name)
+    if np.any(gain < 0):
+        raise ValueError(f"{name} must be non-negative, got {gain.tolist()}")
+    return gain
 
 
 @functools.lru_cache(maxsize=1)
@@ -61,7 +88,7 @@ def rigid_scene_model(payload_mass: float, n_marbles: int = 0) -> mujoco.MjModel
     """
     xml, assets = _rigid_model_xml()
     m = mujoco.MjModel.from_xml_string(xml, assets)
-    b = m.body(_PAYLOAD_BODY).id
+    b = m.body(scene.PAYLOAD_BODY).id
     extra = payload_mass - scene.BOTTLE_MASS - n_marbles * scene.MARBLE_MASS
     m_marb = n_marbles * scene.MARBLE_MASS
     if extra < -1e-9:
@@ -73,48 +100,114 @@ def rigid_scene_model(payload_mass: float, n_marbles: int = 0) -> mujoco.MjModel
     com_z = m_marb * z_marb / total
     m.body_mass[b] = total
     m.body_ipos[b] = [0.0, 0.0, com_z]
-    m.body_inertia[b] = 0.4 * extra * 0.03**2 + m_marb * (0.02**2) + extra * 0.0 + 1e-9
+    m.body_inertia[b] = scene.payload_inertia(extra, m_marb) + 1e-9
     return m
 
 
 class PDController:
     """PD feedback only: ``tau = Kp (q_d - q) + Kd (qd_d - qd)``, clipped to the torque limits."""
 
-    def __init__(self, task: PouringTask, kp: np.ndarray = DEFAULT_KP, kd: np.ndarray = DEFAULT_KD):
-        self.task = task
-        self.kp = np.asarray(kp, float)
-        self.kd = np.asarray(kd, float)
+    dof = _N
+    name = "pd"
+
+    def __init__(self, kp: np.ndarray = DEFAULT_KP, kd: np.ndarray = DEFAULT_KD):
+        self.kp = _as_gain(kp, "kp")
+        self.kd = _as_gain(kd, "kd")
+        self.n_fallbacks = 0
+        self.n_bad_measurements = 0
+
+    def start(self, env: Any, info: dict[str, Any]) -> None:
+        """Called by the episode runner after ``env.reset``: zero the counters."""
+        self.n_fallbacks = 0
+        self.n_bad_measurements = 0
 
     def feedforward(self, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray) -> np.ndarray:
-        return np.zeros(robot.N_JOINTS)
+        return np.zeros(_N)
 
-    def __call__(self, obs: np.ndarray) -> np.ndarray:
-        q, qd, t = obs[0:6], obs[6:12], float(obs[18])
-        q_d, qd_d, qdd_d = self.task.reference(t)
-        tau = self.feedforward(q_d, qd_d, qdd_d) + self.kp * (q_d - q) + self.kd * (qd_d - qd)
+    def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, reference: Reference) -> np.ndarray:
+        """Joint torques for the measured ``(q, qd)`` at time ``t`` (s since reset); always finite and
+        within the torque limits (module docstring: what raises, what falls back)."""
+        if not is_real_number(t):
+            raise TypeError(f"t must be a real number (s), got {type(t).__name__} {t!r}")
+        if not np.isfinite(t):
+            raise ValueError(f"t must be finite, got {t!r}")
+        q = real_array(q, (_N,), "q (measured joint positions)", finite=False)
+        qd = real_array(qd, (_N,), "qd (measured joint velocities)", finite=False)
+        ref = reference(t)
+        if not isinstance(ref, (tuple, list)) or len(ref) != 3:
+            raise ValueError(f"reference(t) must return (q_d, qd_d, qdd_d), got {type(ref).__name__}")
+        q_d, qd_d, qdd_d = (real_array(r, (_N,), f"reference(t)[{i}] ({n})", finite=False)
+                            for i, (r, n) in enumerate(zip(ref, ("q_d", "qd_d", "qdd_d"))))
+        bad = ~(np.isfinite(q) & np.isfinite(qd) & np.isfinite(q_d) & np.isfinite(qd_d))
+        if np.any(bad):
+            self.n_bad_measurements += 1
+        with np.errstate(over="ignore", invalid="ignore"):
+            p_term = np.nan_to_num(self.kp * (q_d - q), nan=0.0, posinf=_BIG, neginf=-_BIG)
+            d_term = np.nan_to_num(self.kd * (qd_d - qd), nan=0.0, posinf=_BIG, neginf=-_BIG)
+        ff = np.zeros(_N)
+        if np.all(np.isfinite(q_d) & np.isfinite(qd_d) & np.isfinite(qdd_d)):
+            with np.errstate(over="ignore", invalid="ignore"):
+                ff = np.asarray(self.feedforward(q_d, qd_d, qdd_d), dtype=float)
+        if not np.all(np.isfinite(ff)):
+            self.n_fallbacks += 1
+            ff = np.zeros(_N)
+        with np.errstate(over="ignore", invalid="ignore"):
+            # (ff + P) + D, as before the checks; saturated terms (1e300) cannot make inf - inf.
+            tau = ff + np.where(bad, 0.0, p_term) + np.where(bad, 0.0, d_term)
         return np.clip(tau, -robot.TORQUE_LIMITS, robot.TORQUE_LIMITS)
 
 
 class OracleController(PDController):
-    """Computed-torque oracle: true inverse dynamics of the full scene at the reference + PD."""
+    """Computed-torque oracle: true inverse dynamics of the full scene at the reference + PD.
 
-    def __init__(self, task: PouringTask, payload_mass: float, n_marbles: int = 30,
-                 kp: np.ndarray = DEFAULT_KP, kd: np.ndarray = DEFAULT_KD):
-        super().__init__(task, kp, kd)
-        self.model = rigid_scene_model(payload_mass, n_marbles)
-        self.data = mujoco.MjData(self.model)
+    Args:
+        payload_mass: total mass in the hand (kg) for a model usable before :meth:`start`
+            (``None``: no model until :meth:`start`).
+        n_marbles: marbles included in the payload when ``info`` does not say (``JacoPayload-v0``
+            has none).
+        kp, kd: PD gains.
+        follow_marbles: on a ``JacoPour-v0``, lump only the marbles still in the bottle, at their
+            current centroid (privileged state), instead of all of them at rest.
+    """
 
+    name = "oracle"
+
+    def __init__(self, payload_mass: float | None = None, n_marbles: int = 0, kp: np.ndarray = DEFAULT_KP,
+                 kd: np.ndarray = DEFAULT_KD, *, follow_marbles: bool = True):
+        super().__init__(kp, kd)
+        if not isinstance(n_marbles, (int, np.integer)) or isinstance(n_marbles, (bool, np.bool_)) or n_marbles < 0:
+            raise ValueError(f"n_marbles must be a non-negative integer, got {n_marbles!r}")
+        if payload_mass is not None:
+            lo = scene.BOTTLE_MASS + n_marbles * scene.MARBLE_MASS
+            if not is_real_number(payload_mass):
+                raise TypeError(f"payload_mass must be a real number (kg) or None, got {payload_mass!r}")
+            if not lo <= payload_mass <= scene.MAX_PAYLOAD:
+                raise ValueError(f"payload_mass must be in [{lo:.3f}, {scene.MAX_PAYLOAD}] kg, got {payload_mass!r}")
+        self.n_marbles = int(n_marbles)
+        self.follow_marbles = follow_marbles
+        self.model: mujoco.MjModel | None = None
+        self.data: mujoco.MjData | None = None
         self._env = None
-        self._payload_b = self.model.body(_PAYLOAD_BODY).id
-        self._extra = payload_mass - scene.BOTTLE_MASS - n_marbles * scene.MARBLE_MASS
+        self._extra = 0.0
+        self._payload_b = -1
         # Payload body origin in the bottle frame (same orientation as the bottle).
         self._payload_origin = np.array([0.0, 0.0, scene.BOTTLE_BOTTOM - scene.BOTTLE_WALL])
+        if payload_mass is not None:
+            self._build(float(payload_mass), self.n_marbles)
 
-    def bind(self, env) -> "OracleController":
-        """Follow the marbles of ``env`` (an unwrapped :class:`jaco_env.envs.JacoPourEnv`): each
-        feedforward call lumps the marbles currently in the bottle at their current centroid."""
-        self._env = env
-        return self
+    def _build(self, payload_mass: float, n_marbles: int) -> None:
+        self.model = rigid_scene_model(payload_mass, n_marbles)
+        self.data = mujoco.MjData(self.model)
+        self._payload_b = self.model.body(scene.PAYLOAD_BODY).id
+        self._extra = payload_mass - scene.BOTTLE_MASS - n_marbles * scene.MARBLE_MASS
+
+    def start(self, env: Any, info: dict[str, Any]) -> None:
+        """Build the rigid model for this episode's payload and, on a pouring env, follow its marbles."""
+        super().start(env, info)
+        n_marbles = int(info.get("n_marbles", self.n_marbles))
+        self._build(float(info["payload_mass"]), n_marbles)
+        follow = self.follow_marbles and n_marbles > 0 and hasattr(env, "marbles_in_bottle_frame")
+        self._env = env if follow else None
 
     def _update_marbles(self) -> None:
         loc, in_bottle = self._env.marbles_in_bottle_frame()
@@ -125,63 +218,13 @@ class OracleController(PDController):
         self.model.body_ipos[self._payload_b] = m_in * c / total
 
     def feedforward(self, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray) -> np.ndarray:
+        if self.model is None:
+            raise RuntimeError("OracleController has no model: pass payload_mass or call start(env, info)")
         if self._env is not None:
             self._update_marbles()
         d = self.data
-        d.qpos[:6] = q_d
-        d.qvel[:6] = qd_d
-        d.qacc[:6] = qdd_d
+        d.qpos[:_N] = q_d
+        d.qvel[:_N] = qd_d
+        d.qacc[:_N] = qdd_d
         mujoco.mj_inverse(self.model, d)
-        return d.qfrc_inverse[:6].copy()
-
-
-def run_episode(env, controller_factory: Callable[[PouringTask, dict], Callable], *, task=None,
-                payload_mass: float | None = None, seed: int | None = 0) -> dict:
-    """Run one ``JacoPour-v0`` episode with a controller built from the reset's task and info.
-
-    ``controller_factory(task, info) -> policy``, ``policy(obs) -> action``.
-    Returns a summary: task, payload_mass, steps, tracking RMSE (rad, true q), fraction of marbles
-    in the jar and spilled at the end, return, unstable flag, and the logged ``t, q, q_d`` arrays.
-    """
-    options = {}
-    if task is not None:
-        options["task"] = task
-    if payload_mass is not None:
-        options["payload_mass"] = payload_mass
-    obs, info = env.reset(seed=seed, options=options or None)
-    u = env.unwrapped
-    policy = controller_factory(u.task, info)
-    if hasattr(policy, "bind"):
-        policy.bind(u)
-    errs, ts, qs, qds, ret = [], [], [], [], 0.0
-    while True:
-        obs, r, term, trunc, info = env.step(policy(obs))
-        ret += r
-        errs.append(info["tracking_error"])
-        ts.append(info["time"])
-        qs.append(u.data.qpos[u._arm_qpos].copy())
-        if term or trunc:
-            break
-    t = np.array(ts)
-    return {
-        "task": u.task.name,
-        "payload_mass": info["payload_mass"],
-        "steps": len(ts),
-        "rmse": float(np.sqrt(np.mean(np.square(errs)))),
-        "max_error": float(np.max(errs)),
-        "in_jar": info["marbles_in_jar"] / info["n_marbles"],
-        "spilled": info["marbles_spilled"] / info["n_marbles"],
-        "return": float(ret),
-        "unstable": bool(info["unstable"]),
-        "t": t,
-        "q": np.array(qs),
-        "q_d": u.task.reference(t)[0],
-    }
-
-
-def oracle_factory(task: PouringTask, info: dict) -> OracleController:
-    return OracleController(task, info["payload_mass"], info["n_marbles"])
-
-
-def pd_factory(task: PouringTask, info: dict) -> PDController:
-    return PDController(task)
+        return d.qfrc_inverse[:_N].copy()

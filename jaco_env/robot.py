@@ -122,13 +122,13 @@ def kinova_asset_dir() -> str:
     return os.path.join(os.path.dirname(dm_control.__file__), "third_party", "kinova")
 
 
-def _axis_angle_quat(axis: np.ndarray, angle: float) -> np.ndarray:
+def axis_angle_quat(axis: np.ndarray, angle: float) -> np.ndarray:
     axis = np.asarray(axis, dtype=float)
     axis = axis / np.linalg.norm(axis)
     return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])
 
 
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     w1, x1, y1, z1 = a
     w2, x2, y2, z2 = b
     return np.array(
@@ -168,7 +168,7 @@ def build_arm_mjcf(
         for joint in joints:
             axis = np.array(joint.axis if joint.axis is not None else [0.0, 0.0, 1.0])
             quat = np.array(body.quat if body.quat is not None else [1.0, 0.0, 0.0, 0.0])
-            body.quat = _quat_mul(quat, _axis_angle_quat(axis, FINGER_CLOSED_ANGLE))
+            body.quat = quat_mul(quat, axis_angle_quat(axis, FINGER_CLOSED_ANGLE))
             joint.remove()
     arm.find("site", "wristsite").attach(hand)
 
@@ -203,7 +203,7 @@ def add_torque_sensors(arm: mjcf.RootElement) -> None:
         if np.linalg.norm(rot_axis) < 1e-12:
             quat = np.array([1.0, 0.0, 0.0, 0.0]) if c > 0 else np.array([0.0, 1.0, 0.0, 0.0])
         else:
-            quat = _axis_angle_quat(rot_axis, float(np.arccos(c)))
+            quat = axis_angle_quat(rot_axis, float(np.arccos(c)))
         pos = joint.pos if joint.pos is not None else [0.0, 0.0, 0.0]
         site = joint.parent.add("site", name=f"torque_site_{i + 1}", pos=pos, quat=quat, size=[0.005],
                                 group=5)

@@ -64,6 +64,29 @@ FIRMWARE_KI = 15.0**2 * robot.DESIGN_INERTIA
 
 MARBLE_BIT = 4
 
+# --- names in the composed model (the arm is attached as ``jaco_arm``, its hand as ``jaco_hand``) ----
+ARM_PREFIX = "jaco_arm/"
+HAND_PREFIX = ARM_PREFIX + "jaco_hand/"
+BOTTLE_BODY = HAND_PREFIX + "bottle"
+PAYLOAD_BODY = HAND_PREFIX + "payload"
+MOUTH_SITE = HAND_PREFIX + "bottle_mouth"
+
+#: Radius (m) of the solid sphere that stands for the extra rigid payload in its inertia, and the
+#: radius of gyration (m) of a pile of marbles lumped into the payload body (the inertia barely
+#: matters at the hand).
+PAYLOAD_SPHERE_RADIUS = 0.03
+MARBLE_PILE_GYRATION = 0.02
+
+
+def payload_inertia(extra_mass: float, marble_mass: float = 0.0) -> float:
+    """Principal moment of inertia (kg m^2, the same about every axis) of the payload body.
+
+    The extra rigid mass is a solid sphere of radius ``PAYLOAD_SPHERE_RADIUS``; marbles lumped into
+    the body (``marble_mass``, kg; the oracle's rigid model) add a point mass at
+    ``MARBLE_PILE_GYRATION``. The environment and the oracle both take the payload inertia from here.
+    """
+    return 0.4 * extra_mass * PAYLOAD_SPHERE_RADIUS**2 + marble_mass * MARBLE_PILE_GYRATION**2
+
 
 def _ring(body: mjcf.Element, n: int, r_in: float, wall: float, z0: float, z1: float, rgba, mass: float,
           prefix: str) -> None:
@@ -86,7 +109,7 @@ def _attach_bottle(arm: mjcf.RootElement, *, with_payload: bool = True) -> mjcf.
     grip = arm.find("site", "jaco_hand/gripsite")
     # Bottle frame: origin at the grip site, z (bottle axis, towards the mouth) along the grip
     # site's x axis, i.e. perpendicular to the approach axis (grip z).
-    quat = robot._quat_mul(np.asarray(grip.quat, float), robot._axis_angle_quat([0, 1, 0], np.pi / 2))
+    quat = robot.quat_mul(np.asarray(grip.quat, float), robot.axis_angle_quat([0, 1, 0], np.pi / 2))
     bottle = hand.add("body", name="bottle", pos=grip.pos, quat=quat)
     rgba = [0.3, 0.6, 0.3, 0.45]
     _ring(bottle, BOTTLE_N_WALLS, BOTTLE_INNER_RADIUS, BOTTLE_WALL, BOTTLE_BOTTOM, BOTTLE_TOP, rgba,

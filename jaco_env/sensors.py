@@ -1,10 +1,55 @@
-"""Sensor noise model of the simulated Jaco 2 joint sensors."""
+"""What the simulated Jaco 2 joint sensors report: the noise model and the observation layout.
+
+Both environments observe the measured joint state first, in one layout defined here:
+
+==========================  ================================================  =====
+entries                     observation                                       unit
+==========================  ================================================  =====
+``OBS_Q``     (0-5)         measured joint positions q                        rad
+``OBS_QD``    (6-11)        measured joint velocities qd                      rad/s
+``OBS_TAU``   (12-17)       measured link-side joint torques                  N m
+``OBS_TIME``  (18)          time since reset                                  s
+``OBS_JAR``   (19-21)       jar position (``JacoPour-v0`` only)               m
+==========================  ================================================  =====
+
+:func:`split_obs` splits an observation into ``(q, qd, tau, t)``; use it rather than literal
+indices. (:mod:`cascgp.episodes`, which may not import ``jaco_env``, splits the same
+``[q, qd, tau, t]`` prefix of any N-DOF arm generically.)
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+
+from jaco_env.checks import is_real_number
+
+from jaco_env.robot import N_JOINTS
+
+OBS_Q = slice(0, N_JOINTS)
+OBS_QD = slice(N_JOINTS, 2 * N_JOINTS)
+OBS_TAU = slice(2 * N_JOINTS, 3 * N_JOINTS)
+OBS_TIME = 3 * N_JOINTS
+#: Length of the measured part ``[q, qd, tau, t]``: the whole ``JacoPayload-v0`` observation.
+MEASUREMENT_DIM = 3 * N_JOINTS + 1
+OBS_JAR = slice(MEASUREMENT_DIM, MEASUREMENT_DIM + 3)
+#: Length of the ``JacoPour-v0`` observation (measurement + jar position).
+POUR_OBS_DIM = MEASUREMENT_DIM + 3
+
+
+def split_obs(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float | np.ndarray]:
+    """``(q, qd, tau, t)`` of an observation of either environment (views, not copies).
+
+    ``obs`` of shape (D,) gives three (N_JOINTS,) arrays and a float; a batch (..., D) (e.g. of a
+    vector env) gives (..., N_JOINTS) arrays and an array of times.
+    """
+    obs = np.asarray(obs)
+    if obs.ndim == 0 or obs.shape[-1] < MEASUREMENT_DIM:
+        raise ValueError(f"observation must end in an axis of at least {MEASUREMENT_DIM} entries "
+                         f"([q, qd, tau, t] of {N_JOINTS} joints), got shape {obs.shape}")
+    t = obs[..., OBS_TIME]
+    return obs[..., OBS_Q], obs[..., OBS_QD], obs[..., OBS_TAU], float(t) if obs.ndim == 1 else t
 
 
 @dataclass(frozen=True)
@@ -25,7 +70,9 @@ class SensorNoise:
     def __post_init__(self) -> None:
         for name in ("q_std", "qd_std", "tau_std"):
             v = getattr(self, name)
-            if not isinstance(v, (int, float, np.floating)) or not np.isfinite(v) or v < 0:
+            if not is_real_number(v):
+                raise TypeError(f"SensorNoise.{name} must be a real number, got {type(v).__name__} {v!r}")
+            if not np.isfinite(v) or v < 0:
                 raise ValueError(f"SensorNoise.{name} must be a finite number >= 0, got {v!r}")
 
     @classmethod
@@ -37,3 +84,9 @@ class SensorNoise:
         n = len(q)
         e = rng.standard_normal((3, n))
         return q + self.q_std * e[0], qd + self.qd_std * e[1], tau + self.tau_std * e[2]
+
+    def measurement(self, rng: np.random.Generator, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
+                    t: float) -> np.ndarray:
+        """The measured part of an observation, ``[q, qd, tau, t]`` with noise (layout above)."""
+        qm, qdm, taum = self.apply(rng, q, qd, tau)
+        return np.concatenate([qm, qdm, taum, [t]])

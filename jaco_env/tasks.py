@@ -1,4 +1,4 @@
-"""Pouring tasks and their reference trajectories.
+"""Pouring tasks: the task description, its reference trajectory and the catalogue of default tasks.
 
 A :class:`PouringTask` names a jar position, a payload and timing. Its reference
 trajectory q_d(t), qd_d(t), qdd_d(t) has five phases:
@@ -17,193 +17,32 @@ return      tilt back to upright (the tip path reversed), then back to the home 
 settle      the home pose is held for ``settle`` seconds (marbles land and come to rest)
 ==========  ===========================================================================
 
-The poses are computed once by inverse kinematics (damped least squares on MuJoCo's
-site Jacobians of the arm + bottle model, 6-D pose error: mouth position and bottle
-orientation). The tip phase is solved at ``N_TIP_POINTS`` tilt angles (warm-started
-one from the next) and interpolated by a cubic spline, re-parametrised by the
-velocity-limit-weighted arc length (the limiting joint moves at a uniform fraction of
-its limit along the path); the other phases are straight lines in joint space. Every
-phase is time-scaled by a quintic s(t) (zero velocity and acceleration at both ends)
-whose duration is the shortest for which no joint exceeds ``speed`` (``tip_speed``
-while tipping) times its velocity limit (:data:`jaco_env.robot.VELOCITY_LIMITS`).
-Default tasks last 15-20 s (the tip, ~5 s each way, is limited by the wrist roll).
+The poses are computed once by inverse kinematics (:mod:`jaco_env.kinematics`). The tip phase
+is solved at ``N_TIP_POINTS`` tilt angles (warm-started one from the next) and interpolated by
+a spline re-parametrised by the velocity-limit-weighted arc length; the other phases are
+straight lines in joint space; every phase is time-scaled by a quintic whose duration is the
+shortest for which no joint exceeds ``speed`` (``tip_speed`` while tipping) times its velocity
+limit (primitives in :mod:`jaco_env.trajectory`). Default tasks last 15-20 s (the tip, ~5 s
+each way, is limited by the wrist roll).
 
-Why hand-written IK: MuJoCo offers Jacobians but no IK solver; a 6-DOF DLS loop is
-a dozen lines and needs no further dependency.
+:data:`DEFAULT_TASKS` holds the named tasks of ``JacoPour-v0``; :func:`get_task` resolves a
+name or a task.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from jaco_env import robot, scene
+from jaco_env.checks import is_real_number
+from jaco_env.kinematics import HOME_MOUTH, home_pose, solve_ik, target_rotation
+from jaco_env.trajectory import Segment, line_path, segment_duration, spline_path
 
-#: Home pose target: bottle mouth position (m) and approach axis; bottle upright.
-HOME_MOUTH = np.array([0.45, 0.0, 0.40])
-HOME_APPROACH = np.array([0.0, 1.0, 0.0])
-#: Initial guess of the home IK (elbow up; found once by a random-restart search).
-HOME_GUESS = np.array([0.549, 2.262, 4.825, -0.212, -2.365, -1.194])
+#: Tilt angles at which the tip phase is solved by IK (the spline's knots).
 N_TIP_POINTS = 13
-_PREFIX = "jaco_arm/jaco_hand/"
-MOUTH_SITE = _PREFIX + "bottle_mouth"
-BOTTLE_BODY = _PREFIX + "bottle"
-
-
-@functools.lru_cache(maxsize=1)
-def _kinematic_model():
-    """Arm + hand + bottle, no actuators, no marbles (compiled once per process)."""
-    return scene.compile_model(scene.build_scene(kind="payload", control_mode=None))
-
-
-def bottle_pose(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Forward kinematics: (mouth position (3,), bottle rotation matrix (3, 3)) at joint angles q."""
-    import mujoco
-
-    m = _kinematic_model()
-    d = mujoco.MjData(m)
-    d.qpos[:6] = q
-    mujoco.mj_kinematics(m, d)
-    return d.site(MOUTH_SITE).xpos.copy(), d.body(BOTTLE_BODY).xmat.reshape(3, 3).copy()
-
-
-def target_rotation(approach: np.ndarray, tilt: float) -> np.ndarray:
-    """Bottle frame for a horizontal approach axis and a tilt (rad) from upright about it.
-
-    Bottle frame: z = bottle axis (towards the mouth), x = minus the hand approach axis.
-    """
-    a = np.asarray(approach, float)
-    a = a / np.linalg.norm(a)
-    up = np.array([0.0, 0.0, 1.0])
-    side = np.cross(a, up)
-    z = np.cos(tilt) * up + np.sin(tilt) * side
-    x = -a
-    y = np.cross(z, x)
-    return np.column_stack([x, y, z])
-
-
-def solve_ik(p_target: np.ndarray, R_target: np.ndarray, q0: np.ndarray, *, iters: int = 300,
-             damping: float = 1e-2, tol: float = 1e-7) -> tuple[np.ndarray, float]:
-    """Damped-least-squares IK for the mouth position and bottle orientation.
-
-    Returns (q, residual) with residual = |position error| + |orientation error| at the end.
-    Joints 2 and 3 are kept inside their ranges.
-    """
-    import mujoco
-
-    m = _kinematic_model()
-    d = mujoco.MjData(m)
-    sid = m.site(MOUTH_SITE).id
-    bid = m.body(BOTTLE_BODY).id
-    q = np.array(q0, dtype=float)
-    lo = m.jnt_range[:6, 0].copy()
-    hi = m.jnt_range[:6, 1].copy()
-    limited = m.jnt_limited[:6].astype(bool)
-    jacp = np.zeros((3, m.nv))
-    jacr = np.zeros((3, m.nv))
-    err = np.inf
-    for _ in range(iters):
-        d.qpos[:6] = q
-        mujoco.mj_kinematics(m, d)
-        mujoco.mj_comPos(m, d)
-        R = d.xmat[bid].reshape(3, 3)
-        e_p = p_target - d.site_xpos[sid]
-        e_r = 0.5 * sum(np.cross(R[:, k], R_target[:, k]) for k in range(3))
-        e = np.concatenate([e_p, e_r])
-        err = float(np.linalg.norm(e_p) + np.linalg.norm(e_r))
-        if err < tol:
-            break
-        mujoco.mj_jacSite(m, d, jacp, jacr, sid)
-        J = np.vstack([jacp[:, :6], jacr[:, :6]])
-        dq = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(6), e)
-        step = np.max(np.abs(dq))
-        if step > 0.2:
-            dq *= 0.2 / step
-        q = q + dq
-        q[limited] = np.clip(q[limited], lo[limited] + 1e-3, hi[limited] - 1e-3)
-    return q, err
-
-
-@functools.lru_cache(maxsize=1)
-def home_pose() -> np.ndarray:
-    """The common start/end pose of every task (bottle upright in front of the robot)."""
-    q, err = solve_ik(HOME_MOUTH, target_rotation(HOME_APPROACH, 0.0), HOME_GUESS)
-    if err > 1e-4:
-        raise RuntimeError(f"home pose IK did not converge (residual {err:.2e})")
-    return q
-
-
-def _quintic(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """s, ds/dtau, d2s/dtau2 of the quintic 10 tau^3 - 15 tau^4 + 6 tau^5 on [0, 1]."""
-    tau = np.clip(tau, 0.0, 1.0)
-    s = tau**3 * (10 - 15 * tau + 6 * tau**2)
-    ds = 30 * tau**2 * (1 - tau) ** 2
-    dds = 60 * tau * (1 - tau) * (1 - 2 * tau)
-    return s, ds, dds
-
-
-class _Segment:
-    """A path q(s), s in [0, 1], with quintic time scaling over ``duration`` seconds."""
-
-    def __init__(self, path, duration: float):
-        self.path = path  # callable (s, nu) -> nu-th derivative (S, 6)
-        self.duration = float(duration)
-
-    def evaluate(self, t_local: np.ndarray):
-        if self.duration <= 0:
-            q = self.path(np.zeros_like(t_local), 0)
-            return q, np.zeros_like(q), np.zeros_like(q)
-        s, ds, dds = _quintic(t_local / self.duration)
-        inside = ((t_local > 0) & (t_local < self.duration))[:, None]
-        sd = (ds / self.duration)[:, None] * inside
-        sdd = (dds / self.duration**2)[:, None] * inside
-        q = self.path(s, 0)
-        dq = self.path(s, 1)
-        ddq = self.path(s, 2)
-        return q, dq * sd, ddq * sd**2 + dq * sdd
-
-
-def _line(q0: np.ndarray, q1: np.ndarray):
-    q0 = np.asarray(q0, float)
-    dq = np.asarray(q1, float) - q0
-
-    def path(s, nu):
-        if nu == 0:
-            return q0 + s[:, None] * dq
-        if nu == 1:
-            return np.broadcast_to(dq, (len(s), 6)).copy()
-        return np.zeros((len(s), 6))
-
-    return path, np.abs(dq)
-
-
-def _spline(qs: np.ndarray, reverse: bool = False):
-    qs = qs[::-1] if reverse else qs
-    sgrid = np.linspace(0.0, 1.0, len(qs))
-    cs = CubicSpline(sgrid, qs, axis=0, bc_type="clamped")
-    # Re-parametrise by the velocity-limit-weighted arc length sigma(s) = int max_j |dq_j/ds| /
-    # vlim_j ds, so that the limiting joint moves at a uniform fraction of its limit along the
-    # path (with a uniform s, the peak |dq/ds| of the tip sets the time scale of the whole tip
-    # and the rest of it crawls). Small floor: no division by zero where the path pauses.
-    fine = np.linspace(0.0, 1.0, 2001)
-    g = np.max(np.abs(cs(fine, 1)) / robot.VELOCITY_LIMITS, axis=1)
-    g = np.maximum(g, 0.05 * g.max())
-    sigma = np.concatenate([[0.0], np.cumsum(0.5 * (g[1:] + g[:-1]) * np.diff(fine))])
-    sigma /= sigma[-1]
-    grid = np.linspace(0.0, 1.0, 61)
-    cs2 = CubicSpline(grid, cs(np.interp(grid, sigma, fine)), axis=0, bc_type="not-a-knot")
-    fine2 = np.linspace(0, 1, 2001)
-    # Peak |dq/dsigma| (the quintic time scaling has zero speed at both ends).
-    return (lambda s, nu: cs2(s, nu)), np.max(np.abs(cs2(fine2, 1)), axis=0)
-
-
-def _duration(max_dqds: np.ndarray, speed: float) -> float:
-    # Quintic peak ds/dt = 1.875 / T; require |dq/ds| * 1.875 / T <= speed * vlim.
-    return float(np.max(1.875 * max_dqds / (speed * robot.VELOCITY_LIMITS)))
 
 
 @dataclass
@@ -245,6 +84,9 @@ class PouringTask:
         if self.jar_pos.shape != (3,) or not np.all(np.isfinite(self.jar_pos)):
             raise ValueError(f"PouringTask.jar_pos must be 3 finite numbers, got {self.jar_pos!r}")
         if self.payload_mass is not None:
+            if not is_real_number(self.payload_mass):
+                raise TypeError(f"PouringTask.payload_mass must be a real number (kg) or None, got "
+                                f"{type(self.payload_mass).__name__} {self.payload_mass!r}")
             pm = float(self.payload_mass)
             if not np.isfinite(pm) or pm <= 0 or pm > scene.MAX_PAYLOAD:
                 raise ValueError(
@@ -305,18 +147,18 @@ class PouringTask:
         qs = np.array(qs)
         q_pre = qs[0]
         segs = []
-        path, mx = _line(q_home, q_pre)
-        segs.append(_Segment(path, _duration(mx, self.speed)))
-        path, mx = _spline(qs)
-        segs.append(_Segment(path, _duration(mx, self.tip_speed)))
-        path, _ = _line(qs[-1], qs[-1])
-        segs.append(_Segment(path, self.hold))
-        path, mx = _spline(qs, reverse=True)
-        segs.append(_Segment(path, _duration(mx, self.tip_speed)))
-        path, mx = _line(q_pre, q_home)
-        segs.append(_Segment(path, _duration(mx, self.speed)))
-        path, _ = _line(q_home, q_home)
-        segs.append(_Segment(path, self.settle))
+        path, mx = line_path(q_home, q_pre)
+        segs.append(Segment(path, segment_duration(mx, self.speed)))
+        path, mx = spline_path(qs)
+        segs.append(Segment(path, segment_duration(mx, self.tip_speed)))
+        path, _ = line_path(qs[-1], qs[-1])
+        segs.append(Segment(path, self.hold))
+        path, mx = spline_path(qs, reverse=True)
+        segs.append(Segment(path, segment_duration(mx, self.tip_speed)))
+        path, mx = line_path(q_pre, q_home)
+        segs.append(Segment(path, segment_duration(mx, self.speed)))
+        path, _ = line_path(q_home, q_home)
+        segs.append(Segment(path, self.settle))
         self._segments = segs
         self._bounds = np.cumsum([0.0] + [s.duration for s in segs])
 
@@ -342,18 +184,23 @@ class PouringTask:
     def reference(self, t):
         """Reference (q_d, qd_d, qdd_d) at time(s) t >= 0 (s since reset).
 
-        Scalar t gives three (6,) arrays; an array (T,) gives three (T, 6) arrays. Before 0 the
+        Scalar t gives three (N_JOINTS,) arrays; an array (T,) gives three (T, N_JOINTS) arrays. Before 0 the
         start pose and after ``duration`` the final pose are held (zero velocity/acceleration).
+        A ``t`` that is not real (str, bool, complex) raises ``TypeError``, a NaN/inf one ``ValueError``.
         """
         if self._segments is None:
             self._build()
         scalar = np.ndim(t) == 0
-        tt = np.atleast_1d(np.asarray(t, dtype=float))
+        raw = np.asarray(t)
+        if raw.dtype.kind not in "iuf":  # a string, bool or complex t is refused, not cast
+            raise TypeError(f"PouringTask.reference: t must be a real number or array (s), got {t!r}")
+        tt = np.atleast_1d(raw.astype(float))
         if tt.ndim != 1 or not np.all(np.isfinite(tt)):
-            raise ValueError("PouringTask.reference: t must be a finite scalar or 1-D array")
-        q = np.empty((len(tt), 6))
-        qd = np.zeros((len(tt), 6))
-        qdd = np.zeros((len(tt), 6))
+            raise ValueError(f"PouringTask.reference: t must be a finite scalar or 1-D array, got {t!r}")
+        n = robot.N_JOINTS
+        q = np.empty((len(tt), n))
+        qd = np.zeros((len(tt), n))
+        qdd = np.zeros((len(tt), n))
         idx = np.clip(np.searchsorted(self._bounds, tt, side="right") - 1, 0, len(self._segments) - 1)
         for k, seg in enumerate(self._segments):
             sel = idx == k

@@ -28,7 +28,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaco_env  # noqa: E402,F401
-from jaco_env.tasks import DEFAULT_TASKS  # noqa: E402
+from jaco_env.oracle import OracleController  # noqa: E402
 
 
 def bench(env_id: str, steps: int) -> dict:
@@ -36,14 +36,12 @@ def bench(env_id: str, steps: int) -> dict:
     env = gym.make(env_id, **kwargs)
     env.reset(seed=0, options={"payload_mass": 1.0})
     u = env.unwrapped
-    # A gravity-holding torque keeps both runs in the same regime (arm still, marbles in the bottle).
-    from jaco_env.oracle import rigid_scene_model  # noqa: PLC0415
-
-    m_id = rigid_scene_model(u.payload_mass, getattr(u, "n_marbles", 0))
-    d_id = mujoco.MjData(m_id)
-    d_id.qpos[:6] = u.data.qpos[u._arm_qpos]
-    mujoco.mj_inverse(m_id, d_id)
-    tau = np.clip(d_id.qfrc_inverse[:6], -u.torque_limits, u.torque_limits).astype(np.float32)
+    # A gravity-holding torque keeps both runs in the same regime (arm still, marbles in the bottle):
+    # the oracle's rigid inverse dynamics (marbles lumped at rest) at the current pose, at rest.
+    q, _ = u.arm_state()
+    zero = np.zeros_like(q)
+    tau = OracleController(u.payload_mass, u.n_marbles, follow_marbles=False).feedforward(q, zero, zero)
+    tau = np.clip(tau, -u.torque_limits, u.torque_limits).astype(np.float32)
 
     state0 = np.empty(mujoco.mj_stateSize(u.model, mujoco.mjtState.mjSTATE_FULLPHYSICS))
     mujoco.mj_getState(u.model, u.data, state0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
@@ -55,7 +53,7 @@ def bench(env_id: str, steps: int) -> dict:
 
     d = mujoco.MjData(u.model)
     mujoco.mj_setState(u.model, d, state0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
-    d.ctrl[:6] = tau
+    d.ctrl[:jaco_env.robot.N_JOINTS] = tau
     t0 = time.perf_counter()
     for _ in range(steps):
         mujoco.mj_step(u.model, d, nstep=u.frame_skip)
@@ -70,14 +68,14 @@ def bench(env_id: str, steps: int) -> dict:
         m2.opt.solver = solver
         d2 = mujoco.MjData(m2)
         mujoco.mj_setState(m2, d2, state0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
-        d2.ctrl[:6] = tau
+        d2.ctrl[:jaco_env.robot.N_JOINTS] = tau
         t0 = time.perf_counter()
         for _ in range(steps):
             mujoco.mj_step(m2, d2, nstep=u.frame_skip)
         solver_cmp[name] = (time.perf_counter() - t0, d2.qpos.copy())
     q_n, q_c = solver_cmp["newton"][1], solver_cmp["cg"][1]
-    arm = u._arm_qpos
-    marb = getattr(u, "_marble_qpos", np.zeros(0, int))
+    arm = u.arm_qpos_adr
+    marb = getattr(u, "marble_qpos_adr", np.zeros(0, int))
     env.close()
     return {
         "newton_raw_steps_per_s": steps / solver_cmp["newton"][0],

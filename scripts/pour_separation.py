@@ -12,7 +12,8 @@ For every task of ``jaco_env.tasks.DEFAULT_TASKS`` runs one seed-fixed ``JacoPou
   model ``assets/jaco2_nominal.urdf`` (10% calibration error, no payload, no friction) + PD,
 * ``pd``: the same PD feedback without feedforward,
 
-all with ``jaco_env.DEFAULT_KP/KD``. Prints a table of joint tracking RMSE (rad), the mouth's
+all with ``jaco_env.DEFAULT_KP/KD``, run by the one episode runner ``cascgp.episodes.run_episode``
+(``wall s``: the whole episode, reset included). Prints a table of joint tracking RMSE (rad), the mouth's
 horizontal position error while pouring (mean and max over the pour window, cm) and the
 fraction of marbles in the jar, and writes ``pour_separation.json`` into ``--out``.
 """
@@ -35,56 +36,65 @@ CONTROLLERS = ("oracle", "nominal", "pd")
 NOMINAL_URDF = Path(__file__).resolve().parents[1] / "assets" / "jaco2_nominal.urdf"
 
 
-def run_one(task: str, controller: str, payload: float, seed: int, n_marbles: int) -> dict:
-    """One episode; returns the metrics (JSON-serialisable)."""
-    import gymnasium as gym
+def make_controller(controller: str):
+    """The controller named ``controller`` (one of ``CONTROLLERS``), all with ``jaco_env.DEFAULT_KP/KD``."""
+    from jaco_env import DEFAULT_KD, DEFAULT_KP, robot
+    from jaco_env.oracle import OracleController, PDController
 
-    import jaco_env  # noqa: F401
-    from jaco_env import DEFAULT_KD, DEFAULT_KP, oracle
-    from jaco_env.tasks import MOUTH_SITE, bottle_pose
-
-    env = gym.make("JacoPour-v0", n_marbles=n_marbles)
-    u = env.unwrapped
-    obs, info = env.reset(seed=seed, options={"task": task, "payload_mass": payload})
-    tk = u.task
     if controller == "oracle":
-        policy = oracle.OracleController(tk, info["payload_mass"], info["n_marbles"]).bind(u)
-    elif controller == "pd":
-        policy = oracle.PDController(tk)
-    elif controller == "nominal":
-        import torch  # noqa: F401,PLC0415  (cascgp needs it; keep it single-threaded)
-
-        torch.set_num_threads(1)
+        return OracleController()
+    if controller == "pd":
+        return PDController()
+    if controller == "nominal":
         from cascgp.controller import FeedforwardController  # noqa: PLC0415
         from cascgp.rbd import load_nominal  # noqa: PLC0415
 
-        ff = FeedforwardController(load_nominal(str(NOMINAL_URDF)), DEFAULT_KP, DEFAULT_KD, u.torque_limits)
+        return FeedforwardController(load_nominal(str(NOMINAL_URDF)), DEFAULT_KP, DEFAULT_KD, robot.TORQUE_LIMITS)
+    raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
 
-        def policy(o):
-            return ff(float(o[18]), o[0:6], o[6:12], tk.reference)
-    else:
-        raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
-    t0, t1 = tk.pour_window
-    sid = u.model.site(MOUTH_SITE).id
-    errs, mouth_err = [], []
-    t_start = time.perf_counter()
-    while True:
-        obs, _, term, trunc, info = env.step(np.asarray(policy(obs), dtype=np.float32))
-        errs.append(info["tracking_error"])
+
+class MouthError:
+    """Episode callback: horizontal distance (m) of the bottle mouth from where the reference puts it,
+    at every step inside the task's pour window."""
+
+    def __init__(self) -> None:
+        self.errors: list[float] = []
+
+    def __call__(self, u, info: dict) -> None:
+        from jaco_env import scene
+        from jaco_env.kinematics import bottle_pose
+
+        t0, t1 = u.task.pour_window
         t = info["time"]
         if t0 <= t <= t1:
-            p_des = bottle_pose(tk.reference(t)[0])[0]
-            mouth_err.append(float(np.linalg.norm(u.data.site_xpos[sid, :2] - p_des[:2])))
-        if term or trunc:
-            break
+            p_des = bottle_pose(u.task.reference(t)[0])[0]
+            self.errors.append(float(np.linalg.norm(u.data.site(scene.MOUTH_SITE).xpos[:2] - p_des[:2])))
+
+
+def run_one(task: str, controller: str, payload: float, seed: int, n_marbles: int) -> dict:
+    """One episode through :func:`cascgp.episodes.run_episode`; returns the metrics (JSON-serialisable)."""
+    import gymnasium as gym
+    import torch  # noqa: PLC0415  (cascgp needs it; keep it single-threaded)
+
+    torch.set_num_threads(1)
+    import jaco_env  # noqa: F401
+    from cascgp.episodes import run_episode  # noqa: PLC0415
+
+    env = gym.make("JacoPour-v0", n_marbles=n_marbles)
+    mouth = MouthError()
+    t_start = time.perf_counter()
+    res = run_episode(env, make_controller(controller), seed=seed, options={"task": task, "payload_mass": payload},
+                      callback=mouth)
     wall = time.perf_counter() - t_start
     env.close()
+    info = res.info
     return {
         "task": task, "controller": controller, "payload_mass": info["payload_mass"],
-        "rmse": float(np.sqrt(np.mean(np.square(errs)))),
-        "mouth_err_mean_cm": 100 * float(np.mean(mouth_err)), "mouth_err_max_cm": 100 * float(np.max(mouth_err)),
-        "in_jar": info["marbles_in_jar"] / info["n_marbles"], "spilled": info["marbles_spilled"] / info["n_marbles"],
-        "unstable": bool(info["unstable"]), "steps": len(errs), "episode_s": float(t), "wall_s": wall,
+        "rmse": res.tracking_rmse,
+        "mouth_err_mean_cm": 100 * float(np.mean(mouth.errors)),
+        "mouth_err_max_cm": 100 * float(np.max(mouth.errors)),
+        "in_jar": res.in_jar, "spilled": res.spilled,
+        "unstable": res.unstable, "steps": res.steps, "episode_s": float(info["time"]), "wall_s": wall,
     }
 
 

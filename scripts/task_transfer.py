@@ -19,6 +19,7 @@ Usage::
 
     python -m scripts.task_transfer --out out/transfer --workers 2     # two controllers at a time
     python -m scripts.task_transfer --out out/transfer --ray local     # the same jobs on a local Ray instance
+    python -m scripts.task_transfer --out out/demo --quick --video out/demo/video   # + side-by-side MP4 clips
 
 Writes ``results.json`` (every attempt's metrics), ``summary.md`` (the summary table),
 ``transfer.png`` (tracking RMSE and marbles in the jar per attempt) to ``--out``, the
@@ -37,7 +38,8 @@ from pathlib import Path
 
 from cascgp_experiments.execution import add_execution_args, check_args, session
 from cascgp_experiments.transfer import (FULL_CONTROLLERS, FULL_TASKS, QUICK_CONTROLLERS, QUICK_TASKS,
-                                         TransferConfig, claim_output, run_transfer, write_outputs)
+                                         TransferConfig, VideoOptions, claim_output, run_transfer, video_attempts,
+                                         write_outputs)
 
 
 def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, bool, argparse.Namespace]:
@@ -57,6 +59,11 @@ def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, boo
     p.add_argument("--overwrite", action="store_true",
                    help="delete the data buffers and job cache of an earlier run in --out (without it, the same "
                         "command resumes a stopped run)")
+    p.add_argument("--video", type=Path, default=None,
+                   help="write MP4 clips (pip install -e '.[video]'): the first and last attempt of every task and the "
+                        "revisit, RBD and the learned controller side by side, with RMSE and marbles on the frame")
+    p.add_argument("--video-controller", type=str, default=None,
+                   help="the learned controller shown next to RBD (default: the last controller that learns)")
     add_execution_args(p)
     a = p.parse_args(argv)
     cfg = TransferConfig(
@@ -69,6 +76,13 @@ def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, boo
     if cfg.attempts < 1:
         p.error("--attempts must be at least 1")
     check_args(p, a)
+    if a.video is not None:
+        learned = a.video_controller or next((c for c in reversed(cfg.controllers) if c not in ("pd", "rbd")), None)
+        if learned is None or learned not in cfg.controllers or "rbd" not in cfg.controllers:
+            p.error("--video needs 'rbd' and a learning controller among --controllers")
+        a.video_options = VideoOptions(str(a.video.resolve()), ("rbd", learned), video_attempts(cfg.plan()))
+    else:
+        a.video_options = None
     return cfg, a.out, a.overwrite, a
 
 
@@ -83,9 +97,11 @@ def main(argv: list[str] | None = None) -> None:
     t0 = time.perf_counter()
     jobs: dict = {}
     with session(a.ray, a.workers):
-        runs = run_transfer(cfg, out, workers=a.workers, ray_address=a.ray, stats=jobs)
+        runs = run_transfer(cfg, out, workers=a.workers, ray_address=a.ray, stats=jobs, video=a.video_options)
     write_outputs(runs, cfg, out, time.perf_counter() - t0, jobs=jobs)
     print((out / "summary.md").read_text())
+    if a.video_options is not None:
+        print(f"videos:  {a.video}/*.mp4")
     print(f"results: {out / 'results.json'}\nplot:    {out / 'transfer.png'}\n"
           f"wall time {time.perf_counter() - t0:.0f} s")
 

@@ -96,6 +96,9 @@ def test_non_finite_model_output_falls_back_to_rbd_and_is_counted():
     assert ctrl.n_fallbacks == 1 and model.calls == 1
     ctrl.reset_counters()
     assert ctrl.n_fallbacks == 0
+    ctrl(0.5, q_d, qd_d, reference)
+    ctrl.start(None, {})  # the episode runner's start of an episode (Controller protocol) zeroes them too
+    assert ctrl.n_fallbacks == 0
 
 
 def test_non_finite_model_output_without_rbd_gives_pd_only():
@@ -148,12 +151,27 @@ def test_output_is_always_finite_and_within_limits(q, qd, t, which):
 
 
 @settings(max_examples=50, deadline=None)
-@given(scale=st.floats(min_value=1.0, max_value=1e8))
-def test_far_out_of_range_states_with_a_fitted_gp_model(scale, fitted_planar_model):
-    """A real fitted cascade queried far outside its training data stays finite and clipped."""
-    model = fitted_planar_model
+@given(scale=st.floats(min_value=1.0, max_value=1e8), gate=st.sampled_from([False, "wiener", "variance"]),
+       bad=st.sampled_from([None, np.nan, np.inf, -np.inf]), online=st.booleans())
+def test_far_out_of_range_states_with_a_fitted_gp_model(scale, gate, bad, online, fitted_planar_model, arm3_rbd):
+    """A real fitted cascade (gated or not, learning online or not) queried far outside its training data, or
+    with non-finite measurements, stays finite and clipped; absurd online samples are refused, never raised."""
+    import copy
+
+    model = copy.deepcopy(fitted_planar_model) if online else fitted_planar_model
     limits = np.full(model.dof, 5.0)
-    ctrl = FeedforwardController(model, 10.0, 1.0, limits)
+    ctrl = FeedforwardController(model, 10.0, 1.0, limits, fallback=arm3_rbd, gate=gate,
+                                 online=4 if online else None, online_every=1)
+    if online:
+        ctrl.start(None, {})
+        value = scale if bad is None else bad
+        for k in range(6):
+            ctrl.observe(np.full(model.dof, value * (k % 2)), np.full(model.dof, -value), np.full(model.dof, value),
+                         0.1 * k)
+        assert ctrl.n_online_samples + ctrl.n_online_rejected == 4
+    if bad is not None:
+        tau = ctrl(0.0, np.full(model.dof, bad), np.full(model.dof, bad), lambda t: (np.zeros(3),) * 3)
+        assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= limits)
 
     def far_reference(t):
         return np.full(model.dof, scale), np.full(model.dof, -scale), np.full(model.dof, scale)
@@ -169,3 +187,35 @@ def fitted_planar_model(arm3_train):
 
     data = arm3_train.take(np.arange(min(80, arm3_train.n_samples)))
     return make_model("np-inward", data.dof, gp_config=GPFitConfig(n_restarts=2, max_iter=200)).fit(data)
+
+
+@pytest.mark.parametrize("rule", ["wiener", "variance"])
+def test_gated_feedforward_follows_its_rule(rule, fitted_planar_model, arm3_rbd, arm3_train):
+    """tau = tau_RBD + w d with d = mu - tau_RBD: w ~ 1 at a training point (the model), and for the variance
+    rule w ~ 0 far away (the nominal torque); the weights equal the documented formulas."""
+    model = fitted_planar_model
+    ctrl = FeedforwardController(model, 0.0, 0.0, np.full(3, 1e6), fallback=arm3_rbd, gate=rule)
+    assert ctrl.name.endswith({"wiener": "-gated", "variance": "-vgated"}[rule])
+    r = 10
+    state = (arm3_train.q[r], arm3_train.qd[r], arm3_train.qdd[r])
+    for query in (state, tuple(x + 50.0 for x in state)):
+        tau = ctrl(0.0, query[0], query[1], lambda t, query=query: query)
+        mean, var = model.predict(*query, propagate=True)
+        nominal = arm3_rbd.inverse_dynamics(*query)
+        d = mean - nominal
+        w = d**2 / (d**2 + var) if rule == "wiener" else np.clip(1 - var / model.signal_var, 0, 1)
+        np.testing.assert_allclose(ctrl.last_gate, w, rtol=1e-6, atol=1e-9)
+        np.testing.assert_allclose(tau, nominal + w * d, rtol=1e-9, atol=1e-6)
+        if query is state:
+            assert np.all(ctrl.last_gate > 0.9)
+        elif rule == "variance":
+            assert np.all(ctrl.last_gate < 0.05)
+
+
+def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
+    with pytest.raises(ValueError, match="gate: needs a nominal"):
+        FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], gate=True)
+    with pytest.raises(ValueError, match="gate: needs a fitted cascgp model"):
+        FeedforwardController(AffineRBD(), KP, KD, LIMITS, gate=True)
+    with pytest.raises(ValueError, match="gate: expected"):
+        FeedforwardController(AffineRBD(), KP, KD, LIMITS, gate="sometimes")

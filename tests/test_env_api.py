@@ -14,7 +14,8 @@ import jaco_env
 from jaco_env import robot, scene
 from jaco_env.envs import JacoPayloadEnv, JacoPourEnv
 from jaco_env.excitation import JOINT_RANGES, SumOfSinusoids
-from jaco_env.tasks import DEFAULT_TASKS, PouringTask, home_pose
+from jaco_env.kinematics import home_pose
+from jaco_env.tasks import DEFAULT_TASKS, PouringTask
 
 
 @pytest.fixture(scope="module")
@@ -99,16 +100,42 @@ def test_pickle_and_async_vector_env():
 def test_info_keys_reward_sum_and_noise(pour_env):
     obs, info = pour_env.reset(seed=0, options={"task": "left", "payload_mass": 1.0})
     assert info["payload_mass"] == 1.0 and info["task"] == "left"
-    assert np.allclose(obs[19:22], DEFAULT_TASKS["left"].jar_pos)
+    assert np.allclose(obs[jaco_env.OBS_JAR], DEFAULT_TASKS["left"].jar_pos)
     q0 = DEFAULT_TASKS["left"].reference(0.0)[0]
-    assert 0 < np.max(np.abs(obs[:6] - q0)) < 5e-3  # noisy but close
+    assert 0 < np.max(np.abs(jaco_env.split_obs(obs)[0] - q0)) < 5e-3  # noisy but close
     obs, r, term, trunc, info = pour_env.step(np.zeros(6))
     for k in ("time", "payload_mass", "marbles_in_jar", "marbles_spilled", "n_marbles", "tracking_error",
               "reward_tracking", "reward_pour", "unstable"):
         assert k in info
     assert r == pytest.approx(info["reward_tracking"] + info["reward_pour"])
-    assert info["time"] == pytest.approx(0.025) and obs[18] == pytest.approx(0.025)
+    assert info["time"] == pytest.approx(0.025) and jaco_env.split_obs(obs)[3] == pytest.approx(0.025)
     assert not term and not trunc
+
+
+def test_split_obs_is_the_observation_layout(pour_env):
+    obs, info = pour_env.reset(seed=0, options={"task": "left", "payload_mass": 1.0})
+    obs, *_ = pour_env.step(np.zeros(6))
+    q, qd, tau, t = jaco_env.split_obs(obs)
+    assert q.shape == qd.shape == tau.shape == (robot.N_JOINTS,) and t == pytest.approx(0.025)
+    assert obs.shape == (jaco_env.POUR_OBS_DIM,) and jaco_env.MEASUREMENT_DIM == jaco_env.OBS_TIME + 1
+    q_true, qd_true = pour_env.unwrapped.arm_state()
+    assert np.max(np.abs(q - q_true)) < 5e-3 and np.max(np.abs(qd - qd_true)) < 5e-2  # noisy measurements
+    batch = np.stack([obs, obs])
+    assert jaco_env.split_obs(batch)[2].shape == (2, robot.N_JOINTS)
+    with pytest.raises(ValueError, match="at least"):
+        jaco_env.split_obs(obs[:10])
+
+
+def test_reward_weights_are_constructor_arguments():
+    env = JacoPourEnv(n_marbles=10, tracking_cost_weight=2.0, pour_reward_weight=0.0)
+    env2 = pickle.loads(pickle.dumps(env))  # EzPickle carries the weights
+    for e in (env, env2):
+        e.reset(seed=0, options={"task": "front"})
+        _, r, _, _, info = e.step(np.full(6, 1.0))
+        assert info["reward_tracking"] == pytest.approx(-2.0 * e.control_dt * info["tracking_error"])
+        assert info["reward_pour"] == 0.0 and r == info["reward_tracking"]
+    with pytest.raises(ValueError, match="tracking_cost_weight"):
+        JacoPourEnv(n_marbles=10, tracking_cost_weight=-1.0)
 
 
 def test_payload_drawn_within_range(pour_env):
@@ -154,13 +181,22 @@ def test_out_of_range_action_is_clipped():
         ({"task": "moon"}, ValueError, "unknown task 'moon'"),
         ({"task": 3}, TypeError, "task must be"),
         ({"payload_mass": 2.5}, ValueError, "payload_mass"),
+        ({"payload_mass": 5.0}, ValueError, "payload_mass"),
         ({"payload_mass": "heavy"}, TypeError, "payload_mass"),
+        ({"payload_mass": "1.2"}, TypeError, "payload_mass"),
+        ({"payload_mass": True}, TypeError, "payload_mass"),
         ({"colour": "red"}, ValueError, "unknown reset option"),
     ],
 )
 def test_bad_reset_options(pour_env, options, exc, match):
+    pour_env.reset(seed=0, options={"task": "front"})
+    pour_env.step(np.zeros(6))
+    u = pour_env.unwrapped
+    qpos, mass = u.data.qpos.copy(), u.payload_mass
     with pytest.raises(exc, match=match):
         pour_env.reset(seed=0, options=options)
+    # Options are checked before the simulation is touched.
+    assert np.array_equal(qpos, u.data.qpos) and u.payload_mass == mass
 
 
 def test_bad_constructor_arguments():
@@ -177,7 +213,7 @@ def test_bad_constructor_arguments():
 def test_unstable_simulation_truncates_without_nan(pour_env):
     obs0, _ = pour_env.reset(seed=0, options={"task": "front"})
     u = pour_env.unwrapped
-    u.data.qvel[u._arm_dof] = 1e6
+    u.data.qvel[u.arm_dof_adr] = 1e6
     obs, r, term, trunc, info = pour_env.step(np.zeros(6))
     assert trunc and info["unstable"] and np.all(np.isfinite(obs)) and np.isfinite(r)
 
@@ -189,8 +225,9 @@ def test_velocity_mode_tracks_command():
     for _ in range(40):
         obs, *_ = env.step(cmd)
     # The PI loop (15 rad/s) follows a ramp under changing gravity and coupling within a few 0.01 rad/s.
-    assert np.allclose(obs[6:12], cmd, atol=0.08)
-    assert np.all(np.abs(obs[12:18]) <= robot.TORQUE_LIMITS + 1e-9)
+    _, qd, tau, _ = jaco_env.split_obs(obs)
+    assert np.allclose(qd, cmd, atol=0.08)
+    assert np.all(np.abs(tau) <= robot.TORQUE_LIMITS + 1e-9)
     env.close()
 
 
@@ -203,12 +240,12 @@ def test_velocity_mode_torque_is_instantaneous_sample():
     for k in range(12):
         cmd = 0.5 * robot.VELOCITY_LIMITS * np.sin(0.3 * k + np.arange(6))
         obs, *_ = env.step(cmd)
-        q, qd, tau = obs[0:6], obs[6:12], obs[12:18]
-        q_ref = u.data.act[u._int_act]
+        q, qd, tau, _ = jaco_env.split_obs(obs)
+        q_ref = u.data.act[u.velocity_ref_act_adr]
         law = np.clip(scene.FIRMWARE_KV * (cmd - qd) + scene.FIRMWARE_KI * (q_ref - q), -robot.TORQUE_LIMITS,
                       robot.TORQUE_LIMITS)
-        assert np.allclose(u.data.qfrc_actuator[u._arm_dof], law, atol=1e-9)
-        fric = law - tau - robot.ARMATURE * u.data.qacc[u._arm_dof] - robot.DAMPING * qd
+        assert np.allclose(u.data.qfrc_actuator[u.arm_dof_adr], law, atol=1e-9)
+        fric = law - tau - robot.ARMATURE * u.data.qacc[u.arm_dof_adr] - robot.DAMPING * qd
         assert np.all(np.abs(fric) <= 1.005 * robot.FRICTIONLOSS + 1e-6)
         # ... and equals MuJoCo's actuator force evaluated afresh at that state and command.
         d = mujoco.MjData(u.model)
@@ -216,7 +253,7 @@ def test_velocity_mode_torque_is_instantaneous_sample():
                            mujoco.mjtState.mjSTATE_PHYSICS | mujoco.mjtState.mjSTATE_TIME)
         d.ctrl[:] = u.data.ctrl
         mujoco.mj_forward(u.model, d)
-        assert np.allclose(d.qfrc_actuator[u._arm_dof], law, atol=1e-9)
+        assert np.allclose(d.qfrc_actuator[u.arm_dof_adr], law, atol=1e-9)
     env.close()
 
 

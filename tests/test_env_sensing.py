@@ -28,7 +28,7 @@ def link_side_torque(u) -> np.ndarray:
         d = mujoco.MjData(m)
         d.qpos[:], d.qvel[:], d.qacc[:], d.act[:] = u.data.qpos, u.data.qvel, u.data.qacc, u.data.act
         mujoco.mj_inverse(m, d)
-        return d.qfrc_inverse[u._arm_dof].copy()
+        return d.qfrc_inverse[u.arm_dof_adr].copy()
     finally:
         m.dof_armature[:], m.dof_frictionloss[:], m.dof_damping[:] = saved
 
@@ -40,7 +40,7 @@ def _run(env, policy, n, check):
     for k in range(n):
         obs, _, term, trunc, info = env.step(policy(k, obs, u))
         assert not info.get("unstable", False)
-        meas.append(obs[12:18])
+        meas.append(jaco_env.split_obs(obs)[2])
         ref.append(link_side_torque(u))
         if term or trunc:
             break
@@ -73,7 +73,8 @@ def test_payload_torque_mode_measures_link_side_torque(payload):
 
     def pd(k, obs, u):
         q_d = q0 + 0.3 * np.sin(0.2 * k + np.arange(6))
-        return jaco_env.DEFAULT_KP * (q_d - obs[:6]) - jaco_env.DEFAULT_KD * obs[6:12]
+        q, qd, _, _ = jaco_env.split_obs(obs)
+        return jaco_env.DEFAULT_KP * (q_d - q) - jaco_env.DEFAULT_KD * qd
 
     _run(env, pd, 80, _within_one_percent)
     env.close()
@@ -86,13 +87,15 @@ def test_pour_env_measures_link_side_torque_with_marbles():
     env = gym.make("JacoPour-v0", sensor_noise=None, n_marbles=10, task="near")
     obs, info = env.reset(seed=0, options={"payload_mass": 1.0})
     u = env.unwrapped
-    ctrl = OracleController(u.task, info["payload_mass"], info["n_marbles"]).bind(u)
+    ctrl = OracleController()
+    ctrl.start(u, info)
     meas, ref = [], []
     t0, t1 = u.task.pour_window
     while True:
-        obs, _, term, trunc, info = env.step(ctrl(obs))
+        q, qd, _, t = jaco_env.split_obs(obs)
+        obs, _, term, trunc, info = env.step(ctrl(t, q, qd, u.task.reference))
         if t0 - 0.5 <= info["time"] <= t1:
-            meas.append(obs[12:18])
+            meas.append(jaco_env.split_obs(obs)[2])
             ref.append(link_side_torque(u))
         if term or trunc or info["time"] > t1:
             break
@@ -113,11 +116,11 @@ def test_torque_loop_residual():
     tau_prev = np.zeros(6)
     act_prev = d.act[:6].copy()
     for k in range(60):
-        g = d.qfrc_bias[u._arm_dof].copy()
+        g = d.qfrc_bias[u.arm_dof_adr].copy()
         cmd = np.clip(g + rng.normal(0, 0.03, 6) * robot.TORQUE_LIMITS, -robot.TORQUE_LIMITS, robot.TORQUE_LIMITS)
         obs, *_ = env.step(cmd)
-        tau_s, qd = obs[12:18], obs[6:12]
-        qdd = d.qacc[u._arm_dof]
+        _, qd, tau_s, _ = jaco_env.split_obs(obs)
+        qdd = d.qacc[u.arm_dof_adr]
         delivered = d.actuator_force[:6]
         # Residual: tau_delivered - tau_link = J_res qdd + b_res qd + dry friction (|.| <= FRICTIONLOSS).
         fric = delivered - tau_s - robot.ARMATURE * qdd - robot.DAMPING * qd
@@ -142,16 +145,16 @@ def test_loop_parameters_follow_their_derivation():
     # The compiled scene carries the residual values on the arm joints.
     env = gym.make("JacoPayload-v0")
     u = env.unwrapped
-    np.testing.assert_allclose(u.model.dof_armature[u._arm_dof], robot.ARMATURE)
-    np.testing.assert_allclose(u.model.dof_frictionloss[u._arm_dof], robot.FRICTIONLOSS)
+    np.testing.assert_allclose(u.model.dof_armature[u.arm_dof_adr], robot.ARMATURE)
+    np.testing.assert_allclose(u.model.dof_frictionloss[u.arm_dof_adr], robot.FRICTIONLOSS)
     env.close()
     # The design inertia is the links' joint-space inertia at home with a 1 kg payload (two digits).
-    from jaco_env.tasks import home_pose
+    from jaco_env.kinematics import home_pose
 
     m = mujoco.MjModel.from_xml_string(*(lambda r: (r.to_xml_string(), r.get_assets()))(
         scene.build_scene(kind="payload", control_mode=None)))
     m.dof_armature[:] = 0.0
-    m.body_mass[m.body("jaco_arm/jaco_hand/payload").id] = 1.0
+    m.body_mass[m.body(scene.PAYLOAD_BODY).id] = 1.0
     d = mujoco.MjData(m)
     d.qpos[:6] = home_pose()
     mujoco.mj_forward(m, d)

@@ -125,3 +125,28 @@ def test_buffer_errors():
                          t=np.arange(3.0))
     with pytest.raises(ValueError, match="dof"):
         buf.append(three)
+
+
+def test_online_controller_learns_inside_the_episode_from_the_runner_measurements():
+    """The runner hands every measurement to observe(); an online controller adds every 4th tick's sample
+    (q, qd, central-difference qdd, the torque measured over that tick) to its model, and the model's
+    prediction at the reference moves toward the true inverse dynamics."""
+    from cascgp.gp import GPFitConfig
+    from cascgp.models import make_model
+
+    env = TwoJointEnv(steps=200)
+    pd = FeedforwardController(None, 20.0, 5.0, np.full(2, 10.0))
+    wrong = run_episode(env, pd, seed=0).data  # PD-only data of a *different* motion amplitude
+    wrong = DynamicsData(q=0.2 * wrong.q, qd=0.2 * wrong.qd, qdd=0.2 * wrong.qdd, tau=0.2 * wrong.tau, t=wrong.t)
+    model = make_model("np-inward", 2, gp_config=GPFitConfig(n_restarts=1, max_iter=50)).fit(wrong.subsample(10))
+    q, qd, qdd = SineTask().reference(3.0)
+    before = np.abs(model.predict_one(q, qd, qdd) - ExactID().inverse_dynamics(q, qd, qdd)).max()
+    ctrl = FeedforwardController(model, 20.0, 5.0, np.full(2, 10.0), online=60)
+    res = run_episode(env, ctrl, seed=0)
+    assert ctrl.name == "np-inward-online"
+    assert abs(ctrl.n_online_samples - res.steps / 4) <= 1
+    assert model.n_online == ctrl.n_online_samples and ctrl.n_online_rejected == 0
+    after = np.abs(model.predict_one(q, qd, qdd) - ExactID().inverse_dynamics(q, qd, qdd)).max()
+    assert after < 0.5 * before
+    ctrl.start(env, {})  # a new episode opens a fresh window
+    assert model.n_online == 0

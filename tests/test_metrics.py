@@ -28,3 +28,17 @@ def test_errors():
         rmse(p, y)
     with pytest.raises(ValueError, match="at least one row"):
         rmse(np.zeros((0, 2)), np.zeros((0, 2)))
+
+
+def test_interval_coverage_of_a_gaussian_sample_and_errors():
+    from cascgp.metrics import interval_coverage
+
+    rng = np.random.default_rng(0)
+    y = rng.normal(size=(200_000, 2)) * np.array([1.0, 3.0])
+    cov = interval_coverage(np.zeros_like(y), np.ones_like(y) * np.array([1.0, 9.0]), y)
+    np.testing.assert_allclose(cov, 0.95, atol=0.003)
+    assert interval_coverage(np.zeros((4, 1)), np.ones((4, 1)), np.array([[0.0], [1.95], [1.97], [-3.0]]))[0] == 0.5
+    with pytest.raises(ValueError, match="var: negative"):
+        interval_coverage(np.zeros(3), -np.ones(3), np.zeros(3))
+    with pytest.raises(ValueError, match="level"):
+        interval_coverage(np.zeros(3), np.ones(3), np.zeros(3), level=1.0)

@@ -215,3 +215,19 @@ def test_controller_falls_back_on_any_model_exception_and_refuses_infinite_limit
     for bad in (np.array([np.inf, 1.0]), np.array([1.0, np.nan]), np.array([1 + 1j, 1.0]), np.array([])):
         with pytest.raises(ValueError, match="torque_limits"):
             FeedforwardController(None, 1.0, 0.1, bad)
+
+
+def test_atomic_writes_get_the_mode_open_would_give(tmp_path: Path) -> None:
+    old = os.umask(0o027)
+    try:
+        import importlib
+
+        import cascgp.io as cio
+
+        importlib.reload(cio)  # the umask is read at import
+        p = cio.atomic_write_text(tmp_path / "a.txt", "x")
+        assert (p.stat().st_mode & 0o777) == 0o640
+    finally:
+        os.umask(old)
+        importlib.reload(cio)
+    assert (atomic_write_text(tmp_path / "b.txt", "x").stat().st_mode & 0o777) == 0o666 & ~old

@@ -24,16 +24,19 @@ Both derivatives are finite at :math:`r = 0`, so the lengthscale gradient needs 
 
 Each kernel object offers the formula in the forms its callers need, all written here once:
 
-=========================  ===============================================================================
-method                     used by
-=========================  ===============================================================================
-``value(r2)``              NumPy reference (:class:`cascgp.gp.posterior.GPPosterior.predict`, tests)
-``value_torch(r2)``        batched prediction and the final factors (:mod:`cascgp.gp.bank`)
-``value_and_grad_(A,B,C)`` the NLL gradient (:func:`cascgp.gp.likelihood.nll_and_grad`): in place on
-                           :math:`s\,r^2` (``s = r2_scale``), no temporaries
-``value_scaled_np_(a)``    the single-query fast path (:mod:`cascgp.models.fastpath`): in place on
-                           :math:`s\,r^2`, NumPy
-=========================  ===============================================================================
+==============================  ================================================================================
+method                          used by
+==============================  ================================================================================
+``value(r2)``                   NumPy reference (:class:`cascgp.gp.posterior.GPPosterior.predict`, tests)
+``grad_r2(r2)``                 NumPy derivative (the mean's input gradient, cascade variance propagation)
+``value_torch(r2)``             batched prediction and the final factors (:mod:`cascgp.gp.bank`)
+``value_and_grad_(A,B,C)``      the NLL gradient (:func:`cascgp.gp.likelihood.nll_and_grad`): in place on
+                                :math:`s\,r^2` (``s = r2_scale``), no temporaries
+``value_scaled_np_(a)``         the single-query fast path (:mod:`cascgp.models.fastpath`): in place on
+                                :math:`s\,r^2`, NumPy
+``value_and_grad_scaled_np``    the fast path with variance (gated controller): value and derivative in
+                                :math:`a = s\,r^2`
+==============================  ================================================================================
 
 ``r2_scale`` :math:`s` is folded into the inputs (or distances) by the callers of the two in-place forms,
 which saves one pass over the data: 5 for Matern 5/2 (:math:`s r^2 = \rho^2`), 1/2 for the RBF
@@ -62,6 +65,10 @@ class Kernel(ABC):
         """:math:`k(r^2)` in NumPy float64; tiny negative round-off in ``r2`` is clipped to 0."""
 
     @abstractmethod
+    def grad_r2(self, r2: np.ndarray) -> np.ndarray:
+        r""":math:`\partial k / \partial (r^2)` in NumPy float64 (finite at :math:`r = 0`)."""
+
+    @abstractmethod
     def value_torch(self, r2: torch.Tensor) -> torch.Tensor:
         """:math:`k(r^2)` in torch (no autograd bookkeeping needed)."""
 
@@ -74,6 +81,10 @@ class Kernel(ABC):
     @abstractmethod
     def value_scaled_np_(self, a: np.ndarray) -> np.ndarray:
         r""":math:`k` from :math:`a = s\,r^2` (1-D NumPy), overwriting ``a``; returns ``a``."""
+
+    @abstractmethod
+    def value_and_grad_scaled_np(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        r""":math:`\kappa(a) = k(a / s)` and :math:`d\kappa/da` from :math:`a = s\,r^2` (NumPy, new arrays)."""
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
@@ -91,6 +102,10 @@ class Matern52(Kernel):
         sr = self._SQRT5 * np.sqrt(r2)
         return (1.0 + sr + (5.0 / 3.0) * r2) * np.exp(-sr)
 
+    def grad_r2(self, r2: np.ndarray) -> np.ndarray:
+        sr = self._SQRT5 * np.sqrt(np.maximum(np.asarray(r2, dtype=np.float64), 0.0))
+        return (-5.0 / 6.0) * (1.0 + sr) * np.exp(-sr)
+
     def value_torch(self, r2: torch.Tensor) -> torch.Tensor:
         sr = torch.sqrt(r2).mul_(self._SQRT5)
         e = torch.exp(-sr)
@@ -102,6 +117,11 @@ class Matern52(Kernel):
         B.add_(1.0).mul_(C)  # u = (1 + rho) e^{-rho}
         torch.addcmul(B, A, C, value=1.0 / 3.0, out=A)  # k = u + rho^2 e^{-rho} / 3
         return -5.0 / 6.0
+
+    def value_and_grad_scaled_np(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        s = np.sqrt(a)  # rho
+        e = np.exp(-s)
+        return (1.0 + s + a / 3.0) * e, -(1.0 + s) * e / 6.0
 
     def value_scaled_np_(self, a: np.ndarray) -> np.ndarray:
         s = np.sqrt(a)  # rho
@@ -123,6 +143,9 @@ class RBF(Kernel):
         r2 = np.maximum(np.asarray(r2, dtype=np.float64), 0.0)
         return np.exp(-0.5 * r2)
 
+    def grad_r2(self, r2: np.ndarray) -> np.ndarray:
+        return -0.5 * np.exp(-0.5 * np.maximum(np.asarray(r2, dtype=np.float64), 0.0))
+
     def value_torch(self, r2: torch.Tensor) -> torch.Tensor:
         return torch.exp(-0.5 * r2)
 
@@ -134,6 +157,10 @@ class RBF(Kernel):
     def value_scaled_np_(self, a: np.ndarray) -> np.ndarray:
         np.negative(a, out=a)
         return np.exp(a, out=a)
+
+    def value_and_grad_scaled_np(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        e = np.exp(-a)
+        return e, -e
 
 
 _REGISTRY: dict[str, Kernel] = {k.name: k for k in (Matern52(), RBF())}

@@ -57,6 +57,18 @@ class GPPosterior:
         var = np.maximum(self.signal_var - (v * v).sum(0), 0.0) * self.y_std**2
         return mean, var
 
+    def mean_grad(self, x: np.ndarray, col: int) -> np.ndarray:
+        r"""Derivative of the posterior mean with respect to input column ``col`` at the rows of ``x``
+        ``(m, d)``: :math:`\partial\mu/\partial x_c = \frac{y_{std} s_f^2}{x_{scale,c}} \sum_k
+        2\,k'(r^2_k)\,(z_c - Z_{kc})\,\alpha_k` (0 for an ignored column)."""
+        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        if not np.isfinite(self.x_scale[col]):
+            return np.zeros(x.shape[0])
+        z = (x - self.x_mean) / self.x_scale
+        r2 = (z * z).sum(1)[:, None] + (self.Z * self.Z).sum(1)[None, :] - 2.0 * z @ self.Z.T
+        dk = get_kernel(self.kernel).grad_r2(r2) * (2.0 * (z[:, col, None] - self.Z[None, :, col]))
+        return self.y_std * self.signal_var * (dk @ self.alpha) / self.x_scale[col]
+
 
 def robust_cholesky(K: torch.Tensor, jitter_max: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Batched Cholesky; jitter only for the members whose factorisation fails.

@@ -36,9 +36,10 @@ noisy torques and small n.
 
 Prediction variance
 -------------------
-``var`` is the latent (noise-free) posterior variance of each joint's GP in torque units.  In
-a cascade it is the variance of that joint's GP *given the chained mean input*: the
-uncertainty of the neighbour's predicted torque is not propagated.
+``var`` is the latent (noise-free) posterior variance of each joint's GP in torque units.  By
+default, in a cascade it is the variance of that joint's GP *given the chained mean input*;
+``predict(..., propagate=True)`` adds the neighbour's uncertainty to first order (see
+:meth:`CascadedGPModel.predict`).
 
 Bad input (documented behaviour)
 --------------------------------

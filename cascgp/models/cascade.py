@@ -18,7 +18,7 @@ from cascgp.data import DynamicsData, as_real_array
 from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
 from cascgp.gp import GPBank, GPFitConfig
 from cascgp.gp.checks import check_scale
-from cascgp.models.fastpath import ZCLIP, FastPath
+from cascgp.models.fastpath import ZCLIP, FastPath, FastVariance
 
 __all__ = ["MODEL_NAMES", "CascadedGPModel", "make_model", "parse_name"]
 
@@ -101,6 +101,9 @@ class CascadedGPModel:
         self.n_train = 0
         self._post: list[Any] = []
         self._fast: FastPath | None = None
+        self._fast_offline: FastPath | None = None
+        self._fast_var: FastVariance | None = None
+        self._online: Any = None
 
     # ------------------------------------------------------------------ basics
     @property
@@ -238,7 +241,9 @@ class CascadedGPModel:
     def _cache(self) -> None:
         """Posterior factors per joint and the padded arrays of the single-query path."""
         self._post = [self.banks[k].posterior(b) for k, b in self.where]
-        self._fast = FastPath.build(self._post, self.specs, self.order)
+        self._fast = self._fast_offline = FastPath.build(self._post, self.specs, self.order)
+        self._fast_var = None
+        self._online = None
 
     # ------------------------------------------------------------------ prediction
     def _check_queries(self, q: Any, qd: Any, qdd: Any, q_hist: Any
@@ -267,26 +272,58 @@ class CascadedGPModel:
             q_hist = None
         return single, q, qd, qdd, q_hist
 
-    def predict(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None
-                ) -> tuple[np.ndarray, np.ndarray]:
-        """Predicted joint torques.
+    def predict(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None, *,
+                propagate: bool = False) -> tuple[np.ndarray, np.ndarray]:
+        r"""Predicted joint torques.
 
         Args:
             q, qd, qdd: (T, N) or (N,) (``qd``/``qdd`` may be None for NP ``-df`` models).
             q_hist: ``-df`` models only: (T, 2, N) or (2, N): ``q(t - df_delta)``, ``q(t - 2 df_delta)``.
+            propagate: cascades only: add the uncertainty of the neighbour's predicted torque to each
+                joint's variance (first-order propagation, below). ``False`` keeps the variance given the
+                chained mean input.
 
         Returns:
             ``mean``, ``var``: (T, N) (or (N,) for (N,) inputs).  ``mean`` is the full torque
-            (RBD added back for SP).  ``var`` is the latent variance of each joint's GP; for a
-            cascade it is the GP variance of that joint given the chained *mean* input (the
-            neighbour's uncertainty is not propagated).
+            (RBD added back for SP).  ``var`` is the latent (noise-free) variance of each joint's
+            torque in N m^2; add :attr:`noise_var` for the variance of a measurement.
+
+        Propagation through the cascade (linearisation of the mean in the torque input, the
+        "delta method"): joint :math:`j` is fed the predicted torque :math:`\hat\tau_t` of its
+        neighbour, itself Gaussian with variance :math:`v_t`; to first order in :math:`\hat\tau_t`,
+
+        .. math::
+
+            v_j = \sigma^2_j(x_j) + \Big(\frac{\partial \mu_j}{\partial \tau}(x_j)\Big)^2 v_t,
+
+        evaluated at the chained mean input :math:`x_j`, with :math:`\partial\mu_j/\partial\tau` in
+        closed form (:meth:`cascgp.gp.posterior.GPPosterior.mean_grad`). The recursion runs in
+        cascade order, so the first joint of the chain keeps its GP variance. The neglected terms are
+        of second order in :math:`\sqrt{v_t}` over the GP's lengthscale in the torque input; a test
+        compares it with Monte Carlo sampling of the cascade. In an SP model the rigid-body part is
+        deterministic, so only the GP part carries variance.
         """
         self._require_fitted()
         single, q, qd, qdd, q_hist = self._check_queries(q, qd, qdd, q_hist)
-        mean, var = self._predict_arrays(q, qd, qdd, q_hist, return_var=True)
+        mean, var = self._predict_arrays(q, qd, qdd, q_hist, return_var=True, propagate=propagate)
         return (mean[0], var[0]) if single else (mean, var)
 
-    def _predict_arrays(self, q, qd, qdd, q_hist, return_var: bool) -> tuple[np.ndarray, np.ndarray]:
+    @property
+    def noise_var(self) -> np.ndarray:
+        """Fitted noise variance of each joint's GP in N m^2, (N,): the measurement noise the model
+        attributes to the torques (add it to ``var`` for a predictive interval of a measurement)."""
+        self._require_fitted()
+        return np.array([P.noise_var * P.y_std**2 for P in self._post])
+
+    @property
+    def signal_var(self) -> np.ndarray:
+        """Prior (signal) variance of each joint's GP in N m^2, (N,): the latent variance far from the
+        training data."""
+        self._require_fitted()
+        return np.array([P.signal_var * P.y_std**2 for P in self._post])
+
+    def _predict_arrays(self, q, qd, qdd, q_hist, return_var: bool,
+                        propagate: bool = False) -> tuple[np.ndarray, np.ndarray]:
         S = self._states(q, qd, qdd, q_hist)
         T, N = q.shape
         sflat = S.reshape(T, -1)
@@ -299,10 +336,13 @@ class CascadedGPModel:
             if tj is not None:
                 x = np.concatenate([x, mean[:, tj:tj + 1]], axis=1)
             P = self._post[j]
-            m, v = _posterior_predict(P, x, return_var)
+            x = _clipped(P, x)
+            m, v = P.predict(x, return_var=return_var)
             mean[:, j] = m + (tau_rbd[:, j] if tau_rbd is not None else 0.0)
             if return_var:
                 var[:, j] = v
+                if propagate and tj is not None:
+                    var[:, j] += P.mean_grad(x, x.shape[1] - 1) ** 2 * var[:, tj]
         return mean, var
 
     def predict_data(self, data: DynamicsData) -> tuple[np.ndarray, np.ndarray]:
@@ -321,6 +361,79 @@ class CascadedGPModel:
         """Mean torque (N,) for ONE query: the lean NumPy path for a controller (no torch, no variance;
         :mod:`cascgp.models.fastpath`). Equals :meth:`predict` to round-off (~1e-12). Inputs are checked for
         shape and finiteness (``ValueError``)."""
+        return self._fast.mean(self._load_query(q, qd, qdd, q_hist))
+
+    def predict_one_var(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None
+                        ) -> tuple[np.ndarray, np.ndarray]:
+        """Mean torque and *propagated* latent variance (N,), (N,) for ONE query: the single-query form of
+        ``predict(..., propagate=True)`` (equal to round-off). The first call builds one ``(n, n)`` matrix per
+        joint (:class:`~cascgp.models.fastpath.FastVariance`); a query then costs one ``(n, n)`` product per
+        joint on top of :meth:`predict_one`."""
+        tau_rbd = self._load_query(q, qd, qdd, q_hist)
+        if self._fast_var is None:
+            online = getattr(self, "_online", None)
+            self._fast_var = online.variance() if online is not None else FastVariance.build(self._post)
+        return self._fast_var.mean_var(self._fast, tau_rbd)
+
+    def posteriors(self) -> list[Any]:
+        """Each joint's fitted :class:`~cascgp.gp.posterior.GPPosterior`, in joint order."""
+        self._require_fitted()
+        return list(self._post)
+
+    # ------------------------------------------------------------------ learning inside an episode
+    def start_online(self, window: int = 150) -> None:
+        """Let new samples enter the model (:meth:`add_sample`) until the next :meth:`fit`, with the
+        hyperparameters held: each joint keeps its fitted set plus the ``window`` most recent samples
+        (:mod:`cascgp.models.online`). Derivative-based models only."""
+        from cascgp.models.online import OnlineWindow
+
+        self._require_fitted()
+        self._online = OnlineWindow(self, window)
+        self._fast = self._online.fast
+        self._fast_var = None
+
+    def stop_online(self) -> None:
+        """Drop the online window (:meth:`start_online`): predictions are again those of the fitted model.
+        Does nothing when no window is open."""
+        if getattr(self, "_online", None) is not None:
+            self._online = None
+            self._fast = self._fast_offline
+            self._fast_var = None
+
+    def add_sample(self, q: Any, qd: Any, qdd: Any, tau: Any) -> None:
+        """Add one measured sample ``(q, qd, qdd, tau)``, each (N,), to every joint (see :meth:`start_online`).
+        Each joint's GP input uses the *measured* neighbour torque and its target is the measured torque (minus
+        the RBD torque for SP), as in training. Rejects non-finite values (``ValueError``), changing nothing."""
+        if getattr(self, "_online", None) is None:
+            raise RuntimeError(f"model {self.name!r}: call start_online() before add_sample()")
+        N = self.dof
+        arr = {}
+        for nm, v in (("q", q), ("qd", qd), ("qdd", qdd), ("tau", tau)):
+            a = _one_real(nm, v)
+            if a.shape != (N,) or not np.isfinite(a).all():
+                raise ValueError(f"{nm}: expected a finite array of shape ({N},), got {a!r}")
+            check_scale(np.stack([a, np.zeros(N)]), nm)
+            arr[nm] = a
+        S = self._states(arr["q"][None], arr["qd"][None], arr["qdd"][None], None).reshape(-1)
+        target = arr["tau"] - (self._rbd_torque(arr["q"][None], arr["qd"][None], arr["qdd"][None])[0]
+                               if self.parametric == "sp" else 0.0)
+        xs = []
+        for j in range(N):
+            sj, tj = self.specs[j]
+            x = _state_cols(S[None], sj)[0]
+            xs.append(np.append(x, arr["tau"][tj]) if tj is not None else x)
+        self._online.add(xs, target)
+        if self._fast_var is not None:
+            self._fast_var = self._online.variance()
+
+    @property
+    def n_online(self) -> int:
+        """Samples added since :meth:`start_online` (0 when not learning online)."""
+        online = getattr(self, "_online", None)
+        return 0 if online is None else online.n_added
+
+    def _load_query(self, q: Any, qd: Any, qdd: Any, q_hist: Any) -> np.ndarray | None:
+        """Check one query and write its state into the fast path's buffer; returns the RBD torque (SP) or None."""
         f = self._fast
         if f is None:
             self._require_fitted()
@@ -352,8 +465,7 @@ class CascadedGPModel:
             buf[2:3 * N:3] = h[1]
         if not np.isfinite(buf).all():
             raise ValueError("q/qd/qdd/q_hist: non-finite value (NaN or inf) in the query")
-        tau_rbd = self._rbd_torque(q, qd, qdd) if self.parametric == "sp" else None
-        return f.mean(tau_rbd)
+        return self._rbd_torque(q, qd, qdd) if self.parametric == "sp" else None
 
     # ------------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike) -> Path:
@@ -368,13 +480,13 @@ def _state_cols(sflat: np.ndarray, state_joints: tuple[int, ...]) -> np.ndarray:
     return sflat[:, cols]
 
 
-def _posterior_predict(P: Any, x: np.ndarray, return_var: bool) -> tuple[np.ndarray, np.ndarray | None]:
-    """GPPosterior.predict with the normalised inputs clipped (finite output for finite input)."""
+def _clipped(P: Any, x: np.ndarray) -> np.ndarray:
+    """``x`` with its normalised values clipped to +-ZCLIP (finite output for finite input)."""
     z = (x - P.x_mean) / P.x_scale
     if not (np.abs(z) <= ZCLIP).all():
         zc = np.clip(z, -ZCLIP, ZCLIP)
         x = np.where(np.isfinite(P.x_scale), P.x_mean + zc * P.x_scale, x)
-    return P.predict(x, return_var=return_var)
+    return x
 
 
 def make_model(name: str, dof: int, rbd: Any = None, *, gp_config: Any = None, df_delta: float = 0.1,

@@ -21,14 +21,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
 from cascgp.gp.kernels import Kernel, get_kernel
 from cascgp.gp.posterior import GPPosterior
 
-__all__ = ["FastPath", "ZCLIP"]
+__all__ = ["FastPath", "FastVariance", "ZCLIP"]
 
 #: Normalised inputs are clipped to +-ZCLIP (finite output for any finite input).
 ZCLIP = 1e6
@@ -71,11 +71,13 @@ class FastPath:
 
     @classmethod
     def build(cls, posts: Sequence[GPPosterior], specs: Sequence[tuple[tuple[int, ...], int | None]],
-              order: tuple[int, ...]) -> FastPath:
-        """From each joint's posterior and input spec ``(state joints, torque joint or None)``."""
+              order: tuple[int, ...], capacity: int = 0) -> FastPath:
+        """From each joint's posterior and input spec ``(state joints, torque joint or None)``; ``capacity``
+        extra zero-weight rows per joint leave room for online samples (:mod:`cascgp.models.online`)."""
         N = len(posts)
         kernel = get_kernel(posts[0].kernel)
-        n = posts[0].Z.shape[0]
+        n0 = posts[0].Z.shape[0]
+        n = n0 + capacity
         D = 3 * N
         c = math.sqrt(kernel.r2_scale)
         idx = np.full((N, D), D, dtype=np.intp)
@@ -94,33 +96,39 @@ class FastPath:
             idx[j, :ds] = cols
             xm[j, :ds] = P.x_mean[:ds]
             xs_inv[j, :ds] = c / P.x_scale[:ds]  # inf scale (ignored column) -> 0
-            W[j, :, :ds] = c * P.Z[:, :ds]
+            W[j, :n0, :ds] = c * P.Z[:, :ds]
             if tj is not None:
                 tm[j] = P.x_mean[ds]
                 ts_inv[j] = c / P.x_scale[ds]
-                Zt[j] = c * P.Z[:, ds]
-            a[j] = P.y_std * P.signal_var * P.alpha
+                Zt[j, :n0] = c * P.Z[:, ds]
+            a[j, :n0] = P.y_std * P.signal_var * P.alpha
             y_mean[j] = P.y_mean
         return cls(kernel=kernel, order=tuple(order), idx=idx, x_mean=xm, x_inv_scale=xs_inv, W=W,
                    W2=np.einsum("jnd,jnd->jn", W, W), torque_from=tuple(s[1] for s in specs),
                    t_mean=tuple(tm.tolist()), t_inv_scale=tuple(ts_inv.tolist()), Zt=Zt, alpha=a,
                    y_mean=tuple(y_mean.tolist()), zclip=ZCLIP * c, buf=np.zeros(D + 1))
 
-    def mean(self, tau_mean: np.ndarray | None) -> np.ndarray:
-        """Predicted torques ``(N,)`` for the state already written into ``buf[:3N]`` as
-        ``(q_1, s_1', s_1'', q_2, ...)``; ``tau_mean`` (SP models) is added to each joint's GP mean before the
-        torque is passed along the cascade."""
+    def state_r2(self) -> np.ndarray:
+        """Scaled squared distances ``(N, n)`` of the state part of every joint's input (from ``buf``) to its
+        training inputs, all joints at once: ``|W|^2 + |z|^2 - 2 W z``."""
         zc = self.zclip
         z = self.buf[self.idx]
         z -= self.x_mean
         z *= self.x_inv_scale
         np.clip(z, -zc, zc, out=z)
-        # state part of every joint at once: r2s (N, n) = |W|^2 + |z|^2 - 2 W z
         r2s = np.matmul(self.W, z[:, :, None])[:, :, 0]
         r2s *= -2.0
         r2s += self.W2
         r2s += np.einsum("jd,jd->j", z, z)[:, None]
         np.maximum(r2s, 0.0, out=r2s)
+        return r2s
+
+    def mean(self, tau_mean: np.ndarray | None) -> np.ndarray:
+        """Predicted torques ``(N,)`` for the state already written into ``buf[:3N]`` as
+        ``(q_1, s_1', s_1'', q_2, ...)``; ``tau_mean`` (SP models) is added to each joint's GP mean before the
+        torque is passed along the cascade."""
+        zc = self.zclip
+        r2s = self.state_r2()
         out = np.empty(len(self.order))
         value_ = self.kernel.value_scaled_np_
         Zt, a, tjs, tm, tsi, ym = self.Zt, self.alpha, self.torque_from, self.t_mean, self.t_inv_scale, self.y_mean
@@ -138,3 +146,70 @@ class FastPath:
                 m += float(tau_mean[j])
             out[j] = m
         return out
+
+
+@dataclass(frozen=True)
+class FastVariance:
+    r"""What the single-query path needs for the *propagated* latent variance (build with :meth:`build`;
+    built on first use, since it holds one ``(n, n)`` matrix per joint).
+
+    With :math:`\kappa` the kernel row of the query (scaled as in :class:`FastPath`) and
+    :math:`B_j = y_{std}\, s_f^2\, L_j^{-1}`, joint j's latent variance given its inputs is
+    :math:`p_j - \|B_j \kappa\|^2` (:math:`p_j = y_{std}^2 s_f^2`, the prior variance), and the cascade adds
+    :math:`(\partial\mu_j/\partial\tau)^2 v_{t(j)}` (see :meth:`cascgp.models.CascadedGPModel.predict`), with
+
+    .. math::
+
+        \frac{\partial\mu_j}{\partial\tau} = \sum_k \tilde\alpha_{jk}\, \kappa'(a_{jk})\,
+            2\,(z^\tau_j - z^\tau_{jk})\, \frac{c}{\ell_\tau} \cdot \frac{1}{c^2} \cdot s
+        = \sum_k \tilde\alpha_{jk}\, \kappa'(a_{jk})\, 2\,(z^\tau_j - z^\tau_{jk})\, t_j
+
+    in the fast path's scaled coordinates (:math:`c = \sqrt s`, :math:`t_j` = ``t_inv_scale``).
+
+    Attributes:
+        B: ``(N, n, n)`` scaled inverse Cholesky factors; prior: ``(N,)`` prior variances (N m^2).
+        window: online samples (:class:`cascgp.models.online.OnlineWindow`) whose variance term is added.
+    """
+
+    B: np.ndarray
+    prior: np.ndarray
+    window: Any = None
+
+    @classmethod
+    def build(cls, posts: Sequence[GPPosterior]) -> FastVariance:
+        from scipy.linalg import solve_triangular
+
+        n = posts[0].Z.shape[0]
+        B = np.stack([solve_triangular(P.L, np.eye(n), lower=True) * (P.y_std * P.signal_var) for P in posts])
+        return cls(B=B, prior=np.array([P.y_std**2 * P.signal_var for P in posts]))
+
+    def mean_var(self, fast: FastPath, tau_mean: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted torques and their propagated latent variances ``(N,)``, ``(N,)`` for the state in
+        ``fast.buf`` (as :meth:`FastPath.mean`)."""
+        zc = fast.zclip
+        r2s = fast.state_r2()
+        N = len(fast.order)
+        mean, var = np.empty(N), np.empty(N)
+        for j in fast.order:
+            r2 = r2s[j]
+            tj = fast.torque_from[j]
+            if tj is not None:
+                tq = (mean[tj] - fast.t_mean[j]) * fast.t_inv_scale[j]
+                tq = zc if tq > zc else (-zc if tq < -zc else tq)
+                diff = tq - fast.Zt[j]
+                r2 = diff * diff + r2
+            kap, dkap = fast.kernel.value_and_grad_scaled_np(r2)
+            a = fast.alpha[j]
+            m = fast.y_mean[j] + float(kap @ a)
+            if tau_mean is not None:
+                m += float(tau_mean[j])
+            mean[j] = m
+            n0 = self.B.shape[1]
+            u = self.B[j] @ kap[:n0]
+            q = float(u @ u) + (self.window.extra_var(j, kap, u) if self.window is not None else 0.0)
+            v = max(self.prior[j] - q, 0.0)
+            if tj is not None:
+                g = 2.0 * fast.t_inv_scale[j] * float((dkap * diff) @ a)
+                v += g * g * var[tj]
+            var[j] = v
+        return mean, var

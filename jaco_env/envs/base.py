@@ -1,0 +1,366 @@
+"""The machinery both Jaco 2 environments share (not registered): :class:`JacoMujocoEnv`.
+
+It owns the simulation plumbing on top of Gymnasium's :class:`MujocoEnv`: composing the scene
+(:func:`jaco_env.scene.build_scene`) and loading it, the action space and its checks, one
+control period of physics (:meth:`JacoMujocoEnv._simulate`: command, torque sensing, instability
+checks), the measured part of the observation (:meth:`JacoMujocoEnv._measure`, layout in
+:mod:`jaco_env.sensors`), setting the payload, placing the arm at rest, and the reset flow.
+
+Reset flow (as Gymnasium's MuJoCo v5 envs, plus options): :meth:`JacoMujocoEnv.reset` checks the
+options with the subclass's :meth:`~JacoMujocoEnv._parse_options` *before* touching the
+simulation, keeps them, and calls :meth:`MujocoEnv.reset` (seeds ``np_random``, resets the data,
+calls :meth:`reset_model` and :meth:`_get_reset_info`). The override is needed because
+``MujocoEnv.reset`` drops ``options``, so ``reset_model`` could not see them otherwise. Each
+environment (:mod:`jaco_env.envs.pour_v0`, :mod:`jaco_env.envs.payload_v0`) implements
+``reset_model``, ``_get_obs``, ``_get_reset_info`` and ``step``. Every check that can reject a
+call (options, action) runs before the simulation is touched: a rejected call changes no state.
+
+Scene files: ``MujocoEnv`` loads its model from a file, and MuJoCo caches the compiled meshes
+by file path. The composed scene is therefore written once per process into one folder
+(:func:`export_scene`: content-addressed file names, so every env of one configuration loads
+the same files and the mesh cache hits; before, each env wrote a fresh folder and the cache
+grew by ~3-4 MiB per ``gym.make``). The folder is removed when the process exits (also in
+``multiprocessing`` workers, e.g. of an ``AsyncVectorEnv``).
+
+Rendering: :meth:`JacoMujocoEnv.render` before the first :meth:`reset` raises
+``gymnasium.error.ResetNeeded`` (as the ``OrderEnforcing`` wrapper of ``gym.make`` does). An env
+that rendered and is never closed is closed at interpreter exit, before the OpenGL (EGL)
+display is terminated, so that no tracebacks are printed at exit.
+"""
+
+from __future__ import annotations
+
+import atexit
+import functools
+import hashlib
+import math
+import multiprocessing.util
+import os
+import shutil
+import tempfile
+import threading
+import weakref
+from typing import Any
+
+import mujoco
+import numpy as np
+from dm_control import mjcf
+from gymnasium import error, logger, spaces
+from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
+
+from jaco_env import robot, scene
+from jaco_env.checks import is_real_number, real_array
+from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
+
+#: Largest physics step (s); the step is control_dt / ceil(control_dt / MAX_PHYSICS_STEP).
+MAX_PHYSICS_STEP = 0.002
+#: A joint speed (rad/s) or marble speed (m/s) above these marks the simulation unstable.
+MAX_JOINT_SPEED = 50.0
+MAX_MARBLE_SPEED = 20.0
+
+DEFAULT_CAMERA = {"distance": 2.0, "azimuth": 150.0, "elevation": -25.0, "lookat": np.array([0.3, 0.0, 0.25])}
+
+_N = robot.N_JOINTS
+
+
+def check_mass(value, lo: float, hi: float, what: str) -> float:
+    """``value`` as a float in [lo, hi] kg (TypeError / ValueError naming ``what`` otherwise).
+
+    Only real numbers are accepted: a string such as ``"1.2"``, a bool or a complex number raises
+    ``TypeError`` (``float()`` would silently accept the first two).
+    """
+    if not is_real_number(value):
+        raise TypeError(f"{what} must be a real number (kg), got {type(value).__name__} {value!r}")
+    v = float(value)
+    if not math.isfinite(v) or not (lo <= v <= hi):
+        raise ValueError(f"{what} must be in [{lo:.3f}, {hi:.3f}] kg, got {v!r}")
+    return v
+
+
+# ------------------------------------------------------------------ scene files (one folder per process)
+_export_lock = threading.Lock()
+_export_dir: str | None = None
+_exported: set[str] = set()
+
+
+def _forget_exports() -> None:
+    """In a forked child: start a folder of its own (the parent removes its folder when it exits)."""
+    global _export_dir
+    _export_dir = None
+    _exported.clear()
+
+
+os.register_at_fork(after_in_child=_forget_exports)
+
+
+def _remove_folders_of_dead_processes() -> None:
+    """Remove the scene folders of killed processes (``jaco_env_<pid>_*`` whose process is gone):
+    a process killed by a signal never runs its exit handlers."""
+    root = tempfile.gettempdir()
+    try:
+        names = os.listdir(root)
+    except OSError:
+        return
+    for name in names:
+        parts = name.split("_")
+        if len(parts) < 4 or parts[:2] != ["jaco", "env"] or not parts[2].isdigit():
+            continue
+        try:
+            os.kill(int(parts[2]), 0)
+        except ProcessLookupError:
+            shutil.rmtree(os.path.join(root, name), ignore_errors=True)
+        except (PermissionError, OverflowError, ValueError):
+            pass  # another user's live process, or not a pid
+
+
+def _write_once(folder: str, name: str, contents: bytes) -> str:
+    path = os.path.join(folder, name)
+    if path not in _exported:
+        if not os.path.exists(path):
+            tmp = f"{path}.{os.getpid()}.tmp"
+            with open(tmp, "wb") as f:
+                f.write(contents)
+            os.replace(tmp, path)
+        _exported.add(path)
+    return path
+
+
+def export_scene(root: mjcf.RootElement) -> str:
+    """Write the composed scene and its mesh assets to this process's scene folder; return the XML's path.
+
+    The asset files keep ``dm_control``'s content-hashed names and the XML is named by the hash of
+    its text, so one configuration always gets the same path (MuJoCo's mesh cache, keyed by path,
+    hits) and every scene shares the mesh files. Files are written once and never rewritten. The
+    folder (``$TMPDIR/jaco_env_<pid>_*``) is removed at exit by ``multiprocessing.util.Finalize``,
+    which runs at interpreter exit in the main process and at the end of ``multiprocessing``
+    workers; the folders of processes killed by a signal are removed when the next one is created.
+    """
+    global _export_dir
+    xml = root.to_xml_string()
+    assets = root.get_assets()
+    with _export_lock:
+        if _export_dir is None or not os.path.isdir(_export_dir):
+            _remove_folders_of_dead_processes()
+            _export_dir = tempfile.mkdtemp(prefix=f"jaco_env_{os.getpid()}_")
+            _exported.clear()
+            multiprocessing.util.Finalize(None, shutil.rmtree, args=(_export_dir,),
+                                          kwargs={"ignore_errors": True}, exitpriority=0)
+        for name, contents in assets.items():
+            _write_once(_export_dir, name, contents if isinstance(contents, bytes) else contents.encode())
+        digest = hashlib.sha256(xml.encode()).hexdigest()[:24]
+        return _write_once(_export_dir, f"scene-{digest}.xml", xml.encode())
+
+
+def _close_at_exit(env_ref: weakref.ref) -> None:
+    env = env_ref()
+    if env is not None:
+        env.close()
+
+
+def check_options(options: dict | None, allowed: tuple[str, ...]) -> dict:
+    """The reset options as a dict (``{}`` for None); unknown keys raise ``ValueError``."""
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise TypeError(f"reset options must be a dict, got {type(options).__name__}")
+    unknown = sorted(set(options) - set(allowed))
+    if unknown:
+        raise ValueError(f"unknown reset option(s) {unknown}; allowed: {list(allowed)}")
+    return options
+
+
+class JacoMujocoEnv(MujocoEnv):
+    """Common machinery of both environments (not registered).
+
+    Public read-only attributes besides Gymnasium's: ``control_mode``, ``control_dt`` (s),
+    ``torque_limits``, ``n_marbles``, ``payload_mass`` (kg, this episode), ``time`` (s since reset)
+    and the MuJoCo addresses of the arm: ``arm_qpos_adr``, ``arm_dof_adr`` (index ``data.qpos`` /
+    ``data.qvel``, ``qacc``, ``qfrc_*``) and ``velocity_ref_act_adr`` (``data.act`` of the velocity
+    loop's integrators, ``q_ref``; empty in torque mode). :meth:`arm_state` gives the true q, qd.
+    """
+
+    metadata = {"render_modes": ["human", "rgb_array", "depth_array"], "render_fps": 40}
+    #: ``scene.build_scene`` kind and observation length; set by each environment.
+    _scene_kind = "payload"
+    _obs_dim = MEASUREMENT_DIM
+
+    def __init__(self, *, control_mode: str, control_freq: float, sensor_noise: SensorNoise | None, n_marbles: int,
+                 render_mode: str | None, width: int, height: int, camera_name: str | None):
+        # No defaults here: each environment's signature holds the public defaults.
+        if control_mode not in ("torque", "velocity"):
+            raise ValueError(f"control_mode must be 'torque' or 'velocity', got {control_mode!r}")
+        if not is_real_number(control_freq):
+            raise TypeError(f"control_freq must be a real number (Hz), got {type(control_freq).__name__} "
+                            f"{control_freq!r}")
+        if not math.isfinite(control_freq) or not (1.0 <= control_freq <= 1000.0):
+            raise ValueError(f"control_freq must be a number in [1, 1000] Hz, got {control_freq!r}")
+        if sensor_noise is not None and not isinstance(sensor_noise, SensorNoise):
+            raise TypeError(f"sensor_noise must be a SensorNoise or None, got {type(sensor_noise).__name__}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        self.control_mode = control_mode
+        self.sensor_noise = sensor_noise if sensor_noise is not None else SensorNoise.none()
+        self.control_dt = 1.0 / float(control_freq)
+        n_sub = int(math.ceil(self.control_dt / MAX_PHYSICS_STEP - 1e-9))
+        timestep = self.control_dt / n_sub
+        self.n_marbles = int(n_marbles)
+        self.torque_limits = robot.TORQUE_LIMITS.copy()
+        self.metadata = {**type(self).metadata, "render_fps": int(round(control_freq))}
+
+        root = scene.build_scene(kind=self._scene_kind, n_marbles=self.n_marbles, control_mode=control_mode,
+                                 timestep=timestep)
+        # MujocoEnv loads from a file: one file per configuration per process (export_scene).
+        obs_space = spaces.Box(-np.inf, np.inf, shape=(self._obs_dim,), dtype=np.float64)
+        self._exit_closer = None
+        MujocoEnv.__init__(
+            self, export_scene(root), n_sub, observation_space=obs_space, render_mode=render_mode,
+            width=width, height=height, camera_name=camera_name,
+            default_camera_config=None if camera_name else DEFAULT_CAMERA,
+        )
+        m = self.model
+        joints = [m.joint(scene.ARM_PREFIX + n).id for n in robot.JOINT_NAMES]
+        self.arm_qpos_adr = np.array([m.jnt_qposadr[j] for j in joints])
+        self.arm_dof_adr = np.array([m.jnt_dofadr[j] for j in joints])
+        self.velocity_ref_act_adr = np.array(
+            [m.actuator_actadr[m.actuator(f"int_{i + 1}").id] for i in range(_N)]) if (
+            control_mode == "velocity") else np.zeros(0, int)
+        self._payload_body = m.body(scene.PAYLOAD_BODY).id
+        self._bottle_body = m.body(scene.BOTTLE_BODY).id
+        self._tau_sensor = np.array([m.sensor_adr[m.sensor(scene.ARM_PREFIX + n).id] + 2
+                                     for n in robot.TORQUE_SENSOR_NAMES])
+        self._warn_counts = np.zeros(len(self.data.warning), dtype=np.int64)
+        self._step_count = 0
+        self._unstable = False
+        self._tau_meas_true = np.zeros(_N)
+        self._last_obs: np.ndarray | None = None
+        self._terminated = False
+        self._warned_terminated = False
+        self._options: dict = {}
+        self.marble_dof_adr = np.zeros(0, dtype=int)
+        self.payload_mass = 0.0
+
+    # ------------------------------------------------------------------ plumbing
+    def _initialize_simulation(self):
+        model = mujoco.MjModel.from_xml_path(self.fullpath)
+        model.vis.global_.offwidth = self.width
+        model.vis.global_.offheight = self.height
+        return model, mujoco.MjData(model)
+
+    def _set_action_space(self):
+        lim = robot.TORQUE_LIMITS if self.control_mode == "torque" else robot.VELOCITY_LIMITS
+        self.action_space = spaces.Box(-lim.astype(np.float32), lim.astype(np.float32), dtype=np.float32)
+        return self.action_space
+
+    @property
+    def time(self) -> float:
+        """Time since reset (s)."""
+        return self._step_count * self.control_dt
+
+    def arm_state(self) -> tuple[np.ndarray, np.ndarray]:
+        """True (noiseless) joint positions and velocities (copies), for analysis only."""
+        return self.data.qpos[self.arm_qpos_adr].copy(), self.data.qvel[self.arm_dof_adr].copy()
+
+    def _set_payload(self, total: float, fixed_mass: float) -> None:
+        extra = total - fixed_mass
+        self.model.body_mass[self._payload_body] = extra
+        self.model.body_inertia[self._payload_body] = scene.payload_inertia(extra)
+        self.payload_mass = float(total)
+
+    def _validate_action(self, action) -> np.ndarray:
+        """The action as float64, clipped to the bounds; TypeError (not real numbers: str, bool, complex,
+        ...) or ValueError (shape, NaN/inf) naming ``action`` otherwise, before anything changes."""
+        a = real_array(action, (_N,), "action")
+        return np.clip(a, self.action_space.low, self.action_space.high)
+
+    def _simulate(self, a: np.ndarray) -> bool:
+        """Advance one control period; return True when the simulation went unstable."""
+        m, d = self.model, self.data
+        d.ctrl[:_N] = a
+        if self.control_mode == "velocity":
+            d.ctrl[_N:2 * _N] = a
+        mujoco.mj_step(m, d, nstep=self.frame_skip)
+        # The joint torque sensors sample at the same instant as q and qd (the end of the period),
+        # with the command of the period just ended still in effect: mj_step left the sensors of
+        # the *start* of its last physics step, so evaluate the model at the current state.
+        mujoco.mj_forward(m, d)
+        self._tau_meas_true = d.sensordata[self._tau_sensor].copy()
+        warn = np.array([w.number for w in d.warning], dtype=np.int64)
+        new_warning = bool(np.any(warn > self._warn_counts))
+        self._warn_counts = warn
+        unstable = new_warning or not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel)))
+        if not unstable:
+            unstable = bool(np.max(np.abs(d.qvel[self.arm_dof_adr])) > MAX_JOINT_SPEED)
+        if not unstable and self.n_marbles:
+            lin = d.qvel[self.marble_dof_adr[:, None] + np.arange(3)]
+            unstable = bool(np.max(np.linalg.norm(lin, axis=1)) > MAX_MARBLE_SPEED)
+        return unstable
+
+    def _measure(self) -> np.ndarray:
+        q, qd = self.arm_state()
+        return self.sensor_noise.measurement(self.np_random, q, qd, self._tau_meas_true, self.time)
+
+    def _reset_arm(self, q0: np.ndarray) -> None:
+        d = self.data
+        d.qpos[self.arm_qpos_adr] = q0
+        d.qvel[:] = 0.0
+        if self.control_mode == "velocity":
+            d.act[self.velocity_ref_act_adr] = q0
+        self._step_count = 0
+        self._unstable = False
+        self._tau_meas_true = np.zeros(_N)
+        self._warn_counts = np.zeros(len(d.warning), dtype=np.int64)
+
+    # ------------------------------------------------------------------ reset flow
+    def _parse_options(self, options: dict | None) -> dict:
+        """Check ``reset`` options before the simulation is touched; return what ``reset_model`` uses."""
+        return check_options(options, ())
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Check the options first (a bad option leaves the simulation untouched), then
+        :meth:`MujocoEnv.reset` (which passes no options to ``reset_model``: they are kept in
+        ``self._options`` for it). ``reset_model`` records the first observation in ``_last_obs``."""
+        self._options = self._parse_options(options)
+        return super().reset(seed=seed)
+
+    def _start_episode(self) -> np.ndarray:
+        """End of ``reset_model``: the first observation, recorded (``step`` and ``render`` need a reset)."""
+        self._terminated = False
+        self._warned_terminated = False
+        self._last_obs = self._get_obs()
+        return self._last_obs
+
+    def _warn_if_terminated(self) -> None:
+        """Gymnasium's convention (as ``CartPole``): warn once when ``step`` is called after ``terminated``."""
+        if self._terminated and not self._warned_terminated:
+            logger.warn("You are calling 'step()' even though this environment has already returned terminated = "
+                        "True. You should always call 'reset()' once you receive 'terminated = True' -- the "
+                        "simulation goes on, but the episode is over (its reward and termination no longer "
+                        "mean anything).")
+            self._warned_terminated = True
+
+    def render(self):
+        """Render a frame (Gymnasium's ``MujocoEnv.render``); ``ResetNeeded`` before the first ``reset``."""
+        if self._last_obs is None:
+            raise error.ResetNeeded("Cannot call `env.render()` before calling `env.reset()`: the scene is not set up")
+        frame = super().render()
+        if self._exit_closer is None:
+            # Registered after the renderer's OpenGL context exists, hence after EGL's own atexit
+            # handler (eglTerminate): atexit runs last-registered first, so this env is closed
+            # while the display is still alive. Unregistered by close() or when the env is collected.
+            self._exit_closer = functools.partial(_close_at_exit, weakref.ref(self))
+            atexit.register(self._exit_closer)
+            weakref.finalize(self, atexit.unregister, self._exit_closer).atexit = False
+        return frame
+
+    def close(self):
+        """Close the rendering contexts (Gymnasium's ``MujocoEnv.close``); safe to call twice."""
+        super().close()
+        if getattr(self, "_exit_closer", None) is not None:
+            atexit.unregister(self._exit_closer)
+            self._exit_closer = None
+
+    def _get_obs(self) -> np.ndarray:
+        return self._measure()
+
+    def _get_reset_info(self) -> dict[str, Any]:
+        raise NotImplementedError

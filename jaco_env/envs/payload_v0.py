@@ -1,0 +1,131 @@
+"""``JacoPayload-v0``: the Jaco 2 with a rigid payload, for data collection (:class:`JacoPayloadEnv`).
+
+This file owns what is particular to it: the fixed or per-reset payload, the start pose option,
+the privileged ``qacc`` in the info and a step without reward. The shared simulation machinery
+is :class:`jaco_env.envs.base.JacoMujocoEnv`.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import mujoco
+import numpy as np
+from gymnasium import error
+from gymnasium.utils import EzPickle
+
+from jaco_env import robot, scene
+from jaco_env.checks import real_array
+from jaco_env.envs.base import JacoMujocoEnv, check_mass, check_options
+from jaco_env.kinematics import home_pose
+from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
+
+
+class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
+    r"""The Jaco 2 of ``JacoPour-v0`` with a rigid payload: no marbles, no jar, no task.
+
+    For the paper's data collection with random sum-of-sinusoids joint motions
+    (:mod:`jaco_env.excitation`), typically in velocity mode.
+
+    ## Description
+    Same robot, actuators, sensors and bottle as :class:`JacoPourEnv`; the bottle holds a
+    rigid extra mass instead of marbles. Total payload in the hand (bottle + extra):
+    ``payload_mass`` (constructor, default 0.8 kg) or ``reset(options={"payload_mass": m})``,
+    a real number in [0.2, 1.6] kg (a string or bool raises ``TypeError``); reported in
+    ``info["payload_mass"]``, never observed.
+
+    ## Action Space
+    As ``JacoPour-v0`` (torque mode: N m; velocity mode: rad/s; clipped; NaN/inf/wrong shape
+    raise ``ValueError``, non-real values (str, bool, complex) ``TypeError``; the simulation is
+    not touched).
+
+    ## Observation Space
+    ``Box(-inf, inf, (19,), float64)``: entries 0-18 of ``JacoPour-v0`` (measured q, qd, tau,
+    time since reset).
+
+    ## Rewards
+    Always 0 (this environment is for data collection).
+
+    ## Starting State
+    At rest at the home pose ``jaco_env.kinematics.home_pose()`` or ``options["q0"]`` (6 finite
+    real angles). A rejected option raises before the simulation is touched.
+
+    ## Info
+    ``time, payload_mass, unstable`` and ``qacc``: the true joint accelerations at the sample
+    instant (privileged, for analysis only: e.g. to measure the error of differentiated
+    accelerations; never part of the observation).
+
+    ## Episode End
+    Never terminates; truncated by the time limit (``max_episode_steps=2400``, 60 s at 40 Hz;
+    pass ``max_episode_steps`` to ``gym.make`` for longer runs) or on an unstable simulation
+    (``info["unstable"] = True``).
+
+    ## Arguments
+    ``gym.make("JacoPayload-v0", control_mode="torque", control_freq=40.0,
+    sensor_noise=SensorNoise(), payload_mass=0.8, render_mode=None, width=480, height=480,
+    camera_name=None)``.
+
+    ## Version History
+    - v0: initial version.
+    """
+
+    _scene_kind = "payload"
+    _obs_dim = MEASUREMENT_DIM
+
+    def __init__(
+        self,
+        control_mode: str = "torque",
+        control_freq: float = 40.0,
+        sensor_noise: SensorNoise | None = SensorNoise(),
+        payload_mass: float = 0.8,
+        render_mode: str | None = None,
+        width: int = 480,
+        height: int = 480,
+        camera_name: str | None = None,
+    ):
+        EzPickle.__init__(self, control_mode, control_freq, sensor_noise, payload_mass, render_mode, width,
+                          height, camera_name)
+        self._fixed_mass = scene.BOTTLE_MASS
+        self.default_payload = check_mass(payload_mass, scene.BOTTLE_MASS, scene.MAX_PAYLOAD, "payload_mass")
+        JacoMujocoEnv.__init__(self, control_mode=control_mode, control_freq=control_freq,
+                               sensor_noise=sensor_noise, n_marbles=0, render_mode=render_mode, width=width,
+                               height=height, camera_name=camera_name)
+
+    def _parse_options(self, options: dict | None) -> dict:
+        opts = check_options(options, ("payload_mass", "q0"))
+        parsed: dict[str, Any] = {}
+        if "payload_mass" in opts:
+            parsed["payload_mass"] = check_mass(opts["payload_mass"], scene.BOTTLE_MASS, scene.MAX_PAYLOAD,
+                                                "options['payload_mass']")
+        if "q0" in opts:
+            parsed["q0"] = real_array(opts["q0"], (robot.N_JOINTS,), "options['q0'] (joint angles, rad)")
+        return parsed
+
+    def reset_model(self) -> np.ndarray:
+        """Payload and the arm at rest at the start pose (after ``reset``'s option check)."""
+        opts = self._options
+        self._set_payload(opts.get("payload_mass", self.default_payload), self._fixed_mass)
+        self._reset_arm(opts["q0"] if "q0" in opts else home_pose())
+        mujoco.mj_forward(self.model, self.data)
+        return self._start_episode()
+
+    def _get_reset_info(self) -> dict[str, Any]:
+        return self._info()
+
+    def _info(self) -> dict[str, Any]:
+        return {"time": self.time, "payload_mass": self.payload_mass, "unstable": self._unstable,
+                "qacc": self.data.qacc[self.arm_dof_adr].copy()}
+
+    def step(self, action):
+        a = self._validate_action(action)
+        if self._last_obs is None:
+            raise error.ResetNeeded("Cannot call `env.step()` before calling `env.reset()`")
+        if not self._unstable:
+            self._step_count += 1
+            if self._simulate(a):
+                self._unstable = True
+            else:
+                self._last_obs = self._get_obs()
+        if self.render_mode == "human":
+            self.render()
+        return self._last_obs.copy(), 0.0, False, self._unstable, self._info()

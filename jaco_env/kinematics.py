@@ -1,0 +1,115 @@
+"""Kinematics of the arm + bottle: forward kinematics, the bottle's target frames, IK and the home pose.
+
+This module owns the kinematic model (the ``"payload"`` scene without actuators or marbles,
+compiled once per process) and everything computed from it alone:
+
+* :func:`bottle_pose` -- forward kinematics of the bottle mouth and the bottle frame;
+* :func:`target_rotation` -- the bottle frame for an approach axis and a tilt;
+* :func:`solve_ik` -- damped least squares on MuJoCo's site Jacobians, 6-D pose error (mouth
+  position and bottle orientation), joints 2 and 3 kept inside their ranges;
+* :func:`home_pose` -- the common start/end pose of every task (bottle upright in front of
+  the robot, mouth at ``HOME_MOUTH``).
+
+Why hand-written IK: MuJoCo offers Jacobians but no IK solver; a 6-DOF DLS loop is a dozen
+lines and needs no further dependency. The trajectories built from these poses are in
+:mod:`jaco_env.trajectory`, the tasks in :mod:`jaco_env.tasks`.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+
+from jaco_env import robot, scene
+
+#: Home pose target: bottle mouth position (m) and approach axis; bottle upright.
+HOME_MOUTH = np.array([0.45, 0.0, 0.40])
+HOME_APPROACH = np.array([0.0, 1.0, 0.0])
+#: Initial guess of the home IK (elbow up; found once by a random-restart search).
+HOME_GUESS = np.array([0.549, 2.262, 4.825, -0.212, -2.365, -1.194])
+
+_N = robot.N_JOINTS
+
+
+@functools.lru_cache(maxsize=1)
+def kinematic_model():
+    """Arm + hand + bottle, no actuators, no marbles (compiled once per process)."""
+    return scene.compile_model(scene.build_scene(kind="payload", control_mode=None))
+
+
+def bottle_pose(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Forward kinematics: (mouth position (3,), bottle rotation matrix (3, 3)) at joint angles q."""
+    import mujoco
+
+    m = kinematic_model()
+    d = mujoco.MjData(m)
+    d.qpos[:_N] = q
+    mujoco.mj_kinematics(m, d)
+    return d.site(scene.MOUTH_SITE).xpos.copy(), d.body(scene.BOTTLE_BODY).xmat.reshape(3, 3).copy()
+
+
+def target_rotation(approach: np.ndarray, tilt: float) -> np.ndarray:
+    """Bottle frame for a horizontal approach axis and a tilt (rad) from upright about it.
+
+    Bottle frame: z = bottle axis (towards the mouth), x = minus the hand approach axis.
+    """
+    a = np.asarray(approach, float)
+    a = a / np.linalg.norm(a)
+    up = np.array([0.0, 0.0, 1.0])
+    side = np.cross(a, up)
+    z = np.cos(tilt) * up + np.sin(tilt) * side
+    x = -a
+    y = np.cross(z, x)
+    return np.column_stack([x, y, z])
+
+
+def solve_ik(p_target: np.ndarray, R_target: np.ndarray, q0: np.ndarray, *, iters: int = 300,
+             damping: float = 1e-2, tol: float = 1e-7) -> tuple[np.ndarray, float]:
+    """Damped-least-squares IK for the mouth position and bottle orientation.
+
+    Returns (q, residual) with residual = |position error| + |orientation error| at the end.
+    Joints 2 and 3 are kept inside their ranges.
+    """
+    import mujoco
+
+    m = kinematic_model()
+    d = mujoco.MjData(m)
+    sid = m.site(scene.MOUTH_SITE).id
+    bid = m.body(scene.BOTTLE_BODY).id
+    q = np.array(q0, dtype=float)
+    lo = m.jnt_range[:_N, 0].copy()
+    hi = m.jnt_range[:_N, 1].copy()
+    limited = m.jnt_limited[:_N].astype(bool)
+    jacp = np.zeros((3, m.nv))
+    jacr = np.zeros((3, m.nv))
+    err = np.inf
+    for _ in range(iters):
+        d.qpos[:_N] = q
+        mujoco.mj_kinematics(m, d)
+        mujoco.mj_comPos(m, d)
+        R = d.xmat[bid].reshape(3, 3)
+        e_p = p_target - d.site_xpos[sid]
+        e_r = 0.5 * sum(np.cross(R[:, k], R_target[:, k]) for k in range(3))
+        e = np.concatenate([e_p, e_r])
+        err = float(np.linalg.norm(e_p) + np.linalg.norm(e_r))
+        if err < tol:
+            break
+        mujoco.mj_jacSite(m, d, jacp, jacr, sid)
+        J = np.vstack([jacp[:, :_N], jacr[:, :_N]])  # (6, N): 6-D pose error (position, orientation)
+        dq = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(len(e)), e)
+        step = np.max(np.abs(dq))
+        if step > 0.2:
+            dq *= 0.2 / step
+        q = q + dq
+        q[limited] = np.clip(q[limited], lo[limited] + 1e-3, hi[limited] - 1e-3)
+    return q, err
+
+
+@functools.lru_cache(maxsize=1)
+def home_pose() -> np.ndarray:
+    """The common start/end pose of every task (bottle upright in front of the robot)."""
+    q, err = solve_ik(HOME_MOUTH, target_rotation(HOME_APPROACH, 0.0), HOME_GUESS)
+    if err > 1e-4:
+        raise RuntimeError(f"home pose IK did not converge (residual {err:.2e})")
+    return q

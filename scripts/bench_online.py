@@ -1,0 +1,83 @@
+"""Cost of the uncertainty-aware feedforward per control tick and of an online sample (issue 10).
+
+    python -m scripts.bench_online --out out/bench [--data out/study/data] [--n 500] [--window 150]
+
+Fits the 6-joint SP inward cascade (default GP fit) on ``n`` rows of simulated Jaco 2 data (the study's
+``jaco_train.npz`` at 10 Hz; without ``--data`` the quick collection preset is recorded), then times on
+queries from the held-out motions: ``predict_one`` (the paper's feedforward), ``predict_one_var`` (mean and
+propagated variance, what the gated controller calls), ``add_sample`` (one online sample into every joint),
+and both single-query paths again with a full online window. Medians and 90th percentiles over ``--reps``
+calls, one thread. Prints a table and writes ``bench_online.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+from pathlib import Path
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import numpy as np  # noqa: E402
+
+
+def _times(fn, args_list, reps: int) -> dict[str, float]:
+    out = []
+    for k in range(reps):
+        a = args_list[k % len(args_list)]
+        t0 = time.perf_counter()
+        fn(*a)
+        out.append(time.perf_counter() - t0)
+    us = 1e6 * np.asarray(out)
+    return {"median_us": float(np.median(us)), "p90_us": float(np.percentile(us, 90))}
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--data", default=None, help="folder with jaco_train.npz and jaco_test.npz")
+    ap.add_argument("--n", type=int, default=500, help="training rows (10 Hz)")
+    ap.add_argument("--window", type=int, default=150, help="online window per joint")
+    ap.add_argument("--reps", type=int, default=2000)
+    a = ap.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(1)
+    from cascgp.io import write_json
+    from cascgp.models import make_model
+    from cascgp.rbd import load_nominal
+    from cascgp_experiments.calibration import study_data
+    from cascgp_experiments.common import NOMINAL_URDF
+
+    out = Path(a.out)
+    train, test = study_data(a.data, out)
+    data = train.subsample(10.0)
+    data = data.take(np.arange(min(a.n, data.n_samples)))
+    rbd = load_nominal(NOMINAL_URDF)
+    t0 = time.perf_counter()
+    model = make_model("sp-inward", 6, rbd).fit(data)
+    fit_s = time.perf_counter() - t0
+    q = [(test.q[i], test.qd[i], test.qdd[i]) for i in range(0, test.n_samples, 7)]
+    rows = {"predict_one (offline)": _times(model.predict_one, q, a.reps),
+            "predict_one_var (offline)": _times(model.predict_one_var, q, a.reps)}
+    model.start_online(a.window)
+    samples = [(test.q[i], test.qd[i], test.qdd[i], test.tau[i]) for i in range(0, test.n_samples, 10)]
+    rows["add_sample (window filling and full)"] = _times(model.add_sample, samples, max(3 * a.window, 300))
+    rows["predict_one (online, full window)"] = _times(model.predict_one, q, a.reps)
+    rows["predict_one_var (online, full window)"] = _times(model.predict_one_var, q, a.reps)
+    res = {"n_train": model.n_train, "window": a.window, "fit_s": fit_s, "reps": a.reps, "rows": rows,
+           "control_period_us": 25_000.0, "command": "python -m scripts.bench_online " + " ".join(argv or [])}
+    write_json(out / "bench_online.json", res)
+    print(f"SP inward, 6 joints, n = {model.n_train}, online window {a.window}, one thread")
+    print("| call | median (us) | p90 (us) |\n|---|---|---|")
+    for k, v in rows.items():
+        print(f"| {k} | {v['median_us']:.0f} | {v['p90_us']:.0f} |")
+    print(f"wrote {out / 'bench_online.json'}")
+
+
+if __name__ == "__main__":
+    import sys
+
+    main(sys.argv[1:])

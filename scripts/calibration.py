@@ -1,0 +1,51 @@
+"""Calibration of the cascades' 95 % predictive intervals on held-out Jaco episodes (issue 10).
+
+    python -m scripts.calibration --data out/study/data --out out/calibration [--seconds 10 30] [--subsets 3]
+
+``--data`` is a folder with the study's ``jaco_train.npz``/``jaco_test.npz`` (``python -m
+scripts.collect_jaco_data``); without it the quick collection preset is recorded into ``<out>/data``.
+Writes ``calibration.json`` and ``calibration.md`` into ``--out`` (see :mod:`cascgp_experiments.calibration`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default=None, help="folder with jaco_train.npz and jaco_test.npz")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--seconds", type=float, nargs="+", default=[10.0, 30.0])
+    ap.add_argument("--subsets", type=int, default=3)
+    ap.add_argument("--restarts", type=int, default=3)
+    a = ap.parse_args(argv)
+    import time
+
+    import torch
+    from tqdm import tqdm
+
+    from cascgp_experiments.calibration import CASCADES, calibration, study_data, summary_table, write
+
+    torch.set_num_threads(1)
+    out = Path(a.out)
+    train, test = study_data(a.data, out)
+    t0 = time.perf_counter()
+    bar = tqdm(total=len(CASCADES) * len(a.seconds) * min(a.subsets, 10), desc="calibration fits")
+    res = calibration(train, test, seconds=tuple(a.seconds), n_subsets=a.subsets, n_restarts=a.restarts,
+                      progress=lambda row: bar.update())
+    bar.close()
+    res["wall_s"] = time.perf_counter() - t0
+    res["command"] = "python -m scripts.calibration " + " ".join(argv if argv is not None else __import__("sys").argv[1:])
+    write(res, out)
+    print(summary_table(res))
+    print(f"wrote {out / 'calibration.json'}")
+
+
+if __name__ == "__main__":
+    main()

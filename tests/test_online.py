@@ -1,0 +1,114 @@
+"""Learning inside an episode (issue 10, item 3): block-factor updates equal the closed-form GP on the enlarged
+set with the hyperparameters held, the window drops the oldest samples, and bad samples change nothing."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cascgp.features import states_from_arrays
+from cascgp.gp import GPFitConfig
+from cascgp.gp.kernels import get_kernel
+from cascgp.models import make_model
+from tests.conftest import make_arm, sinusoid_data
+
+
+def _closed_form(model, extra, q, qd, qdd):
+    """Mean and propagated variance at one query from each joint's GP refactorised from scratch on its fitted
+    set plus the online samples ``extra`` (list of (q, qd, qdd, tau)), hyperparameters held."""
+    posts = model.posteriors()
+    Sx = [states_from_arrays("db", e[0][None], e[1][None], e[2][None], None).reshape(-1) for e in extra]
+    S = states_from_arrays("db", q[None], qd[None], qdd[None], None).reshape(-1)
+    rbd = (lambda a, b, c: model.rbd.inverse_dynamics(a, b, c)) if model.parametric == "sp" else \
+        (lambda a, b, c: np.zeros(model.dof))
+    mean, var = np.zeros(model.dof), np.zeros(model.dof)
+    for j in model.order:
+        P = posts[j]
+        sj, tj = model.specs[j]
+        cols = np.concatenate([[3 * s, 3 * s + 1, 3 * s + 2] for s in sj])
+
+        def norm(x, P=P):
+            return np.where(np.isfinite(P.x_scale), (x - P.x_mean) / P.x_scale, 0.0)
+
+        Zw = np.array([norm(np.append(Sx[i][cols], e[3][tj]) if tj is not None else Sx[i][cols])
+                       for i, e in enumerate(extra)]).reshape(len(extra), -1)
+        yw = np.array([(e[3][j] - rbd(e[0], e[1], e[2])[j] - P.y_mean) / P.y_std for e in extra])
+        Z = np.vstack([P.Z, Zw])
+        y0 = P.L @ (P.L.T @ P.alpha)
+        y = np.concatenate([y0, yw])
+        k = get_kernel(P.kernel)
+        K = P.signal_var * k.value(((Z[:, None] - Z[None]) ** 2).sum(-1)) + (P.noise_var + P.jitter) * np.eye(len(Z))
+        xq = np.append(S[cols], mean[tj]) if tj is not None else S[cols]
+        zq = norm(xq)
+        ks = P.signal_var * k.value(((zq - Z) ** 2).sum(-1))
+        alpha = np.linalg.solve(K, y)
+        mean[j] = P.y_mean + P.y_std * ks @ alpha + rbd(q, qd, qdd)[j]
+        v = P.signal_var - ks @ np.linalg.solve(K, ks)
+        if tj is not None:
+            dk = k.grad_r2(((zq - Z) ** 2).sum(-1)) * 2 * (zq[-1] - Z[:, -1])
+            g = P.y_std * P.signal_var * (dk @ alpha) / P.x_scale[-1]
+            var[j] = v * P.y_std**2 + g * g * var[tj]
+        else:
+            var[j] = v * P.y_std**2
+    return mean, var
+
+
+@pytest.mark.parametrize("name", ["np-inward", "sp-outward", "np-standard"])
+def test_online_samples_equal_the_closed_form_gp_and_the_window_drops_the_oldest(name: str) -> None:
+    arm = make_arm(3, friction=0.3)
+    train = sinusoid_data(arm, 4.0, 10.0, seed=1, noise=0.02)
+    model = make_model(name, 3, make_arm(3) if name.startswith("sp") else None,
+                       gp_config=GPFitConfig(n_restarts=1, max_iter=40)).fit(train)
+    new = sinusoid_data(make_arm(3, friction=0.8), 1.2, 10.0, seed=7, noise=0.02)  # another robot: new data
+    samples = [(new.q[i], new.qd[i], new.qdd[i], new.tau[i]) for i in range(new.n_samples)]
+    model.start_online(window=5)
+    query = (new.q[3] + 0.01, new.qd[3], new.qdd[3])
+    for i, s in enumerate(samples[:8]):
+        model.add_sample(*s)
+        kept = samples[max(0, i + 1 - 5): i + 1]
+        m_ref, v_ref = _closed_form(model, kept, *query)
+        m1 = model.predict_one(*query)
+        m2, v2 = model.predict_one_var(*query)
+        np.testing.assert_allclose(m1, m_ref, rtol=1e-7, atol=1e-7)
+        np.testing.assert_allclose(m2, m_ref, rtol=1e-7, atol=1e-7)
+        np.testing.assert_allclose(v2, v_ref, rtol=1e-5, atol=1e-9)
+    assert model.n_online == 8
+
+
+def test_online_learning_moves_the_prediction_toward_new_data_and_refit_resets_it() -> None:
+    arm = make_arm(3, friction=0.3)
+    model = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=40)).fit(
+        sinusoid_data(arm, 4.0, 10.0, seed=1, noise=0.02))
+    other = make_arm(3, friction=2.0)
+    new = sinusoid_data(other, 3.0, 10.0, seed=3)
+    before = np.array([model.predict_one(new.q[i], new.qd[i], new.qdd[i]) for i in range(new.n_samples)])
+    model.start_online(window=40)
+    for i in range(0, new.n_samples, 2):
+        model.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
+    after = np.array([model.predict_one(new.q[i], new.qd[i], new.qdd[i]) for i in range(1, new.n_samples, 2)])
+    err_before = np.abs(before[1::2] - new.tau[1::2]).mean()
+    err_after = np.abs(after - new.tau[1::2]).mean()
+    assert err_after < 0.5 * err_before
+    model.fit(sinusoid_data(arm, 4.0, 10.0, seed=1, noise=0.02))
+    assert model.n_online == 0
+    np.testing.assert_allclose(model.predict_one(new.q[1], new.qd[1], new.qdd[1]), before[1], rtol=1e-9)
+
+
+def test_bad_samples_are_refused_and_change_nothing() -> None:
+    arm = make_arm(2)
+    d = sinusoid_data(arm, 3.0, 10.0, seed=1)
+    model = make_model("np-inward", 2, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(d)
+    with pytest.raises(RuntimeError, match="start_online"):
+        model.add_sample(d.q[0], d.qd[0], d.qdd[0], d.tau[0])
+    model.start_online(window=3)
+    ref = model.predict_one(d.q[1], d.qd[1], d.qdd[1])
+    for bad in (np.array([np.nan, 0.0]), np.array([1e200, 0.0]), np.zeros(3), np.array([1j, 0])):
+        with pytest.raises((ValueError, TypeError), match="tau"):
+            model.add_sample(d.q[0], d.qd[0], d.qdd[0], bad)
+    np.testing.assert_array_equal(model.predict_one(d.q[1], d.qd[1], d.qdd[1]), ref)
+    assert model.n_online == 0
+    with pytest.raises(ValueError, match="window"):
+        model.start_online(window=0)
+    df = make_model("np-inward-df", 2, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(d)
+    with pytest.raises(ValueError, match="derivative-based"):
+        df.start_online()
