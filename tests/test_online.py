@@ -112,3 +112,31 @@ def test_bad_samples_are_refused_and_change_nothing() -> None:
     df = make_model("np-inward-df", 2, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(d)
     with pytest.raises(ValueError, match="derivative-based"):
         df.start_online()
+
+
+@pytest.mark.parametrize("name", ["sp-inward", "np-standard"])
+def test_stop_online_restores_the_fitted_model_exactly(name: str) -> None:
+    """After stop_online, mean and propagated variance are the fitted model's again, bit for bit; a second stop
+    and a stop without a window change nothing; add_sample needs a new start_online."""
+    arm = make_arm(3, friction=0.3)
+    model = make_model(name, 3, make_arm(3) if name.startswith("sp") else None,
+                       gp_config=GPFitConfig(n_restarts=1, max_iter=30)).fit(sinusoid_data(arm, 3.0, 10.0, seed=1))
+    new = sinusoid_data(make_arm(3, friction=2.0), 1.0, 10.0, seed=5)
+    query = (new.q[2], new.qd[2], new.qdd[2])
+    model.stop_online()  # no window: nothing to do
+    mean0, (m0, v0) = model.predict_one(*query), model.predict_one_var(*query)
+    model.start_online(window=6)
+    for i in range(0, new.n_samples, 2):
+        model.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
+    assert model.n_online > 0
+    assert not np.allclose(model.predict_one(*query), mean0)
+    assert not np.allclose(model.predict_one_var(*query)[1], v0)
+    for _ in range(2):
+        model.stop_online()
+        assert model.n_online == 0
+        np.testing.assert_array_equal(model.predict_one(*query), mean0)
+        m1, v1 = model.predict_one_var(*query)
+        np.testing.assert_array_equal(m1, m0)
+        np.testing.assert_allclose(v1, v0, rtol=1e-12, atol=0)
+    with pytest.raises(RuntimeError, match="start_online"):
+        model.add_sample(*query, new.tau[2])
