@@ -210,11 +210,23 @@ def _limit_threads() -> None:
         sys.modules["torch"].set_num_threads(1)
 
 
+def _exit_with_parent(parent_pid: int, period_s: float = 1.0) -> None:
+    """Leave this worker process as soon as the process that started it is gone. A run killed with SIGKILL
+    or SIGTERM sent to its main process alone (``kill PID``, a batch scheduler) runs no cleanup, and the pool
+    processes went on with their jobs as orphans, holding a core and ~0.5 GB each. Polling the parent id is
+    the portable check (Linux's PR_SET_PDEATHSIG is not); the job's result would have nowhere to go."""
+    while True:
+        time.sleep(period_s)
+        if os.getppid() != parent_pid:
+            os._exit(1)
+
+
 def _init_process(channel: Any) -> None:
-    """Initializer of every pool process: one thread, the progress channel."""
+    """Initializer of every pool process: one thread, the progress channel, exit with the parent."""
     global _CHANNEL
     _limit_threads()
     _CHANNEL = channel
+    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), name="exit-with-parent", daemon=True).start()
 
 
 def _call(fn: Callable, inputs: dict, index: int, attempt: int, channel: Any = None) -> tuple:

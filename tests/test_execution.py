@@ -72,6 +72,13 @@ def slow_job(x: int, seconds: float) -> dict:
     return {"x": x, "y": float(np.sqrt(x))}
 
 
+def endless_job(x: int, pid_dir: str) -> int:
+    """Writes its process id, then waits for ever (a job that outlives its run)."""
+    (Path(pid_dir) / f"{x}.pid").write_text(str(os.getpid()))
+    while True:
+        time.sleep(0.1)
+
+
 def counting_job(x: int, log_dir: str) -> int:
     (Path(log_dir) / f"ran_{x}_{time.monotonic_ns()}").write_text("")
     return x + 1
@@ -183,6 +190,49 @@ def test_killed_run_resumes_from_the_cache(tmp_path: Path) -> None:
                        show_progress=False)
     assert resumed.n_cached == 8
     assert list(resumed) == [{"x": x, "y": float(np.sqrt(x))} for x in range(8)]
+
+
+_ORPHAN_SCRIPT = """
+import sys
+from cascgp_experiments.execution import run_jobs
+from test_execution import endless_job
+run_jobs(endless_job, [{"x": x, "pid_dir": sys.argv[1]} for x in range(2)], workers=2, show_progress=False)
+"""
+
+
+def _alive(pid: int) -> bool:
+    """The process exists and is not a zombie (an orphan's exit may wait for PID 1 to reap it)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return False
+    return state != "Z"
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process states from /proc")
+def test_pool_workers_exit_when_the_run_is_killed_alone(tmp_path: Path) -> None:
+    """SIGKILL to the run's main process only (not its group, as `kill PID` or a scheduler does): the pool
+    processes, busy with jobs that would never end, leave too instead of running on as orphans."""
+    p = subprocess.Popen([sys.executable, "-c", _ORPHAN_SCRIPT, str(tmp_path)], env=_env(), cwd=REPO,
+                         start_new_session=True)
+    pids: list[int] = []
+    try:
+        while len(pids) < 2:  # both workers busy: no clock, the run's state
+            assert p.poll() is None, "the run ended before its workers started"
+            pids = [int(f.read_text()) for f in tmp_path.glob("*.pid") if f.read_text()]
+            time.sleep(0.05)
+        os.kill(p.pid, signal.SIGKILL)
+        p.wait(timeout=60)
+        deadline = time.monotonic() + 60  # a hang guard, not a speed limit: without the fix they never exit
+        while any(_alive(pid) for pid in pids) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not any(_alive(pid) for pid in pids), "pool workers outlived the killed run"
+    finally:
+        for pid in pids:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
 
 
 # --------------------------------------------------------------------------- experiments: helpers
