@@ -24,8 +24,10 @@ reports units as it goes with :func:`report_progress` (a no-op outside :func:`ru
 per episode; the bar's postfix shows the last note.
 
 Failures: a job that raises is reported on stderr with its inputs and the error, and submitted once
-more; if it fails again :class:`JobError` is raised naming the inputs (after the jobs already
-running have finished and been cached; jobs not yet started are cancelled). A worker process that
+more; if it fails again :class:`JobError` is raised naming the inputs (local processes: after the jobs
+already running have finished and been cached, jobs not yet started are cancelled; Ray: ``ray.cancel``
+interrupts the running jobs too, so only those that had finished are cached). Any other exception in
+this process (Ctrl-C, a cache write that fails) cancels the jobs not yet started at once. A worker process that
 dies (a crash in native code, the out-of-memory killer) ends the run with a ``RuntimeError`` naming a
 job it was running; the finished jobs are in the cache, so running the command again resumes.
 
@@ -210,7 +212,7 @@ def _limit_threads() -> None:
         sys.modules["torch"].set_num_threads(1)
 
 
-def _exit_with_parent(parent_pid: int, period_s: float = 1.0) -> None:
+def _exit_with_parent(parent_pid: int, period_s: float = 0.5) -> None:
     """Leave this worker process as soon as the process that started it is gone. A run killed with SIGKILL
     or SIGTERM sent to its main process alone (``kill PID``, a batch scheduler) runs no cleanup, and the pool
     processes went on with their jobs as orphans, holding a core and ~0.5 GB each. Polling the parent id is
@@ -221,12 +223,14 @@ def _exit_with_parent(parent_pid: int, period_s: float = 1.0) -> None:
             os._exit(1)
 
 
-def _init_process(channel: Any) -> None:
-    """Initializer of every pool process: one thread, the progress channel, exit with the parent."""
+def _init_process(channel: Any, parent_pid: int | None = None) -> None:
+    """Initializer of every pool process: one thread, the progress channel, exit with the parent
+    (``parent_pid``: the run's process id, passed by it, so that a parent already gone is noticed too)."""
     global _CHANNEL
     _limit_threads()
     _CHANNEL = channel
-    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), name="exit-with-parent", daemon=True).start()
+    pid = os.getppid() if parent_pid is None else int(parent_pid)
+    threading.Thread(target=_exit_with_parent, args=(pid,), name="exit-with-parent", daemon=True).start()
 
 
 def _call(fn: Callable, inputs: dict, index: int, attempt: int, channel: Any = None) -> tuple:
@@ -454,40 +458,52 @@ def _run_pool(fn, jobs, todo, workers, progress, finished) -> None:
     channel = ctx.Queue()
     drain = _Drain(channel, progress, lambda: channel.get(timeout=0.2))
     drain.start()
-    error: BaseException | None = None
     try:
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_init_process,
-                                 initargs=(channel,)) as pool:
-            running: dict[Future, int] = {pool.submit(_call, fn, jobs[i], i, 0): i for i in todo}
-            while running:
-                done, _ = wait(running, return_when=FIRST_COMPLETED)
-                for fut in done:
-                    i = running.pop(fut)
-                    if fut.cancelled():
-                        continue
-                    try:
-                        out = fut.result()
-                    except BrokenProcessPool as exc:
-                        lost = [i] + [j for j in running.values()]
-                        raise RuntimeError(
-                            f"a worker process died (crashed or killed, e.g. out of memory) while these jobs were "
-                            f"running or waiting: " + "; ".join(f"{fn.__name__}({_short(jobs[j], 300)})"
-                                                                for j in lost[:8])
-                            + ("; ..." if len(lost) > 8 else "")
-                            + ". The finished jobs are cached (with a cache folder): run again to resume") from exc
-                    try:
-                        again = finished(i, out)
-                    except JobError as exc:
-                        if error is None:
-                            error = exc
-                            for f in running:  # jobs not started yet; the running ones finish and are cached
-                                f.cancel()
-                        continue
-                    if again and error is None:
-                        running[pool.submit(_call, fn, jobs[i], i, progress.attempt[i])] = i
+                                 initargs=(channel, os.getpid())) as pool:
+            try:
+                _drive_pool(pool, fn, jobs, todo, progress, finished)
+            except BaseException:
+                # Not a JobError (handled inside): Ctrl-C, a failed cache write... Leaving the `with` would
+                # wait for every queued job to run (uncached) before the error surfaced.
+                pool.shutdown(wait=False, cancel_futures=True)
+                raise
     finally:
         drain.stop()
         channel.close()
+
+
+def _drive_pool(pool: ProcessPoolExecutor, fn, jobs, todo, progress, finished) -> None:
+    """Submit the jobs, collect them, resubmit a failed one once; a JobError is raised after the running jobs
+    have finished (the ones not started are cancelled)."""
+    error: BaseException | None = None
+    running: dict[Future, int] = {pool.submit(_call, fn, jobs[i], i, 0): i for i in todo}
+    while running:
+        done, _ = wait(running, return_when=FIRST_COMPLETED)
+        for fut in done:
+            i = running.pop(fut)
+            if fut.cancelled():
+                continue
+            try:
+                out = fut.result()
+            except BrokenProcessPool as exc:
+                lost = [i] + [j for j in running.values()]
+                raise RuntimeError(
+                    f"a worker process died (crashed or killed, e.g. out of memory) while these jobs were "
+                    f"running or waiting: " + "; ".join(f"{fn.__name__}({_short(jobs[j], 300)})"
+                                                        for j in lost[:8])
+                    + ("; ..." if len(lost) > 8 else "")
+                    + ". The finished jobs are cached (with a cache folder): run again to resume") from exc
+            try:
+                again = finished(i, out)
+            except JobError as exc:
+                if error is None:
+                    error = exc
+                    for f in running:  # jobs not started yet; the running ones finish and are cached
+                        f.cancel()
+                continue
+            if again and error is None:
+                running[pool.submit(_call, fn, jobs[i], i, progress.attempt[i])] = i
     if error is not None:
         raise error
 
@@ -560,7 +576,8 @@ def _run_ray(fn, jobs, todo, workers, address, progress, finished) -> None:
                 if again and error is None:
                     running[remote.remote(fn, jobs[i], i, progress.attempt[i], channel)] = i
             if error is not None:
-                # cancelled tasks raise on get; the ones already running may still finish and be cached
+                # cancelled tasks raise on get (ray.cancel interrupts the running ones too); any that had
+                # finished in the meantime are cached
                 for ref in list(running):
                     i = running.pop(ref)
                     try:

@@ -17,6 +17,7 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -79,6 +80,16 @@ def endless_job(x: int, pid_dir: str) -> int:
         time.sleep(0.1)
 
 
+def uncacheable_job(x: int, log_dir: str) -> Any:
+    """Job 0 returns what JSON cannot hold (the run fails in this process, not in the job); the others
+    take a while and leave a mark that they ran."""
+    (Path(log_dir) / f"ran_{x}").write_text("")
+    if x == 0:
+        return {1j}
+    time.sleep(0.5)
+    return x
+
+
 def counting_job(x: int, log_dir: str) -> int:
     (Path(log_dir) / f"ran_{x}_{time.monotonic_ns()}").write_text("")
     return x + 1
@@ -118,6 +129,16 @@ def test_failed_job_is_retried_once_and_reported_with_its_inputs(tmp_path: Path,
         assert f"transient failure of job {x}" in err
         assert f'"x":{x}' in err  # the inputs
     assert err.count("retrying (1/1)") == 3
+
+
+def test_an_error_in_the_run_itself_cancels_the_queued_jobs(tmp_path: Path) -> None:
+    """An exception that is not a job's (here: a result that cannot be stored) stops the run at once: the
+    jobs still queued never run (they all used to run, uncached, before the error came out)."""
+    n = 12
+    with pytest.raises((TypeError, ValueError)):
+        run_jobs(uncacheable_job, [{"x": x, "log_dir": str(tmp_path)} for x in range(n)], workers=2,
+                 cache_dir=tmp_path / "cache", show_progress=False)
+    assert len(list(tmp_path.glob("ran_*"))) < n
 
 
 @pytest.mark.parametrize("workers", [1, 2])
