@@ -6,7 +6,8 @@ so an interrupted run never leaves a half-written buffer: reopening the folder
 gives every episode that was completely saved.
 
 No episode is ever overwritten: a new file takes the number after the highest one in
-the folder *at the time of the append* (a gap left by a removed file is not reused),
+the folder *at the time of the append* (a gap left by a removed file is not filled; the number
+of a removed *last* file is taken again, since nothing on disk remembers it),
 and it is published exclusively (:func:`cascgp.io.atomic_write` with ``exclusive``), so
 two buffers appending to one folder each keep all their episodes; one buffer does not
 see the other's later episodes until the folder is reopened.

@@ -82,7 +82,8 @@ class FeedforwardController:
         kd: derivative gains (N m s / rad), scalar or per joint.
         torque_limits: symmetric actuator limits (N m), per joint.
         fallback: rigid-body model used when ``model`` returns a non-finite torque
-            (defaults to ``model`` itself if that is a rigid-body model, else zero); with ``gate``
+            (defaults to ``model`` itself if that is a rigid-body model, else an SP model's own ``rbd``,
+            else zero); with ``gate``
             it is also the nominal model the feedforward falls back toward.
         gate: trust the learned model only where it is confident (needs a cascgp model with
             ``predict_one_var`` and a nominal model: ``fallback``, or an SP model's own ``rbd``):
@@ -148,6 +149,8 @@ class FeedforwardController:
                 raise ValueError(f"model.dof ({model_dof}) does not match torque_limits ({self.dof} joints)")
         if fallback is None and model is not None and hasattr(model, "inverse_dynamics"):
             fallback = model
+        if fallback is None and getattr(model, "rbd", None) is not None:
+            fallback = model.rbd  # an SP model's own nominal model (the module docstring's promise)
         self.fallback = fallback
         if gate is True:
             gate = "wiener"
@@ -171,6 +174,9 @@ class FeedforwardController:
                 raise ValueError(f"online: expected None or a window of >= 1 samples, got {online!r}")
             if model.feature_kind != "db":
                 raise ValueError(f"online: model {model.name!r}: online updates support derivative-based models only")
+            if getattr(model, "train_on_predicted", False) and model.structure != "standard":
+                raise ValueError(f"online: model {model.name!r} was trained on predicted neighbour torques; online "
+                                 "samples carry measured ones")
         if isinstance(online_every, bool) or not isinstance(online_every, (int, np.integer)) or online_every < 1:
             raise ValueError(f"online_every: expected an integer >= 1, got {online_every!r}")
         self.online = None if online is None else int(online)
@@ -303,8 +309,11 @@ class FeedforwardController:
         self.reset_counters()
         self._recent, self._n_observed = [], 0
         self.n_online_samples = self.n_online_rejected = 0
+        self.last_gate, self.last_model_error = None, None
         if self.online:
             self.model.start_online(self.online)
+        elif hasattr(self.model, "stop_online"):
+            self.model.stop_online()  # an offline controller uses the fitted model, not an earlier episode's window
 
     def observe(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, t: float) -> None:
         """A new measurement (called by the runner after every step). With ``online``, every

@@ -106,9 +106,13 @@ def ratios(results: dict[str, Any]) -> list[dict[str, Any]]:
     for seed, run in results["runs"].items():
         ung, gat, rbd = run[UNGATED], run[GATED], run["rbd"]
 
-        def add(quantity: str, task: str, num: float, den: float) -> None:
+        def add(quantity: str, task: str, num: float | None, den: float | None) -> None:
+            # a non-finite RMSE went through JSON as None: its ratio is NaN (and shows as such in the tables)
+            num, den = (float("nan") if v is None else float(v) for v in (num, den))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                ratio = float(np.divide(num, den))
             rows.append({"seed": int(seed), "task": task, "quantity": quantity, "num": num, "den": den,
-                         "ratio": num / den})
+                         "ratio": ratio})
 
         for task in tasks:
             u = _one(ung, task, last)
@@ -130,10 +134,14 @@ def ratios(results: dict[str, Any]) -> list[dict[str, Any]]:
 
 
 def _stats(values: list[float], limit: float | None) -> dict[str, Any]:
-    v = np.asarray(values, dtype=float)
+    """Median, quartiles and range of the finite ratios; ``n_nonfinite`` counts the others (none in a sound run)."""
+    a = np.asarray(values, dtype=float)
+    v = a[np.isfinite(a)]
+    if v.size == 0:
+        return {"n": 0, "n_nonfinite": int(a.size)}
     q1, med, q3 = np.percentile(v, [25, 50, 75])
-    out = {"n": int(v.size), "median": float(med), "q1": float(q1), "q3": float(q3), "min": float(v.min()),
-           "max": float(v.max())}
+    out = {"n": int(v.size), "n_nonfinite": int(a.size - v.size), "median": float(med), "q1": float(q1),
+           "q3": float(q3), "min": float(v.min()), "max": float(v.max())}
     if limit is not None:
         out["limit"] = limit
         out["n_meeting"] = int(np.sum(v <= limit))
@@ -161,7 +169,12 @@ def summary_markdown(results: dict[str, Any]) -> str:
              "|---|---|---|---|---|---|---|"]
     for quantity, groups in s.items():
         for g, st in groups.items():
+            if st["n"] == 0:
+                lines.append(f"| {quantity} | {g} | 0 | - | - | - | - ({st['n_nonfinite']} not finite) |")
+                continue
             meet = f"{st['n_meeting']} of {st['n']} (<= {st['limit']})" if "limit" in st else "-"
+            if st.get("n_nonfinite"):
+                meet += f"; {st['n_nonfinite']} not finite"
             lines.append(f"| {quantity} | {g} | {st['n']} | {st['median']:.3f} | {st['q1']:.3f}-{st['q3']:.3f} "
                          f"| {st['max']:.3f} | {meet} |")
     lines += ["", "| seed | task | quantity | numerator RMSE | denominator RMSE | ratio |", "|---|---|---|---|---|---|"]
@@ -185,7 +198,8 @@ def plot(results: dict[str, Any], path: Path) -> None:
         x = i + np.linspace(-0.2, 0.2, len(sel)) if len(sel) > 1 else np.array([i])
         colors = ["C1" if r["seed"] in SEEDS_SEEN_WHEN_CHOSEN else "C0" for r in sel]
         ax.scatter(x, [r["ratio"] for r in sel], c=colors, s=18)
-        ax.hlines(results["summary"][quantity]["all"]["median"], i - 0.3, i + 0.3, color="k")
+        if results["summary"][quantity]["all"]["n"]:
+            ax.hlines(results["summary"][quantity]["all"]["median"], i - 0.3, i + 0.3, color="k")
         if quantity in CRITERIA:
             ax.hlines(CRITERIA[quantity], i - 0.35, i + 0.35, color="r", linestyles="dashed")
     ax.axhline(1.0, color="0.7", lw=1, zorder=0)

@@ -219,3 +219,49 @@ def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
         FeedforwardController(AffineRBD(), KP, KD, LIMITS, gate=True)
     with pytest.raises(ValueError, match="gate: expected"):
         FeedforwardController(AffineRBD(), KP, KD, LIMITS, gate="sometimes")
+
+
+def test_an_offline_controller_uses_the_fitted_model_even_after_an_online_episode(fitted_planar_model, arm3_train):
+    """A window left open by an online episode on a shared model must not reach the next, offline one."""
+    import copy
+
+    model = copy.deepcopy(fitted_planar_model)
+    ref_state = (arm3_train.q[7], arm3_train.qd[7], arm3_train.qdd[7])
+    fitted = model.predict_one(*ref_state)
+    model.start_online(5)
+    for i in range(20, 25):
+        model.add_sample(arm3_train.q[i] + 0.3, arm3_train.qd[i], arm3_train.qdd[i], arm3_train.tau[i] + 2.0)
+    assert not np.allclose(model.predict_one(*ref_state), fitted)
+    ctrl = FeedforwardController(model, 0.0, 0.0, np.full(3, 1e6))
+    ctrl.start(None, {})
+    np.testing.assert_array_equal(ctrl.feedforward(0.0, lambda t: ref_state), fitted)
+
+
+def test_an_sp_model_that_fails_falls_back_to_its_own_rbd(arm3_rbd, arm3_train, monkeypatch):
+    """Without a fallback argument, an SP model's own nominal model is the fallback (not zero)."""
+    from cascgp.gp import GPFitConfig
+    from cascgp.models import make_model
+
+    data = arm3_train.take(np.arange(40))
+    model = make_model("sp-inward", 3, rbd=arm3_rbd, gp_config=GPFitConfig(n_restarts=1, max_iter=30)).fit(data)
+    ctrl = FeedforwardController(model, 0.0, 0.0, np.full(3, 1e6))
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("model broke")
+
+    monkeypatch.setattr(model, "predict_one", broken)
+    state = (data.q[3], data.qd[3], data.qdd[3])
+    np.testing.assert_allclose(ctrl.feedforward(0.0, lambda t: state), arm3_rbd.inverse_dynamics(*state))
+    assert ctrl.n_fallbacks == 1 and "model broke" in ctrl.last_model_error
+
+
+def test_online_learning_is_refused_for_a_cascade_trained_on_predicted_torques(arm3_train):
+    from cascgp.gp import GPFitConfig
+    from cascgp.models import make_model
+
+    model = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=20),
+                       train_on_predicted=True).fit(arm3_train.take(np.arange(40)))
+    with pytest.raises(ValueError, match="predicted neighbour torques"):
+        FeedforwardController(model, 1.0, 0.1, np.full(3, 10.0), online=5)
+    with pytest.raises(ValueError, match="predicted neighbour torques"):
+        model.start_online(5)

@@ -248,6 +248,17 @@ def test_load_errors(fitted, arm3_rbd, tmp_path):
     np.savez(tmp_path / "nox.npz", **z)
     with pytest.raises(ValueError, match="X"):
         load_model(tmp_path / "nox.npz")
+    # n_banks / n_train fields that are wrong in kind: a ValueError naming the file, not an IndexError/TypeError
+    import json
+
+    for field, value, match in (("n_banks", 0, "n_banks"), ("n_train", None, "nbank.npz")):
+        z = dict(np.load(p))
+        cfg = json.loads(str(z["config_json"]))
+        cfg[field] = value
+        z["config_json"] = np.array(json.dumps(cfg))
+        np.savez(tmp_path / "nbank.npz", **z)
+        with pytest.raises(ValueError, match=match):
+            load_model(tmp_path / "nbank.npz")
     DynamicsData(q=np.zeros((2, 1)), qd=np.zeros((2, 1)), qdd=np.zeros((2, 1)), tau=np.zeros((2, 1)),
                  t=[0, 1]).save(tmp_path / "data.npz")
     with pytest.raises(ValueError, match="format_kind"):
@@ -380,3 +391,18 @@ def test_package_exports():
     assert cascgp.DynamicsData is DynamicsData and callable(cascgp.nrmse) and callable(cascgp.load_ias)
     with pytest.raises(AttributeError):
         cascgp.nope  # noqa: B018
+
+
+def test_adopt_banks_refuses_banks_of_different_sizes_and_changes_nothing(arm3_train):
+    """Banks whose GPs hold different numbers of rows (a crafted file) are refused before anything changes."""
+    from cascgp.gp import GPFitConfig
+
+    cfg = GPFitConfig(n_restarts=1, max_iter=10)
+    a = make_model("np-inward", 3, gp_config=cfg).fit(arm3_train.take(np.arange(40)))
+    b = make_model("np-inward", 3, gp_config=cfg).fit(arm3_train.take(np.arange(50)))
+    query = (arm3_train.q[3], arm3_train.qd[3], arm3_train.qdd[3])
+    before, banks, where = a.predict_one(*query), list(a.banks), list(a.where)
+    with pytest.raises(ValueError, match="different numbers of training rows"):
+        a.adopt_banks([a.banks[0], b.banks[0]], [(0, 0), (1, 1), (0, 2)], 40)
+    assert a.banks == banks and a.where == where and a.n_train == 40
+    np.testing.assert_array_equal(a.predict_one(*query), before)

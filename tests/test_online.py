@@ -140,3 +140,43 @@ def test_stop_online_restores_the_fitted_model_exactly(name: str) -> None:
         np.testing.assert_allclose(v1, v0, rtol=1e-12, atol=0)
     with pytest.raises(RuntimeError, match="start_online"):
         model.add_sample(*query, new.tau[2])
+
+
+def test_a_sample_refused_by_one_joint_changes_no_joint(monkeypatch) -> None:
+    """If one joint's window factor fails (here forced on the second joint, with a full window, so that the
+    oldest sample would have been dropped), the sample enters no joint: mean, variance and count unchanged,
+    and the model goes on exactly as one that never saw it."""
+    import copy
+
+    import cascgp.models.online as online
+
+    arm = make_arm(3, friction=0.3)
+    model = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=30)).fit(
+        sinusoid_data(arm, 3.0, 10.0, seed=1))
+    new = sinusoid_data(make_arm(3, friction=2.0), 1.0, 10.0, seed=5)
+    query = (new.q[1], new.qd[1], new.qdd[1])
+    model.start_online(window=3)
+    for i in range(3):
+        model.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
+    twin = copy.deepcopy(model)
+    mean0, var0 = model.predict_one_var(*query)
+    real, calls = online.cholesky, {"n": 0}
+
+    def failing(a, **kw):
+        calls["n"] += 1
+        if calls["n"] == 2:
+            raise np.linalg.LinAlgError("forced: not positive definite")
+        return real(a, **kw)
+
+    monkeypatch.setattr(online, "cholesky", failing)
+    with pytest.raises(np.linalg.LinAlgError, match="forced"):
+        model.add_sample(new.q[5], new.qd[5], new.qdd[5], new.tau[5])
+    monkeypatch.undo()
+    assert model.n_online == 3
+    mean1, var1 = model.predict_one_var(*query)
+    np.testing.assert_array_equal(mean1, mean0)
+    np.testing.assert_array_equal(var1, var0)
+    for m in (model, twin):
+        m.add_sample(new.q[6], new.qd[6], new.qdd[6], new.tau[6])
+    np.testing.assert_array_equal(model.predict_one(*query), twin.predict_one(*query))
+    np.testing.assert_array_equal(model.predict_one_var(*query)[1], twin.predict_one_var(*query)[1])

@@ -91,6 +91,19 @@ def test_ratios_are_those_of_the_records_and_the_summary_their_quartiles() -> No
     assert summary["gate_learners_last"]["seen"]["n"] == 3 and summary["gate_learners_last"]["new"]["n"] == 6
 
 
+def test_a_non_finite_rmse_gives_a_nan_ratio_that_the_summary_counts_apart() -> None:
+    res = _fake_results()
+    last_left = next(a for a in res["runs"]["2"][GATED] if a["task"] == "left" and a["task_attempt"] == 1)
+    last_left["tracking_rmse"] = None  # what JSON makes of a NaN
+    rows = ratios(res)
+    bad = [r for r in rows if r["seed"] == 2 and r["task"] == "left" and r["quantity"] == "gate_learners_last"]
+    assert len(bad) == 1 and np.isnan(bad[0]["ratio"])
+    st = summarise(rows)["gate_learners_last"]["all"]
+    assert st["n"] == 8 and st["n_nonfinite"] == 1 and np.isfinite(st["median"])
+    text = gate_eval.summary_markdown({"config": res["config"], "summary": summarise(rows), "ratios": rows})
+    assert "1 not finite" in text and "| nan |" in text
+
+
 @pytest.mark.slow
 def test_gate_eval_end_to_end_writes_its_outputs(tmp_path) -> None:
     cfg = replace(TINY, controllers=gate_eval.GATE_EVAL_CONFIG.controllers, revisit=True)

@@ -232,10 +232,20 @@ class CascadedGPModel:
             if banks[k].dims[b] != want:
                 raise ValueError(f"bank {k} GP {b}: input dimension {banks[k].dims[b]} does not match "
                                  f"{self.name!r} joint {j} ({want})")
+        rows = {int(banks[k].n_train) for k, _ in where}
+        if len(rows) != 1:
+            raise ValueError(f"banks: the joints' GPs hold different numbers of training rows {sorted(rows)}")
+        old = (self.banks, self.where, self.n_train, self._post, self._fast, self._fast_offline, self._fast_var,
+               self._online)
         self.banks = list(banks)
         self.where = [tuple(w) for w in where]
         self.n_train = int(n_train)
-        self._cache()
+        try:
+            self._cache()
+        except Exception:
+            (self.banks, self.where, self.n_train, self._post, self._fast, self._fast_offline, self._fast_var,
+             self._online) = old
+            raise
 
     # ------------------------------------------------------------------ caches
     def _cache(self) -> None:
@@ -359,14 +369,15 @@ class CascadedGPModel:
 
     def predict_one(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None) -> np.ndarray:
         """Mean torque (N,) for ONE query: the lean NumPy path for a controller (no torch, no variance;
-        :mod:`cascgp.models.fastpath`). Equals :meth:`predict` to round-off (~1e-12). Inputs are checked for
-        shape and finiteness (``ValueError``)."""
+        :mod:`cascgp.models.fastpath`). Equals :meth:`predict` to round-off (~1e-12), except while an online
+        window is open (:meth:`start_online`): then it includes the online samples, which :meth:`predict` does
+        not. Inputs are checked for shape and finiteness (``ValueError``)."""
         return self._fast.mean(self._load_query(q, qd, qdd, q_hist))
 
     def predict_one_var(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None
                         ) -> tuple[np.ndarray, np.ndarray]:
         """Mean torque and *propagated* latent variance (N,), (N,) for ONE query: the single-query form of
-        ``predict(..., propagate=True)`` (equal to round-off). The first call builds one ``(n, n)`` matrix per
+        ``predict(..., propagate=True)`` (equal to round-off; with an online window open, of the enlarged sets). The first call builds one ``(n, n)`` matrix per
         joint (:class:`~cascgp.models.fastpath.FastVariance`); a query then costs one ``(n, n)`` product per
         joint on top of :meth:`predict_one`."""
         tau_rbd = self._load_query(q, qd, qdd, q_hist)

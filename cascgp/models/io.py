@@ -177,9 +177,12 @@ def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
             banks.append(GPBank.from_state_dict(sd))
         except (ValueError, TypeError, RuntimeError) as exc:
             raise ValueError(f"{path}: bank {k}: {exc}") from exc
+    if not banks:
+        raise ValueError(f"{path}: config_json.n_banks: expected at least one GP bank, got {n_banks}")
     try:
-        model.adopt_banks(banks, where, int(cfg.get("n_train", banks[0].n_train)))
-    except ValueError as exc:
+        n_train = int(cfg["n_train"]) if "n_train" in cfg else int(banks[0].n_train)
+        model.adopt_banks(banks, where, n_train)
+    except (ValueError, TypeError) as exc:
         raise ValueError(f"{path}: {exc}") from exc
     need = [f"check/{k}" for k in ("q", "qd", "qdd", "q_hist", "mean", "var")]
     if any(k not in z for k in need):

@@ -49,8 +49,7 @@ class _JointWindow:
         self.kernel = get_kernel(P.kernel)
         self.noise = P.noise_var + P.jitter
         self.L00 = P.L
-        y0 = P.L @ (P.L.T @ P.alpha)  # K alpha = normalised targets
-        self.u0 = solve_triangular(P.L, y0, lower=True)
+        self.u0 = P.L.T @ P.alpha  # L00^-1 y0 with y0 = K alpha = L00 L00^T alpha (the normalised targets)
         self.Zw = np.zeros((window, d))
         self.Lw0 = np.zeros((window, n0))
         self.yw = np.zeros(window)
@@ -60,25 +59,39 @@ class _JointWindow:
         self.alphaw = np.zeros(0)
         self.Lww = np.zeros((0, 0))
 
-    def add(self, z: np.ndarray, y: float) -> None:
-        """Add one normalised input ``z`` and normalised target ``y``; the oldest is dropped when full."""
+    def propose(self, z: np.ndarray, y: float) -> tuple:
+        """Everything that adding the normalised input ``z`` and target ``y`` would change, computed without
+        changing anything: the new row of :math:`L_{w0}`, the window block ``S`` and its factor. Raises (e.g.
+        ``LinAlgError`` for a block that is not positive definite) with the window as it was; :meth:`commit`
+        applies it and cannot fail."""
         P, W = self.P, self.Zw.shape[0]
-        if self.m == W:  # drop the oldest (row 0): shift the window and its block of S
-            m = self.m
-            self.Zw[:-1], self.Lw0[:-1], self.yw[:-1] = self.Zw[1:].copy(), self.Lw0[1:].copy(), self.yw[1:].copy()
-            self.S[:m - 1, :m - 1] = self.S[1:m, 1:m].copy()
-            self.m -= 1
-        i = self.m
+        drop = self.m == W  # the oldest (row 0) leaves
+        keep = slice(1, self.m) if drop else slice(0, self.m)
         k0 = P.signal_var * self.kernel.value(((z - P.Z) ** 2).sum(1))
         row = solve_triangular(self.L00, k0, lower=True, check_finite=False)
-        kw = P.signal_var * self.kernel.value(((z - self.Zw[:i]) ** 2).sum(1))
-        s_new = kw - self.Lw0[:i] @ row  # S = K_ww + noise I - L_w0 L_w0^T, one new row and column
-        self.S[i, :i] = s_new
-        self.S[:i, i] = s_new
-        self.S[i, i] = P.signal_var + self.noise - float(row @ row)
+        kw = P.signal_var * self.kernel.value(((z - self.Zw[keep]) ** 2).sum(1))
+        s_new = kw - self.Lw0[keep] @ row  # S = K_ww + noise I - L_w0 L_w0^T, one new row and column
+        i = s_new.size
+        S = np.empty((i + 1, i + 1))
+        S[:i, :i] = self.S[keep, keep]
+        S[i, :i] = S[:i, i] = s_new
+        S[i, i] = P.signal_var + self.noise - float(row @ row)
+        Lww = cholesky(S, lower=True, check_finite=False)
+        if not (np.all(np.isfinite(Lww)) and np.all(np.isfinite(row))):
+            raise np.linalg.LinAlgError("the window block's factor is not finite")
+        return drop, z, float(y), row, S, Lww
+
+    def commit(self, proposal: tuple) -> None:
+        """Apply a :meth:`propose` result: shift out the oldest sample if full, add the new one, new weights."""
+        drop, z, y, row, S, Lww = proposal
+        if drop:
+            self.Zw[:-1], self.Lw0[:-1], self.yw[:-1] = self.Zw[1:].copy(), self.Lw0[1:].copy(), self.yw[1:].copy()
+            self.m -= 1
+        i = self.m
         self.Zw[i], self.Lw0[i], self.yw[i] = z, row, y
         self.m = m = i + 1
-        self.Lww = cholesky(self.S[:m, :m], lower=True, check_finite=False)
+        self.S[:m, :m] = S
+        self.Lww = Lww
         Lw0 = self.Lw0[:m]
         uw = solve_triangular(self.Lww, self.yw[:m] - Lw0 @ self.u0, lower=True, check_finite=False)
         self.alphaw = solve_triangular(self.Lww, uw, lower=True, trans="T", check_finite=False)
@@ -107,6 +120,9 @@ class OnlineWindow:
     def __init__(self, model: Any, window: int) -> None:
         if model.feature_kind != "db":
             raise ValueError(f"online: model {model.name!r}: online updates support derivative-based models only")
+        if getattr(model, "train_on_predicted", False) and model.structure != "standard":
+            raise ValueError(f"online: model {model.name!r} was trained on predicted neighbour torques; online "
+                             "samples carry measured ones, so they would not match its training inputs")
         if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
             raise ValueError(f"window: expected an integer >= 1, got {window!r}")
         self.model = model
@@ -137,13 +153,17 @@ class OnlineWindow:
 
     def _add(self, x_per_joint: list[np.ndarray], y: np.ndarray) -> None:
         fast, n0, c = self.fast, self.n0, self.c
+        proposals = []  # every joint first: a joint that refuses the sample leaves all of them unchanged
         for j, (J, x) in enumerate(zip(self.joints, x_per_joint)):
             P = J.P
             z = np.where(np.isfinite(P.x_scale), (x - P.x_mean) / P.x_scale, 0.0)
             z = np.clip(z, -fast.zclip / c, fast.zclip / c)
-            J.add(z, (float(y[j]) - P.y_mean) / P.y_std)
+            proposals.append(J.propose(z, (float(y[j]) - P.y_mean) / P.y_std))
+        for j, (J, proposal) in enumerate(zip(self.joints, proposals)):
+            P = J.P
+            J.commit(proposal)
             m = J.m
-            ds = z.size - (fast.torque_from[j] is not None)
+            ds = proposal[1].size - (fast.torque_from[j] is not None)
             Wj = fast.W[j, n0:n0 + m]
             Wj[:, :ds] = c * J.Zw[:m, :ds]
             fast.W2[j, n0:n0 + m] = np.einsum("nd,nd->n", Wj, Wj)
