@@ -314,6 +314,8 @@ class FeedforwardController:
             self.model.start_online(self.online)
         elif hasattr(self.model, "stop_online"):
             self.model.stop_online()  # an offline controller uses the fitted model, not an earlier episode's window
+        if self.gate:
+            self.model.prepare_variance()  # before the first tick, not in it
 
     def observe(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, t: float) -> None:
         """A new measurement (called by the runner after every step). With ``online``, every

@@ -3,6 +3,8 @@ set with the hyperparameters held, the window drops the oldest samples, and bad 
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -146,8 +148,6 @@ def test_a_sample_refused_by_one_joint_changes_no_joint(monkeypatch) -> None:
     """If one joint's window factor fails (here forced on the second joint, with a full window, so that the
     oldest sample would have been dropped), the sample enters no joint: mean, variance and count unchanged,
     and the model goes on exactly as one that never saw it."""
-    import copy
-
     import cascgp.models.online as online
 
     arm = make_arm(3, friction=0.3)
@@ -180,3 +180,26 @@ def test_a_sample_refused_by_one_joint_changes_no_joint(monkeypatch) -> None:
         m.add_sample(new.q[6], new.qd[6], new.qdd[6], new.tau[6])
     np.testing.assert_array_equal(model.predict_one(*query), twin.predict_one(*query))
     np.testing.assert_array_equal(model.predict_one_var(*query)[1], twin.predict_one_var(*query)[1])
+
+
+def test_the_variance_path_is_built_once_per_fit_and_shared_by_online_windows() -> None:
+    """prepare_variance builds the fitted sets' inverse factors once; opening and closing windows reuses them
+    (no rebuild at the first gated tick of each episode), and the values equal a fresh build's."""
+    arm = make_arm(3, friction=0.3)
+    model = make_model("sp-inward", 3, make_arm(3), gp_config=GPFitConfig(n_restarts=1, max_iter=30)).fit(
+        sinusoid_data(arm, 3.0, 10.0, seed=1))
+    new = sinusoid_data(make_arm(3, friction=2.0), 1.0, 10.0, seed=5)
+    query = (new.q[2], new.qd[2], new.qdd[2])
+    base = model.prepare_variance()
+    assert model.prepare_variance() is base
+    v_off = model.predict_one_var(*query)[1]
+    model.start_online(4)
+    assert model.prepare_variance().B is base.B
+    model.add_sample(new.q[0], new.qd[0], new.qdd[0], new.tau[0])
+    v_on = model.predict_one_var(*query)[1]
+    fresh = copy.deepcopy(model)
+    fresh._fast_var = fresh._fast_var_offline = None  # what a rebuild from scratch gives
+    np.testing.assert_allclose(fresh.predict_one_var(*query)[1], v_on, rtol=1e-12)
+    model.stop_online()
+    assert model.prepare_variance() is base
+    np.testing.assert_array_equal(model.predict_one_var(*query)[1], v_off)

@@ -103,6 +103,7 @@ class CascadedGPModel:
         self._fast: FastPath | None = None
         self._fast_offline: FastPath | None = None
         self._fast_var: FastVariance | None = None
+        self._fast_var_offline: FastVariance | None = None
         self._online: Any = None
 
     # ------------------------------------------------------------------ basics
@@ -236,7 +237,7 @@ class CascadedGPModel:
         if len(rows) != 1:
             raise ValueError(f"banks: the joints' GPs hold different numbers of training rows {sorted(rows)}")
         old = (self.banks, self.where, self.n_train, self._post, self._fast, self._fast_offline, self._fast_var,
-               self._online)
+               self._fast_var_offline, self._online)
         self.banks = list(banks)
         self.where = [tuple(w) for w in where]
         self.n_train = int(n_train)
@@ -244,7 +245,7 @@ class CascadedGPModel:
             self._cache()
         except Exception:
             (self.banks, self.where, self.n_train, self._post, self._fast, self._fast_offline, self._fast_var,
-             self._online) = old
+             self._fast_var_offline, self._online) = old
             raise
 
     # ------------------------------------------------------------------ caches
@@ -252,7 +253,7 @@ class CascadedGPModel:
         """Posterior factors per joint and the padded arrays of the single-query path."""
         self._post = [self.banks[k].posterior(b) for k, b in self.where]
         self._fast = self._fast_offline = FastPath.build(self._post, self.specs, self.order)
-        self._fast_var = None
+        self._fast_var = self._fast_var_offline = None
         self._online = None
 
     # ------------------------------------------------------------------ prediction
@@ -381,10 +382,19 @@ class CascadedGPModel:
         joint (:class:`~cascgp.models.fastpath.FastVariance`); a query then costs one ``(n, n)`` product per
         joint on top of :meth:`predict_one`."""
         tau_rbd = self._load_query(q, qd, qdd, q_hist)
+        return self.prepare_variance().mean_var(self._fast, tau_rbd)
+
+    def prepare_variance(self) -> FastVariance:
+        """Build the single-query variance path now (one ``(n, n)`` triangular inverse per joint, tens of ms at
+        n = 500), e.g. before an episode, so that the first gated control tick does not pay for it. Built once
+        per fit and shared by every online window opened on it; returns it."""
+        self._require_fitted()
         if self._fast_var is None:
-            online = getattr(self, "_online", None)
-            self._fast_var = online.variance() if online is not None else FastVariance.build(self._post)
-        return self._fast_var.mean_var(self._fast, tau_rbd)
+            if self._fast_var_offline is None:
+                self._fast_var_offline = FastVariance.build(self._post)
+            online = self._online
+            self._fast_var = online.variance(self._fast_var_offline) if online is not None else self._fast_var_offline
+        return self._fast_var
 
     def posteriors(self) -> list[Any]:
         """Each joint's fitted :class:`~cascgp.gp.posterior.GPPosterior`, in joint order."""
@@ -434,8 +444,6 @@ class CascadedGPModel:
             x = _state_cols(S[None], sj)[0]
             xs.append(np.append(x, arr["tau"][tj]) if tj is not None else x)
         self._online.add(xs, target)
-        if self._fast_var is not None:
-            self._fast_var = self._online.variance()
 
     @property
     def n_online(self) -> int:

@@ -135,9 +135,12 @@ class OnlineWindow:
         self.n_added = 0
         self._var: FastVariance | None = None
 
-    def variance(self) -> FastVariance:
+    def variance(self, base: FastVariance | None = None) -> FastVariance:
+        """The variance path of the fitted sets plus this window (the window's term is read live at each
+        query). ``base``: the fitted model's own (:meth:`~cascgp.models.CascadedGPModel.prepare_variance`),
+        so that opening a window does not rebuild it."""
         if self._var is None:
-            base = FastVariance.build(self.model.posteriors())
+            base = base if base is not None else FastVariance.build(self.model.posteriors())
             self._var = FastVariance(B=base.B, prior=base.prior, window=self)
         return self._var
 
