@@ -49,7 +49,10 @@ class _JointWindow:
         self.kernel = get_kernel(P.kernel)
         self.noise = P.noise_var + P.jitter
         self.L00 = P.L
-        self.u0 = P.L.T @ P.alpha  # L00^-1 y0 with y0 = K alpha = L00 L00^T alpha (the normalised targets)
+        # u0 = L00^-1 y0 with y0 = K alpha the normalised targets; algebraically L00^T alpha, but kept as the
+        # solve it always was: the documented online runs (README, docs/) reproduce bit for bit with it.
+        y0 = P.L @ (P.L.T @ P.alpha)
+        self.u0 = solve_triangular(P.L, y0, lower=True)
         self.Zw = np.zeros((window, d))
         self.Lw0 = np.zeros((window, n0))
         self.yw = np.zeros(window)
