@@ -385,8 +385,8 @@ class CascadedGPModel:
         return self.prepare_variance().mean_var(self._fast, tau_rbd)
 
     def prepare_variance(self) -> FastVariance:
-        """Build the single-query variance path now (one ``(n, n)`` triangular inverse per joint, tens of ms at
-        n = 500), e.g. before an episode, so that the first gated control tick does not pay for it. Built once
+        """Build the single-query variance path now (one ``(n, n)`` triangular inverse per joint), e.g. before an
+        episode, so that the first gated control tick does not pay for it. Built once
         per fit and shared by every online window opened on it; returns it."""
         self._require_fitted()
         if self._fast_var is None:
