@@ -168,9 +168,10 @@ def _read_cached(path: Path, fn: Callable, inputs: Mapping[str, Any]) -> dict | 
         rec = read_json(path)
     except (OSError, ValueError):
         return None
-    if (not isinstance(rec, dict) or rec.get("format") != CACHE_FORMAT or rec.get("fn") != _fn_name(fn)
-            or rec.get("inputs") != json.loads(_canonical(inputs)) or "result" not in rec):
-        return None
+    if (not isinstance(rec, dict) or rec.get("format") != CACHE_FORMAT or rec.get("version") != CACHE_VERSION
+            or rec.get("fn") != _fn_name(fn) or rec.get("inputs") != json.loads(_canonical(inputs))
+            or "result" not in rec):
+        return None  # not ours, another version of the record, or other inputs: the job runs again
     return rec
 
 

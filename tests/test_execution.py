@@ -173,6 +173,22 @@ def test_cache_is_keyed_by_the_inputs_and_normalises_results(tmp_path: Path) -> 
     assert cached.n_cached == 1 and fresh[0] == cached[0] and fresh[0]["t"] == [1, 2]
 
 
+def test_a_cache_record_of_another_version_is_not_used(tmp_path: Path) -> None:
+    import json
+
+    log = tmp_path / "log"
+    log.mkdir()
+    jobs = [{"x": x, "log_dir": str(log)} for x in range(2)]
+    run_jobs(counting_job, jobs, workers=1, cache_dir=tmp_path / "c", show_progress=False)
+    rec_path = sorted((tmp_path / "c").glob("counting_job-*.json"))[0]
+    rec = json.loads(rec_path.read_text())
+    rec["version"] = rec["version"] + 1
+    rec["result"] = -1  # what an incompatible record could hold
+    rec_path.write_text(json.dumps(rec))
+    again = run_jobs(counting_job, jobs, workers=1, cache_dir=tmp_path / "c", show_progress=False)
+    assert again.n_cached == 1 and list(again) == [1, 2] and len(list(log.iterdir())) == 3
+
+
 def test_workers_must_be_positive() -> None:
     with pytest.raises(ValueError, match="workers"):
         run_jobs(counting_job, [], workers=0)
