@@ -172,11 +172,9 @@ class FeedforwardController:
                 raise ValueError(f"online: needs a fitted cascgp model, got {type(model).__name__}")
             if isinstance(online, bool) or not isinstance(online, (int, np.integer)) or online < 1:
                 raise ValueError(f"online: expected None or a window of >= 1 samples, got {online!r}")
-            if model.feature_kind != "db":
-                raise ValueError(f"online: model {model.name!r}: online updates support derivative-based models only")
-            if getattr(model, "train_on_predicted", False) and model.structure != "standard":
-                raise ValueError(f"online: model {model.name!r} was trained on predicted neighbour torques; online "
-                                 "samples carry measured ones")
+            from cascgp.models.online import check_supported
+
+            check_supported(model)
         if isinstance(online_every, bool) or not isinstance(online_every, (int, np.integer)) or online_every < 1:
             raise ValueError(f"online_every: expected an integer >= 1, got {online_every!r}")
         self.online = None if online is None else int(online)

@@ -212,13 +212,11 @@ def _paired_episodes(names: Sequence[str], env: Any, model: Any | None, rbd: Any
                      seed: int, options: dict[str, Any], meta: dict[str, Any]) -> dict[str, dict[str, Any]]:
     """One episode of each controller in ``names`` on ``model`` (see :func:`run_controller`'s ``paired``)."""
     out = {}
-    for p in names:
-        if model is not None and hasattr(model, "stop_online"):
-            model.stop_online()  # an earlier online episode must not leak into this one
+    for p in names:  # each controller's start() opens its own window or closes one left open
         controller = make_controller(p, rbd, model, feedback)
         out[p] = run_episode(env, controller, seed=seed, options=options, meta=meta).summary()
     if model is not None and hasattr(model, "stop_online"):
-        model.stop_online()
+        model.stop_online()  # leave the model as it was found
     return out
 
 

@@ -236,23 +236,23 @@ class CascadedGPModel:
         rows = {int(banks[k].n_train) for k, _ in where}
         if len(rows) != 1:
             raise ValueError(f"banks: the joints' GPs hold different numbers of training rows {sorted(rows)}")
-        old = (self.banks, self.where, self.n_train, self._post, self._fast, self._fast_offline, self._fast_var,
-               self._fast_var_offline, self._online)
-        self.banks = list(banks)
-        self.where = [tuple(w) for w in where]
-        self.n_train = int(n_train)
-        try:
-            self._cache()
-        except Exception:
-            (self.banks, self.where, self.n_train, self._post, self._fast, self._fast_offline, self._fast_var,
-             self._fast_var_offline, self._online) = old
-            raise
+        post, fast = self._built(banks, where)  # may raise: nothing assigned yet
+        self.banks, self.where, self.n_train = list(banks), [tuple(w) for w in where], int(n_train)
+        self._install(post, fast)
 
     # ------------------------------------------------------------------ caches
+    def _built(self, banks: list[GPBank], where: list[tuple[int, int]]) -> tuple[list[Any], FastPath]:
+        """Posterior factors per joint and the padded arrays of the single-query path (assigns nothing)."""
+        post = [banks[k].posterior(b) for k, b in where]
+        return post, FastPath.build(post, self.specs, self.order)
+
     def _cache(self) -> None:
-        """Posterior factors per joint and the padded arrays of the single-query path."""
-        self._post = [self.banks[k].posterior(b) for k, b in self.where]
-        self._fast = self._fast_offline = FastPath.build(self._post, self.specs, self.order)
+        """Build and install the caches of the current banks."""
+        self._install(*self._built(self.banks, self.where))
+
+    def _install(self, post: list[Any], fast: FastPath) -> None:
+        self._post = post
+        self._fast = self._fast_offline = fast
         self._fast_var = self._fast_var_offline = None
         self._online = None
 
@@ -378,9 +378,9 @@ class CascadedGPModel:
     def predict_one_var(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None
                         ) -> tuple[np.ndarray, np.ndarray]:
         """Mean torque and *propagated* latent variance (N,), (N,) for ONE query: the single-query form of
-        ``predict(..., propagate=True)`` (equal to round-off; with an online window open, of the enlarged sets). The first call builds one ``(n, n)`` matrix per
-        joint (:class:`~cascgp.models.fastpath.FastVariance`); a query then costs one ``(n, n)`` product per
-        joint on top of :meth:`predict_one`."""
+        ``predict(..., propagate=True)`` (equal to round-off; with an online window open, of the enlarged
+        sets). The first call builds one ``(n, n)`` matrix per joint (:meth:`prepare_variance`); a query then
+        costs one ``(n, n)`` product per joint on top of :meth:`predict_one`."""
         tau_rbd = self._load_query(q, qd, qdd, q_hist)
         return self.prepare_variance().mean_var(self._fast, tau_rbd)
 
@@ -416,7 +416,7 @@ class CascadedGPModel:
     def stop_online(self) -> None:
         """Drop the online window (:meth:`start_online`): predictions are again those of the fitted model.
         Does nothing when no window is open."""
-        if getattr(self, "_online", None) is not None:
+        if self._online is not None:
             self._online = None
             self._fast = self._fast_offline
             self._fast_var = None

@@ -37,7 +37,7 @@ from cascgp.gp.kernels import get_kernel
 from cascgp.gp.likelihood import blas_threads
 from cascgp.models.fastpath import FastPath, FastVariance
 
-__all__ = ["OnlineWindow"]
+__all__ = ["OnlineWindow", "check_supported"]
 
 
 class _JointWindow:
@@ -112,6 +112,16 @@ class _JointWindow:
         return float(a @ a)
 
 
+def check_supported(model: Any) -> None:
+    """``ValueError`` naming the model unless online samples can enter it: derivative-based features, and
+    neighbour torques in training that were measured (online samples carry measured ones)."""
+    if model.feature_kind != "db":
+        raise ValueError(f"online: model {model.name!r}: online updates support derivative-based models only")
+    if getattr(model, "train_on_predicted", False) and model.structure != "standard":
+        raise ValueError(f"online: model {model.name!r} was trained on predicted neighbour torques; online "
+                         "samples carry measured ones, so they would not match its training inputs")
+
+
 class OnlineWindow:
     """Online samples of every joint of a fitted derivative-based cascade (see the module docstring).
 
@@ -121,11 +131,7 @@ class OnlineWindow:
     """
 
     def __init__(self, model: Any, window: int) -> None:
-        if model.feature_kind != "db":
-            raise ValueError(f"online: model {model.name!r}: online updates support derivative-based models only")
-        if getattr(model, "train_on_predicted", False) and model.structure != "standard":
-            raise ValueError(f"online: model {model.name!r} was trained on predicted neighbour torques; online "
-                             "samples carry measured ones, so they would not match its training inputs")
+        check_supported(model)
         if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
             raise ValueError(f"window: expected an integer >= 1, got {window!r}")
         self.model = model
