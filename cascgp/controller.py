@@ -71,6 +71,34 @@ def _as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
     return gain
 
 
+def gate_weights(correction: np.ndarray, var: np.ndarray, rule: str = "wiener",
+                 prior: np.ndarray | None = None) -> np.ndarray:
+    r"""The gate's weights :math:`w \in [0, 1]` on a learned correction (:class:`FeedforwardController`, ``gate``).
+
+    Args:
+        correction: :math:`d`, the model's mean torque minus the nominal torque, any shape.
+        var: :math:`v`, the model's (propagated) latent variance, the same shape.
+        rule: ``"wiener"``: :math:`d^2 / (d^2 + v)` (1 where both are 0); ``"variance"``:
+            :math:`\operatorname{clip}(1 - v / p, 0, 1)` with ``prior`` :math:`p`, broadcast against ``var``.
+
+    Returns:
+        The weights; a non-finite weight is 0 (the nominal torque).
+    """
+    d = np.asarray(correction, dtype=float)
+    v = np.asarray(var, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        if rule == "wiener":
+            d2 = d * d
+            w = np.where(d2 + v > 0.0, d2 / (d2 + v), 1.0)
+        elif rule == "variance":
+            if prior is None:
+                raise ValueError("gate_weights: rule 'variance' needs the prior variance")
+            w = np.clip(1.0 - v / np.asarray(prior, dtype=float), 0.0, 1.0)
+        else:
+            raise ValueError(f"gate_weights: rule must be 'wiener' or 'variance', got {rule!r}")
+    return np.where(np.isfinite(w), w, 0.0)
+
+
 class FeedforwardController:
     r"""PD feedback plus a model-based feedforward torque, clipped to the actuator limits.
 
@@ -247,13 +275,7 @@ class FeedforwardController:
         mean, var = self.model.predict_one_var(q_d, qd_d, qdd_d, q_hist=q_hist)
         nominal = np.asarray(self._nominal.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
         d = mean - nominal
-        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-            if self.gate == "wiener":
-                d2 = d * d
-                w = np.where(d2 + var > 0.0, d2 / (d2 + var), 1.0)
-            else:
-                w = np.clip(1.0 - var / self._prior, 0.0, 1.0)
-        w = np.where(np.isfinite(w), w, 0.0)
+        w = gate_weights(d, var, self.gate, self._prior)
         self.last_gate = w
         return nominal + w * d
 

@@ -18,7 +18,8 @@ everything seen so far (subsampled to ``rate_hz``, at most ``cap`` rows), warm-s
 previous model's hyperparameters.
 
 Seeds: attempt ``i`` resets the env with seed ``seed * 1000 + i``; the refit after it uses the GP
-seed ``seed + i``.
+seed ``seed + fit_seed_offset + i`` (:class:`RetrainConfig`; the offset, 0 by default, changes only the random
+starts of the fits, e.g. to measure how far two learners that differ in nothing else drift apart).
 """
 
 from __future__ import annotations
@@ -37,7 +38,8 @@ from cascgp.gp import GPFitConfig
 from cascgp.models import MODEL_NAMES, make_model
 
 __all__ = ["PLAIN_CONTROLLERS", "ONLINE_WINDOW", "Attempt", "Feedback", "RetrainConfig", "ControllerRun",
-           "check_controller", "parse_controller", "make_controller", "attempt_plan", "default_model_factory",
+           "BeforeAttempt", "check_controller", "parse_controller", "make_controller", "attempt_plan",
+           "default_model_factory",
            "run_controller", "run_controllers"]
 
 #: Controllers that never learn.
@@ -54,6 +56,10 @@ Attempt = tuple[str, int, str]
 ModelFactory = Callable[[str, Any, GPFitConfig], Any]
 #: ``callback(controller_name, record)``, called after every attempt.
 AttemptCallback = Callable[[str, dict[str, Any]], None]
+#: ``before_attempt(controller_name, attempt_index, attempt, model)`` -> a JSON-ready dict or None, called before
+#: every attempt with the learned model that attempt uses (None before the first fit); a dict is stored in the
+#: attempt's record as ``"before"`` (e.g. the model's uncertainty along the task's reference).
+BeforeAttempt = Callable[[str, int, "Attempt", Any], "dict[str, Any] | None"]
 
 
 @dataclass(frozen=True)
@@ -73,6 +79,7 @@ class RetrainConfig:
     rate_hz: float = 10.0   # training data rate (Hz)
     cap: int = 500          # maximum training-set size
     restarts: int = 3       # GP optimiser restarts per refit
+    fit_seed_offset: int = 0  # added to the GP seed of every refit (only the random starts change)
 
 
 @dataclass
@@ -143,7 +150,7 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
                    model_factory: ModelFactory = default_model_factory, buffer_dir: str | Path | None = None,
                    on_attempt: AttemptCallback | None = None,
                    episode_callback: EpisodeCallback | None = None,
-                   paired: Sequence[str] = ()) -> ControllerRun:
+                   paired: Sequence[str] = (), before_attempt: BeforeAttempt | None = None) -> ControllerRun:
     """Run every attempt of ``plan`` with one controller; a learning controller is refitted after every
     ``"train"`` attempt on all data so far.
 
@@ -164,11 +171,14 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
             differences in data and fits that separate two independent learners). Each must be ``name``'s
             model with other suffixes; each runs one episode with the attempt's seed and task, adds nothing
             to the buffer, and leaves the model as it found it (an online window it opens is closed).
+        before_attempt: called before every attempt with the model it uses (:data:`BeforeAttempt`); must not
+            change the model.
 
     Returns:
         The run; each record holds ``attempt``, ``task``, ``task_attempt``, ``phase``, ``n_train`` (rows the
         controller's model was fitted on), the episode's :meth:`EpisodeResult.summary` and, after a refit,
-        ``fit_seconds``; with ``paired``, ``record["paired"][p]`` is controller ``p``'s episode summary.
+        ``fit_seconds``; with ``paired``, ``record["paired"][p]`` is controller ``p``'s episode summary; with
+        ``before_attempt``, ``record["before"]`` is what it returned (when not None).
     """
     base, _, _ = parse_controller(name)
     learns = base not in PLAIN_CONTROLLERS
@@ -184,6 +194,7 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
     model = None
     run = ControllerRun(name)
     for i, (task, k, phase) in enumerate(plan):
+        before = before_attempt(name, i, (task, k, phase), model) if before_attempt is not None else None
         controller = make_controller(name, rbd, model, feedback)
         callback = episode_callback(name, i, (task, k, phase)) if episode_callback is not None else None
         result: EpisodeResult = run_episode(
@@ -193,13 +204,16 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
                   "n_train": 0 if model is None else int(model.n_train), **result.summary()}
         if controller.online:
             record["online_samples"] = controller.n_online_samples
+        if before is not None:
+            record["before"] = before
         if paired:
             record["paired"] = _paired_episodes(paired, env, model, rbd, feedback, seed=config.seed * 1000 + i,
                                                 options={"task": task, **options}, meta={"attempt": i, "phase": phase})
         if learns and phase == "train":
             buffer.append(result.data)
             t0 = time.perf_counter()
-            new = model_factory(base, rbd, GPFitConfig(n_restarts=config.restarts, seed=config.seed + i))
+            new = model_factory(base, rbd, GPFitConfig(n_restarts=config.restarts,
+                                                       seed=config.seed + config.fit_seed_offset + i))
             model = new.fit(buffer.training_set(config.rate_hz, config.cap), init=model)
             record["fit_seconds"] = time.perf_counter() - t0
         run.attempts.append(record)

@@ -67,6 +67,7 @@ class TransferConfig:
     cap: int = 500
     restarts: int = 3
     n_marbles: int = 30
+    fit_seed_offset: int = 0
 
     def plan(self) -> list[Attempt]:
         """Every attempt, in order (:func:`cascgp.learning.attempt_plan`)."""
@@ -74,7 +75,8 @@ class TransferConfig:
 
     def retrain(self) -> RetrainConfig:
         """The seeds and refit settings of :mod:`cascgp.learning`."""
-        return RetrainConfig(seed=self.seed, rate_hz=self.rate_hz, cap=self.cap, restarts=self.restarts)
+        return RetrainConfig(seed=self.seed, rate_hz=self.rate_hz, cap=self.cap, restarts=self.restarts,
+                             fit_seed_offset=self.fit_seed_offset)
 
     def reset_options(self) -> dict[str, Any]:
         """Reset options besides the task: the unknown payload."""
