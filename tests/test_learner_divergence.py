@@ -1,0 +1,149 @@
+"""The learner-divergence experiment's pieces: the gate's rule as a function, run_controller's before_attempt hook
+and fit_seed_offset (on a tiny two-joint env, no MuJoCo), the uncertainty along a reference, and the ratios and
+decision rules of cascgp_experiments.learner_divergence (on synthetic records)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cascgp.controller import gate_weights
+from cascgp.gp import GPFitConfig
+from cascgp.learning import Feedback, RetrainConfig, default_model_factory, run_controller
+from cascgp.models import make_model
+from cascgp_experiments import learner_divergence as ld
+from tests.test_episodes import ExactID, TwoJointEnv
+
+PLAN = [("sine", 0, "train"), ("sine", 1, "train"), ("sine", 2, "train")]
+FEEDBACK = Feedback(np.full(2, 20.0), np.full(2, 5.0), np.full(2, 10.0))
+SMALL = RetrainConfig(seed=3, restarts=2, cap=60)
+
+
+def test_gate_weights_are_the_documented_rules() -> None:
+    rng = np.random.default_rng(0)
+    d, v = rng.normal(size=(5, 3)), rng.uniform(0.01, 2.0, size=(5, 3))
+    np.testing.assert_allclose(gate_weights(d, v), d**2 / (d**2 + v))
+    prior = np.array([1.0, 2.0, 4.0])
+    np.testing.assert_allclose(gate_weights(d, v, "variance", prior), np.clip(1 - v / prior, 0, 1))
+    # No correction and no uncertainty: the model (1); a non-finite weight: the nominal torque (0).
+    assert gate_weights(np.zeros(2), np.zeros(2)).tolist() == [1.0, 1.0]
+    assert gate_weights(np.array([np.inf, 1.0]), np.array([1.0, np.inf])).tolist() == [0.0, 0.0]
+    with pytest.raises(ValueError, match="prior"):
+        gate_weights(d, v, "variance")
+    with pytest.raises(ValueError, match="rule"):
+        gate_weights(d, v, "median")
+
+
+def _run(name: str, config: RetrainConfig = SMALL, **kw):
+    return run_controller(name, TwoJointEnv(steps=60), PLAN, ExactID(), FEEDBACK, config, **kw)
+
+
+def test_before_attempt_sees_the_model_each_attempt_uses_and_changes_nothing() -> None:
+    seen = []
+
+    def before(name, i, attempt, model):
+        seen.append((name, i, attempt, model, None if model is None else model.n_train))
+        return None if model is None else {"n": int(model.n_train)}
+
+    hooked = _run("np-inward", before_attempt=before).attempts
+    plain = _run("np-inward").attempts
+    assert [(s[0], s[1], s[2]) for s in seen] == [("np-inward", i, a) for i, a in enumerate(PLAN)]
+    assert seen[0][3] is None and "before" not in hooked[0]
+    for rec, s in zip(hooked[1:], seen[1:]):
+        assert s[3].fitted and rec["before"] == {"n": s[4]} == {"n": rec["n_train"]}
+    assert seen[1][3] is not seen[2][3]  # a new model after every refit
+
+    def strip(a):  # repr: equal floats print equal, and NaN (no marbles here) equals NaN
+        return repr({k: v for k, v in a.items() if k not in ("before", "fit_seconds")})
+
+    assert [strip(a) for a in hooked] == [strip(a) for a in plain]
+
+
+def test_fit_seed_offset_changes_only_the_gp_seed_of_each_refit() -> None:
+    seeds = []
+
+    def factory(name, rbd, gp_config):
+        seeds.append(gp_config.seed)
+        return default_model_factory(name, rbd, gp_config)
+
+    _run("np-inward", RetrainConfig(seed=3, restarts=2, cap=60, fit_seed_offset=100), model_factory=factory)
+    assert seeds == [103, 104, 105]
+    seeds.clear()
+    _run("np-inward", model_factory=factory)
+    assert seeds == [3, 4, 5]
+
+
+def test_reference_uncertainty_is_the_models_propagated_variance_along_the_points(arm3_train, arm3_rbd) -> None:
+    data = arm3_train.take(np.arange(60))
+    model = make_model("sp-inward", data.dof, rbd=arm3_rbd, gp_config=GPFitConfig(n_restarts=2, max_iter=100)).fit(data)
+    q, qd, qdd = arm3_train.q[100:140], arm3_train.qd[100:140], arm3_train.qdd[100:140]
+    out = ld.reference_uncertainty(model, arm3_rbd, q, qd, qdd)
+    mean, var = model.predict(q, qd, qdd, propagate=True)
+    d = mean - arm3_rbd.inverse_dynamics(q, qd, qdd)
+    np.testing.assert_allclose(out["rel_var"], np.median(var / model.signal_var, axis=0))
+    np.testing.assert_allclose(out["weight"], (d**2 / (d**2 + var)).mean(axis=0))
+    np.testing.assert_allclose(out["sd_rms"], np.sqrt(var.mean(axis=0)))
+    assert all(0.0 <= w <= 1.0 for w in out["weight"])
+
+
+def _fake(gl_factor: float, relvar_factor: float, seeds=range(6)) -> dict:
+    """Synthetic runs: GL tracks ``gl_factor`` x UL's early attempts and has ``relvar_factor`` x UL's relative
+    variance; its lag at the last attempt grows with that factor (plus noise); UL' differs from UL by noise."""
+    rng = np.random.default_rng(1)
+    tasks = ["front", "left", "right"]
+    cfg = {"tasks": tasks, "attempts": 4, "seeds": list(seeds), "payload_mass": 1.2}
+    runs = {}
+    for s in seeds:
+        ul, gl, null = [], [], []
+        for t in tasks:
+            for k in range(4):
+                base = float(rng.uniform(0.05, 0.2))
+                f = float(relvar_factor * rng.uniform(0.8, 1.25))
+                lag = f ** 0.5 if k == 3 else gl_factor
+                rec = {"task": t, "task_attempt": k, "phase": "train"}
+                ul.append({**rec, "tracking_rmse": base, "before": {"rel_var": [0.1, 0.2]}})
+                gl.append({**rec, "tracking_rmse": base * lag, "before": {"rel_var": [0.1 * f, 0.2 * f]},
+                           "paired": {ld.UNGATED: {"tracking_rmse": base * lag / 1.02}}})
+                null.append({**rec, "tracking_rmse": base * float(rng.uniform(0.97, 1.03))})
+        runs[str(s)] = {"GL": gl, "UL": ul, "UL'": null}
+    return {"config": cfg, "runs": runs}
+
+
+def test_divergence_ratios_are_those_of_the_records_and_multiply_out() -> None:
+    res = _fake(1.5, 2.0)
+    rows = ld.ratios(res)
+    run = res["runs"]["2"]
+    pick = {q: next(r for r in rows if r["seed"] == 2 and r["task"] == "left" and r["quantity"] == q)
+            for q in ("null_last", "gate_learners_last", "gate_on_gl_model", "gl_model_vs_ul", "rel_var_gl_vs_ul",
+                      "early_tracking_gl_vs_ul")}
+    g, u, n = (next(a for a in run[k] if a["task"] == "left" and a["task_attempt"] == 3) for k in ("GL", "UL", "UL'"))
+    assert pick["null_last"]["ratio"] == n["tracking_rmse"] / u["tracking_rmse"]
+    assert pick["gate_learners_last"]["ratio"] == g["tracking_rmse"] / u["tracking_rmse"]
+    assert pick["gate_on_gl_model"]["ratio"] * pick["gl_model_vs_ul"]["ratio"] == \
+        pytest.approx(pick["gate_learners_last"]["ratio"])
+    assert pick["rel_var_gl_vs_ul"]["ratio"] == pytest.approx(np.mean(g["before"]["rel_var"]) / 0.15)
+    early = [a["tracking_rmse"] for a in run["GL"] if a["task"] == "left" and a["task_attempt"] < 3]
+    early_u = [a["tracking_rmse"] for a in run["UL"] if a["task"] == "left" and a["task_attempt"] < 3]
+    assert pick["early_tracking_gl_vs_ul"]["ratio"] == pytest.approx(np.mean(early) / np.mean(early_u))
+    # No early-tracking row on the first task (every learner starts there from the same RBD attempt).
+    assert not any(r["task"] == "front" and r["quantity"] == "early_tracking_gl_vs_ul" for r in rows)
+
+
+def test_decision_rules_support_the_hypothesis_only_when_the_data_do() -> None:
+    yes = ld.tests_of_hypotheses(ld.ratios(_fake(1.5, 2.0)))
+    assert yes["divergence_hypothesis_supported"]
+    assert yes["null_within_10pct"] == yes["null_n"] == 18
+    assert yes["spread_gate_vs_null"]["p_mannwhitney_gate_greater"] < 0.05
+    # GL tracks as UL early on and is no less certain: not supported, whatever else holds.
+    no = ld.tests_of_hypotheses(ld.ratios(_fake(1.0, 1.0)))
+    assert not no["divergence_hypothesis_supported"]
+
+
+def test_reproduction_counts_identical_attempts() -> None:
+    res = _fake(1.5, 2.0, seeds=range(2))
+    ref = {"runs": {s: {ld.GATED: [dict(a) for a in r["GL"]], ld.UNGATED: [dict(a) for a in r["UL"]]}
+                    for s, r in res["runs"].items()}}
+    ref["runs"]["1"][ld.GATED][5]["tracking_rmse"] += 1e-3
+    rep = ld.reproduction(res, ref)
+    assert rep["attempts_compared"] == 2 * 2 * 12 and rep["identical"] == rep["attempts_compared"] - 1
+    assert rep["max_abs_difference"] == pytest.approx(1e-3)
