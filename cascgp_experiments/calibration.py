@@ -28,14 +28,28 @@ __all__ = ["CASCADES", "calibration", "study_data"]
 CASCADES = ("np-inward", "np-outward", "sp-inward", "sp-outward")
 
 
-def study_data(folder: str | Path | None, out: str | Path) -> tuple[DynamicsData, DynamicsData]:
-    """The study's ``jaco_train.npz``/``jaco_test.npz`` from ``folder``; without one, the quick collection
-    preset recorded into ``<out>/data`` (:mod:`cascgp_experiments.collect`)."""
-    if folder:
-        return tuple(DynamicsData.load(Path(folder) / f"jaco_{s}.npz") for s in ("train", "test"))
+def study_data(folder: str | Path | None, out: str | Path, *, preset: str = "quick", sensor_noise: str = "default",
+               qdd_source: str = "savgol", workers: int | None = None) -> tuple[DynamicsData, DynamicsData]:
+    """The study's ``jaco_train.npz``/``jaco_test.npz`` from ``folder``; without one, the collection ``preset``
+    (:data:`cascgp_experiments.collect.PRESETS`) with ``sensor_noise`` and ``qdd_source`` (see
+    :class:`~cascgp_experiments.collect.CollectConfig`) recorded into ``<out>/data`` on ``workers`` processes
+    (``None``: every core), or reused from there when present with the same settings.
+
+    The collection options only apply to a new collection: with ``folder``, anything but the defaults is a
+    ``ValueError`` (the files are used as they were recorded)."""
+    from dataclasses import replace
+
     from cascgp_experiments.collect import PRESETS, collect
 
-    train, test, _ = collect(Path(out) / "data", PRESETS["quick"])
+    if folder:
+        if (sensor_noise, qdd_source) != ("default", "savgol"):
+            raise ValueError(f"sensor_noise={sensor_noise!r}/qdd_source={qdd_source!r} only apply to a new "
+                             f"collection, not to the files in {folder!s} (leave out the data folder)")
+        return tuple(DynamicsData.load(Path(folder) / f"jaco_{s}.npz") for s in ("train", "test"))
+    if preset not in PRESETS:
+        raise ValueError(f"preset: expected one of {tuple(PRESETS)}, got {preset!r}")
+    cfg = replace(PRESETS[preset], sensor_noise=sensor_noise, qdd_source=qdd_source)
+    train, test, _ = collect(Path(out) / "data", cfg, workers=workers)
     return train, test
 
 
@@ -65,7 +79,7 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
                     cov[prop] = interval_coverage(mean, var + m.noise_var, test10.tau, level)
                 rows.append({"model": name, "seconds": secs, "subset": k, "n_train": data.n_samples,
                              "coverage_mean_input": cov[False].tolist(), "coverage_propagated": cov[True].tolist(),
-                             "fit_s": time.perf_counter() - t0})
+                             "noise_std": np.sqrt(m.noise_var).tolist(), "fit_s": time.perf_counter() - t0})
                 if progress is not None:
                     progress(rows[-1])
     summary = {}
@@ -74,19 +88,23 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
             sel = [r for r in rows if r["model"] == name and r["seconds"] == secs]
             summary[f"{name}@{secs:g}s"] = {
                 key: np.median(np.array([r[key] for r in sel]), axis=0).round(4).tolist()
-                for key in ("coverage_mean_input", "coverage_propagated")}
-    return {"level": level, "rate_hz": rate_hz, "n_subsets": len(subsets), "n_test_rows": test10.n_samples,
-            "rows": rows, "summary": summary}
+                for key in ("coverage_mean_input", "coverage_propagated", "noise_std")}
+    return {"level": level, "rate_hz": rate_hz, "n_subsets": len(subsets), "n_restarts": n_restarts,
+            "n_test_rows": test10.n_samples, "collection": train.meta.get("collection"),
+            "qdd_source": train.meta.get("qdd_source"), "rows": rows, "summary": summary}
 
 
 def summary_table(res: dict[str, Any]) -> str:
-    """Markdown: median coverage per joint, mean-input vs propagated variance."""
+    """Markdown: median coverage per joint, mean-input vs propagated variance (and the median fitted noise
+    std in N m, when the result has it)."""
     dof = len(next(iter(res["summary"].values()))["coverage_mean_input"])
     head = "| model @ data | variance | " + " | ".join(f"J{j + 1}" for j in range(dof)) + " |"
     lines = [head, "|" + "---|" * (dof + 2)]
     for key, s in res["summary"].items():
-        for label, field in (("given mean input", "coverage_mean_input"), ("propagated", "coverage_propagated")):
-            lines.append(f"| {key} | {label} | " + " | ".join(f"{v:.3f}" for v in s[field]) + " |")
+        for label, field in (("given mean input", "coverage_mean_input"), ("propagated", "coverage_propagated"),
+                             ("fitted noise std (N m)", "noise_std")):
+            if field in s:
+                lines.append(f"| {key} | {label} | " + " | ".join(f"{v:.3f}" for v in s[field]) + " |")
     return "\n".join(lines)
 
 
