@@ -14,15 +14,19 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.stats import norm
 
-from cascgp.data import DynamicsData
+from cascgp.data import DynamicsData, SavGol
 from cascgp.gp import GPFitConfig
 from cascgp.metrics import interval_coverage
 from cascgp.models import make_model
 from cascgp.rbd import load_nominal
 from cascgp_experiments.common import NOMINAL_URDF
 
-__all__ = ["CASCADES", "calibration", "study_data"]
+__all__ = ["CASCADES", "BAND", "calibration", "combined_table", "compare_arms", "sensor_input_var", "study_data"]
+
+#: The issue's target band for the coverage of a 95 % interval.
+BAND = (0.90, 0.98)
 
 #: The cascades whose variance can be propagated (derivative-based states, as the controller uses).
 CASCADES = ("np-inward", "np-outward", "sp-inward", "sp-outward")
@@ -53,10 +57,33 @@ def study_data(folder: str | Path | None, out: str | Path, *, preset: str = "qui
     return train, test
 
 
+def sensor_input_var(collection: dict, dof: int) -> np.ndarray:
+    """Variances of the noise of the GP's measured inputs, (dof, 3) = ``(q, qd, qdd)`` per joint, from physics:
+    the env's sensor model (``jaco_env.SensorNoise()``, or none for ``sensor_noise="none"``) for q and qd, and
+    for the filtered qdd the velocity noise times the Savitzky-Golay filter's gain at the recording rate
+    (:meth:`cascgp.data.SavGol.noise_gain`; 0 for ``qdd_source="true"``). ``collection``: a data file's
+    ``meta["collection"]`` (:class:`cascgp_experiments.collect.CollectConfig` as a dict)."""
+    from jaco_env import SensorNoise
+
+    if not isinstance(collection, dict) or not {"rate_hz", "savgol_window", "savgol_polyorder"} <= set(collection):
+        raise ValueError("collection: expected the meta['collection'] of a collected Jaco file (rate_hz, savgol_window,"
+                         f" savgol_polyorder), got {collection!r}")
+    sn = SensorNoise.none() if collection.get("sensor_noise", "default") == "none" else SensorNoise()
+    gain = SavGol(int(collection["savgol_window"]), int(collection["savgol_polyorder"])).noise_gain(
+        1.0 / float(collection["rate_hz"]))
+    qdd_var = 0.0 if collection.get("qdd_source", "savgol") == "true" else sn.qd_std**2 * gain
+    return np.tile([sn.q_std**2, sn.qd_std**2, qdd_var], (int(dof), 1))
+
+
 def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float, ...] = (10.0, 30.0),
                 n_subsets: int = 3, models: tuple[str, ...] = CASCADES, rate_hz: float = 10.0,
-                n_restarts: int = 3, level: float = 0.95, progress=None) -> dict[str, Any]:
+                n_restarts: int = 3, level: float = 0.95, input_var: np.ndarray | None = None,
+                progress=None) -> dict[str, Any]:
     """Coverage per model, training size, subset and joint (see the module docstring).
+
+    ``input_var`` (dof, 3): variances of the input noise (:func:`sensor_input_var`); with it a third
+    variance, the propagated one plus the test-time input-noise term (``predict(..., input_var=...)``), is
+    scored as ``coverage_input_noise``.
 
     Returns a JSON-serialisable dict: ``rows`` (one per model, seconds, subset, with ``coverage_mean_input``
     and ``coverage_propagated`` lists per joint) and ``summary`` (per model and seconds: the median over
@@ -77,9 +104,31 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
                 for prop in (False, True):
                     mean, var = m.predict(test10.q, test10.qd, test10.qdd, propagate=prop)
                     cov[prop] = interval_coverage(mean, var + m.noise_var, test10.tau, level)
+                # (mean, var): the propagated prediction from here on
+                # diagnostics: the factor on the predictive std that would make the 95 % interval cover 95 % of
+                # the test torques, and the coverage on the rest of the training subset's own motion (rows after
+                # the first `secs`, same excitation, states near the training ones)
+                sd = np.sqrt(var + m.noise_var)
+                scale = np.quantile(np.abs(test10.tau - mean) / np.maximum(sd, 1e-300), level, axis=0) / float(
+                    norm.ppf(0.5 + 0.5 * level))
+                sub10 = sub.subsample(rate_hz)
+                n_rest = sub10.n_samples - data.n_samples
                 rows.append({"model": name, "seconds": secs, "subset": k, "n_train": data.n_samples,
                              "coverage_mean_input": cov[False].tolist(), "coverage_propagated": cov[True].tolist(),
-                             "noise_std": np.sqrt(m.noise_var).tolist(), "fit_s": time.perf_counter() - t0})
+                             "noise_std": np.sqrt(m.noise_var).tolist(), "std_scale_for_level": scale.tolist(),
+                             "n_same_motion_rest": n_rest})
+                if n_rest > 0:
+                    rest = sub10.take(np.arange(data.n_samples, sub10.n_samples))
+                    mr, vr = m.predict(rest.q, rest.qd, rest.qdd, propagate=True)
+                    rows[-1]["coverage_same_motion_rest"] = interval_coverage(mr, vr + m.noise_var, rest.tau,
+                                                                              level).tolist()
+                if input_var is not None:
+                    _, var_in = m.predict(test10.q, test10.qd, test10.qdd, propagate=True, input_var=input_var)
+                    rows[-1]["coverage_input_noise"] = interval_coverage(mean, var_in + m.noise_var, test10.tau,
+                                                                         level).tolist()
+                    # the input-noise term's size: median over the test rows of its std, per joint (N m)
+                    rows[-1]["input_noise_std"] = np.median(np.sqrt(np.maximum(var_in - var, 0.0)), 0).tolist()
+                rows[-1]["fit_s"] = time.perf_counter() - t0
                 if progress is not None:
                     progress(rows[-1])
     summary = {}
@@ -88,9 +137,12 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
             sel = [r for r in rows if r["model"] == name and r["seconds"] == secs]
             summary[f"{name}@{secs:g}s"] = {
                 key: np.median(np.array([r[key] for r in sel]), axis=0).round(4).tolist()
-                for key in ("coverage_mean_input", "coverage_propagated", "noise_std")}
+                for key in ("coverage_mean_input", "coverage_propagated", "coverage_input_noise", "noise_std",
+                            "input_noise_std", "std_scale_for_level", "coverage_same_motion_rest")
+                if all(key in r for r in sel)}
     return {"level": level, "rate_hz": rate_hz, "n_subsets": len(subsets), "n_restarts": n_restarts,
             "n_test_rows": test10.n_samples, "collection": train.meta.get("collection"),
+            "input_var": None if input_var is None else np.asarray(input_var).tolist(),
             "qdd_source": train.meta.get("qdd_source"), "rows": rows, "summary": summary}
 
 
@@ -102,7 +154,10 @@ def summary_table(res: dict[str, Any]) -> str:
     lines = [head, "|" + "---|" * (dof + 2)]
     for key, s in res["summary"].items():
         for label, field in (("given mean input", "coverage_mean_input"), ("propagated", "coverage_propagated"),
-                             ("fitted noise std (N m)", "noise_std")):
+                             ("propagated + input noise", "coverage_input_noise"),
+                             ("propagated, rest of the training motion", "coverage_same_motion_rest"),
+                             ("std factor for 95 % (propagated)", "std_scale_for_level"),
+                             ("fitted noise std (N m)", "noise_std"), ("input-noise std (N m)", "input_noise_std")):
             if field in s:
                 lines.append(f"| {key} | {label} | " + " | ".join(f"{v:.3f}" for v in s[field]) + " |")
     return "\n".join(lines)
@@ -114,3 +169,41 @@ def write(res: dict[str, Any], out: str | Path) -> None:
     out = Path(out)
     write_json(out / "calibration.json", res)
     atomic_write_text(out / "calibration.md", summary_table(res) + "\n")
+
+
+def compare_arms(arms: dict[str, dict[str, Any]], field: str = "coverage_propagated", base: str | None = None) -> str:
+    """Markdown: the decision statistics of ``docs/calibration.md`` for each arm (a :func:`calibration` result):
+    over all cells (model @ seconds x joint, each the median over subsets) of ``field``, the median cell, the
+    range, the number of cells in :data:`BAND`, and against the arm ``base`` (default: the first) the median of
+    the paired change per cell."""
+    names = list(arms)
+    base = base or names[0]
+
+    def cells(res: dict[str, Any]) -> np.ndarray:
+        return np.array([s[field] for _, s in sorted(res["summary"].items())], float).ravel()
+
+    ref = cells(arms[base])
+    lines = [f"| arm | cells | median | min - max | in {BAND[0]:.2f}-{BAND[1]:.2f} | median change vs {base} |",
+             "|---|---|---|---|---|---|"]
+    for name in names:
+        c = cells(arms[name])
+        if c.shape != ref.shape:
+            raise ValueError(f"arm {name!r}: {c.size} cells, the base arm {base!r} has {ref.size}")
+        inside = int(((c >= BAND[0]) & (c <= BAND[1])).sum())
+        lines.append(f"| {name} | {c.size} | {np.median(c):.3f} | {c.min():.3f} - {c.max():.3f} | {inside} | "
+                     f"{np.median(c - ref):+.3f} |")
+    return "\n".join(lines)
+
+
+def combined_table(arms: dict[str, dict[str, Any]], field: str = "coverage_propagated") -> str:
+    """Markdown: ``field`` (medians over subsets, per joint) of several arms side by side, one row per model @
+    seconds and arm."""
+    first = next(iter(arms.values()))
+    dof = len(next(iter(first["summary"].values()))[field])
+    lines = ["| model @ data | arm | " + " | ".join(f"J{j + 1}" for j in range(dof)) + " |", "|" + "---|" * (dof + 2)]
+    for key in first["summary"]:
+        for name, res in arms.items():
+            vals = res["summary"][key].get(field)
+            cells = " | ".join(f"{v:.3f}" for v in vals) if vals is not None else " | ".join("-" * dof)
+            lines.append(f"| {key} | {name} | {cells} |")
+    return "\n".join(lines)

@@ -33,6 +33,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--qdd", default="savgol", choices=("savgol", "true"),
                     help="new collection only: q̈ from the Savitzky-Golay filter or the simulator's true q̈")
     ap.add_argument("--workers", type=int, default=None, help="collection processes (default: every core)")
+    ap.add_argument("--input-noise", action="store_true",
+                    help="also score the propagated variance plus the test-time input-noise term, with the sensor "
+                         "noise and the filter gain of the data's collection (sensor_input_var)")
     a = ap.parse_args(argv)
     if a.data and (a.sensor_noise != "default" or a.qdd != "savgol" or a.collect != "quick"):
         ap.error("--collect/--sensor-noise/--qdd apply to a new collection: leave out --data")
@@ -41,7 +44,8 @@ def main(argv: list[str] | None = None) -> None:
     import torch
     from tqdm import tqdm
 
-    from cascgp_experiments.calibration import CASCADES, calibration, study_data, summary_table, write
+    from cascgp_experiments.calibration import (CASCADES, calibration, sensor_input_var, study_data, summary_table,
+                                                 write)
 
     torch.set_num_threads(1)
     out = Path(a.out)
@@ -50,10 +54,16 @@ def main(argv: list[str] | None = None) -> None:
                                  workers=a.workers)
     except ValueError as e:
         ap.error(str(e))
+    input_var = None
+    if a.input_noise:
+        try:
+            input_var = sensor_input_var(train.meta.get("collection"), train.dof)
+        except ValueError as e:
+            ap.error(f"--input-noise: {e}")
     t0 = time.perf_counter()
     bar = tqdm(total=len(CASCADES) * len(a.seconds) * min(a.subsets, 10), desc="calibration fits")
     res = calibration(train, test, seconds=tuple(a.seconds), n_subsets=a.subsets, n_restarts=a.restarts,
-                      progress=lambda row: bar.update())
+                      input_var=input_var, progress=lambda row: bar.update())
     bar.close()
     res["wall_s"] = time.perf_counter() - t0
     res["command"] = "python -m scripts.calibration " + " ".join(argv if argv is not None else __import__("sys").argv[1:])

@@ -101,3 +101,62 @@ def test_cli_rejects_data_with_collection_options(tmp_path: Path) -> None:
     run = subprocess.run([sys.executable, "-m", "scripts.calibration", "--data", str(tmp_path), "--out", str(tmp_path),
                           "--sensor-noise", "none"], cwd=REPO, capture_output=True, text=True, timeout=120)
     assert run.returncode == 2 and "leave out --data" in run.stderr
+
+
+def test_sensor_input_var_from_the_sensor_model_and_the_filter() -> None:
+    from cascgp_experiments.calibration import sensor_input_var
+
+    v = sensor_input_var(asdict(CollectConfig()), 6)
+    assert v.shape == (6, 3)
+    # q 5e-4 rad, qd 5e-3 rad/s; qdd: window 9, order 2 at 100 Hz, gain 1 / (60 dt^2) = 166.7 s^-2
+    np.testing.assert_allclose(v[0], [5e-4**2, 5e-3**2, 5e-3**2 / (60 * 0.01**2)], rtol=1e-12)
+    assert not sensor_input_var(asdict(CollectConfig(sensor_noise="none")), 6).any()
+    assert sensor_input_var(asdict(CollectConfig(qdd_source="true")), 6)[:, 2].max() == 0.0
+    old = {k: v for k, v in asdict(CollectConfig()).items() if k not in ("sensor_noise", "qdd_source")}
+    np.testing.assert_array_equal(sensor_input_var(old, 6), v)
+    with pytest.raises(ValueError, match="collection"):
+        sensor_input_var(None, 6)
+
+
+def test_calibration_scores_the_input_noise_variance(arms) -> None:
+    from cascgp_experiments.calibration import calibration, sensor_input_var, summary_table
+
+    train, test = arms["noisy"]
+    iv = sensor_input_var(train.meta["collection"], train.dof)
+    res = calibration(train, test, seconds=(1.0,), n_subsets=1, models=("np-inward", "sp-outward"), n_restarts=1,
+                      input_var=iv)
+    assert res["input_var"] == iv.tolist() and res["collection"]["sensor_noise"] == "default"
+    for row in res["rows"]:
+        # more variance: the coverage can only rise
+        assert np.all(np.array(row["coverage_input_noise"]) >= np.array(row["coverage_propagated"]))
+        assert len(row["input_noise_std"]) == 6 and min(row["input_noise_std"]) >= 0
+    assert "propagated + input noise" in summary_table(res) and "input-noise std" in summary_table(res)
+    for row in res["rows"]:  # diagnostics: the rest of the training motion, the std factor for 95 %
+        assert ("coverage_same_motion_rest" in row) == (row["n_same_motion_rest"] > 0)
+        assert len(row["std_scale_for_level"]) == 6 and min(row["std_scale_for_level"]) >= 0
+    plain = calibration(train, test, seconds=(1.0,), n_subsets=1, models=("np-inward",), n_restarts=1)
+    assert "coverage_input_noise" not in plain["rows"][0] and "input noise" not in summary_table(plain)
+
+
+def _fake_result(cov: list[list[float]]) -> dict:
+    return {"summary": {f"m@{k}s": {"coverage_propagated": c, "coverage_mean_input": c} for k, c in enumerate(cov)}}
+
+
+def test_compare_arms_counts_cells_in_the_band_and_paired_changes() -> None:
+    from cascgp_experiments.calibration import combined_table, compare_arms
+
+    a = _fake_result([[0.80, 0.85], [0.90, 0.99]])
+    b = _fake_result([[0.90, 0.95], [0.91, 0.97]])
+    lines = compare_arms({"a": a, "b": b}).splitlines()
+    assert lines[2] == "| a | 4 | 0.875 | 0.800 - 0.990 | 1 | +0.000 |"
+    assert lines[3] == "| b | 4 | 0.930 | 0.900 - 0.970 | 4 | +0.055 |"  # paired changes +.10 +.10 +.01 -.02
+    assert "| m@1s | b | 0.910 | 0.970 |" in combined_table({"a": a, "b": b})
+    with pytest.raises(ValueError, match="cells"):
+        compare_arms({"a": a, "c": _fake_result([[0.9, 0.9]])})
+
+
+def test_compare_cli_errors(tmp_path: Path) -> None:
+    for args, msg in ((["noequals"], "NAME=DIR"), ([f"a={tmp_path}"], "no "),):
+        run = subprocess.run([sys.executable, "-m", "scripts.calibration_compare", *args], cwd=REPO,
+                             capture_output=True, text=True, timeout=120)
+        assert run.returncode == 2 and msg in run.stderr, run.stderr
