@@ -5,6 +5,13 @@ training subsets (10 Hz, as the study) and predict the held-out test motions. Pe
 measured torques inside the 95 % predictive interval is reported for the variance *given the chained mean*
 (``propagate=False``, the paper's) and the *propagated* one (``propagate=True``); both add the fitted noise
 variance, since the targets are measurements. A calibrated model covers about 0.95.
+
+With ``input_var`` (:func:`sensor_input_var`) the propagated variance plus the test-time input-noise term
+(``predict(..., input_var=...)``) is scored too. Diagnostics per fit: the fitted noise std, the factor on the
+predictive std that 95 % coverage of the test torques would need, and the coverage on the rest of the training
+subset's own motion. :func:`compare_arms` and :func:`combined_table` compare runs (the noisy / noiseless /
+true-q̈ arms of ``docs/calibration.md``, collected with :attr:`CollectConfig.sensor_noise
+<cascgp_experiments.collect.CollectConfig.sensor_noise>` and ``qdd_source``).
 """
 
 from __future__ import annotations

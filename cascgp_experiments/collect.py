@@ -38,8 +38,12 @@ it gains: on the 2-core machine (load average 0.1-0.8 from other work) the full 
 serially, 14 s as jobs on 2 processes and 46 s in a 2-env ``AsyncVectorEnv``
 (``python -m scripts.bench_parallel --cases collect-full``, ``docs/bench/parallel_collect_full.json``).
 
+Ablations (``docs/calibration.md``, not the study's data): ``sensor_noise="none"`` records noiseless measurements
+(the motions are the same: the command is open loop and the firmware acts on the simulator's state);
+``qdd_source="true"`` stores the simulator's true accelerations instead of the filtered ones.
+
 Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N]
-[--ray ADDRESS]``.
+[--ray ADDRESS] [--sensor-noise none] [--qdd true]``.
 """
 
 from __future__ import annotations

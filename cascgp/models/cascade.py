@@ -336,9 +336,10 @@ class CascadedGPModel:
         """
         self._require_fitted()
         single, q, qd, qdd, q_hist = self._check_queries(q, qd, qdd, q_hist)
+        input_var = self._check_input_var(input_var) if input_var is not None else None
         mean, var = self._predict_arrays(q, qd, qdd, q_hist, return_var=True, propagate=propagate)
         if input_var is not None:
-            var = var + self._input_noise_var(q, qd, qdd, self._check_input_var(input_var))
+            var = var + self._input_noise_var(q, qd, qdd, input_var)
         return (mean[0], var[0]) if single else (mean, var)
 
     def _check_input_var(self, input_var: Any) -> np.ndarray:
