@@ -104,6 +104,26 @@ class SavGol:
             raise ValueError(
                 f"SavGol.polyorder: expected 1 <= polyorder < window, got {self.polyorder}")
 
+    def noise_gain(self, dt: float) -> float:
+        r"""Variance gain of the differentiating filter for white noise on the velocities, in s⁻².
+
+        In the interior of a segment the filter is a fixed linear combination
+        :math:`\hat{\ddot q}_t = \sum_k c_k \dot q_{t+k}` (``scipy.signal.savgol_coeffs(window, polyorder,
+        deriv=1, delta=dt)``), so independent velocity noise of variance :math:`\sigma^2_{\dot q}` gives the
+        acceleration noise variance :math:`\sigma^2_{\ddot q} = \sigma^2_{\dot q} \sum_k c_k^2`; this returns
+        :math:`\sum_k c_k^2`. (Window 9, order 2, ``dt`` = 0.01 s: :math:`c_k = k / (60\,dt)`, gain
+        :math:`1 / (60\,dt^2)` = 166.7 s⁻².) The centre coefficient of a centred first-derivative filter is 0,
+        so that acceleration noise is uncorrelated with the velocity noise of the same sample. The
+        ``window // 2`` samples at each end of a segment (``mode="interp"``) use other, noisier
+        coefficients; they are not covered.
+        """
+        if not np.isfinite(dt) or dt <= 0:
+            raise ValueError(f"dt: expected a positive sample period (s), got {dt!r}")
+        from scipy.signal import savgol_coeffs
+
+        c = savgol_coeffs(self.window, self.polyorder, deriv=1, delta=float(dt), use="dot")
+        return float(np.sum(c * c))
+
 
 @dataclass(frozen=True, eq=False)
 class DynamicsData:

@@ -5,6 +5,13 @@ training subsets (10 Hz, as the study) and predict the held-out test motions. Pe
 measured torques inside the 95 % predictive interval is reported for the variance *given the chained mean*
 (``propagate=False``, the paper's) and the *propagated* one (``propagate=True``); both add the fitted noise
 variance, since the targets are measurements. A calibrated model covers about 0.95.
+
+With ``input_var`` (:func:`sensor_input_var`) the propagated variance plus the test-time input-noise term
+(``predict(..., input_var=...)``) is scored too. Diagnostics per fit: the fitted noise std, the factor on the
+predictive std that 95 % coverage of the test torques would need, and the coverage on the rest of the training
+subset's own motion. :func:`compare_arms` and :func:`combined_table` compare runs (the noisy / noiseless /
+true-q̈ arms of ``docs/calibration.md``, collected with :attr:`CollectConfig.sensor_noise
+<cascgp_experiments.collect.CollectConfig.sensor_noise>` and ``qdd_source``).
 """
 
 from __future__ import annotations
@@ -14,35 +21,76 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy.stats import norm
 
-from cascgp.data import DynamicsData
+from cascgp.data import DynamicsData, SavGol
 from cascgp.gp import GPFitConfig
 from cascgp.metrics import interval_coverage
 from cascgp.models import make_model
 from cascgp.rbd import load_nominal
 from cascgp_experiments.common import NOMINAL_URDF
 
-__all__ = ["CASCADES", "calibration", "study_data"]
+__all__ = ["CASCADES", "BAND", "calibration", "combined_table", "compare_arms", "sensor_input_var", "study_data"]
+
+#: The issue's target band for the coverage of a 95 % interval.
+BAND = (0.90, 0.98)
 
 #: The cascades whose variance can be propagated (derivative-based states, as the controller uses).
 CASCADES = ("np-inward", "np-outward", "sp-inward", "sp-outward")
 
 
-def study_data(folder: str | Path | None, out: str | Path) -> tuple[DynamicsData, DynamicsData]:
-    """The study's ``jaco_train.npz``/``jaco_test.npz`` from ``folder``; without one, the quick collection
-    preset recorded into ``<out>/data`` (:mod:`cascgp_experiments.collect`)."""
-    if folder:
-        return tuple(DynamicsData.load(Path(folder) / f"jaco_{s}.npz") for s in ("train", "test"))
+def study_data(folder: str | Path | None, out: str | Path, *, preset: str = "quick", sensor_noise: str = "default",
+               qdd_source: str = "savgol", workers: int | None = None) -> tuple[DynamicsData, DynamicsData]:
+    """The study's ``jaco_train.npz``/``jaco_test.npz`` from ``folder``; without one, the collection ``preset``
+    (:data:`cascgp_experiments.collect.PRESETS`) with ``sensor_noise`` and ``qdd_source`` (see
+    :class:`~cascgp_experiments.collect.CollectConfig`) recorded into ``<out>/data`` on ``workers`` processes
+    (``None``: every core), or reused from there when present with the same settings.
+
+    The collection options only apply to a new collection: with ``folder``, anything but the defaults is a
+    ``ValueError`` (the files are used as they were recorded)."""
+    from dataclasses import replace
+
     from cascgp_experiments.collect import PRESETS, collect
 
-    train, test, _ = collect(Path(out) / "data", PRESETS["quick"])
+    if folder:
+        if (sensor_noise, qdd_source) != ("default", "savgol"):
+            raise ValueError(f"sensor_noise={sensor_noise!r}/qdd_source={qdd_source!r} only apply to a new "
+                             f"collection, not to the files in {folder!s} (leave out the data folder)")
+        return tuple(DynamicsData.load(Path(folder) / f"jaco_{s}.npz") for s in ("train", "test"))
+    if preset not in PRESETS:
+        raise ValueError(f"preset: expected one of {tuple(PRESETS)}, got {preset!r}")
+    cfg = replace(PRESETS[preset], sensor_noise=sensor_noise, qdd_source=qdd_source)
+    train, test, _ = collect(Path(out) / "data", cfg, workers=workers)
     return train, test
+
+
+def sensor_input_var(collection: dict, dof: int) -> np.ndarray:
+    """Variances of the noise of the GP's measured inputs, (dof, 3) = ``(q, qd, qdd)`` per joint, from physics:
+    the env's sensor model (``jaco_env.SensorNoise()``, or none for ``sensor_noise="none"``) for q and qd, and
+    for the filtered qdd the velocity noise times the Savitzky-Golay filter's gain at the recording rate
+    (:meth:`cascgp.data.SavGol.noise_gain`; 0 for ``qdd_source="true"``). ``collection``: a data file's
+    ``meta["collection"]`` (:class:`cascgp_experiments.collect.CollectConfig` as a dict)."""
+    from jaco_env import SensorNoise
+
+    if not isinstance(collection, dict) or not {"rate_hz", "savgol_window", "savgol_polyorder"} <= set(collection):
+        raise ValueError("collection: expected the meta['collection'] of a collected Jaco file (rate_hz, savgol_window,"
+                         f" savgol_polyorder), got {collection!r}")
+    sn = SensorNoise.none() if collection.get("sensor_noise", "default") == "none" else SensorNoise()
+    gain = SavGol(int(collection["savgol_window"]), int(collection["savgol_polyorder"])).noise_gain(
+        1.0 / float(collection["rate_hz"]))
+    qdd_var = 0.0 if collection.get("qdd_source", "savgol") == "true" else sn.qd_std**2 * gain
+    return np.tile([sn.q_std**2, sn.qd_std**2, qdd_var], (int(dof), 1))
 
 
 def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float, ...] = (10.0, 30.0),
                 n_subsets: int = 3, models: tuple[str, ...] = CASCADES, rate_hz: float = 10.0,
-                n_restarts: int = 3, level: float = 0.95, progress=None) -> dict[str, Any]:
+                n_restarts: int = 3, level: float = 0.95, input_var: np.ndarray | None = None,
+                progress=None) -> dict[str, Any]:
     """Coverage per model, training size, subset and joint (see the module docstring).
+
+    ``input_var`` (dof, 3): variances of the input noise (:func:`sensor_input_var`); with it a third
+    variance, the propagated one plus the test-time input-noise term (``predict(..., input_var=...)``), is
+    scored as ``coverage_input_noise``.
 
     Returns a JSON-serialisable dict: ``rows`` (one per model, seconds, subset, with ``coverage_mean_input``
     and ``coverage_propagated`` lists per joint) and ``summary`` (per model and seconds: the median over
@@ -63,9 +111,31 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
                 for prop in (False, True):
                     mean, var = m.predict(test10.q, test10.qd, test10.qdd, propagate=prop)
                     cov[prop] = interval_coverage(mean, var + m.noise_var, test10.tau, level)
+                # (mean, var): the propagated prediction from here on
+                # diagnostics: the factor on the predictive std that would make the 95 % interval cover 95 % of
+                # the test torques, and the coverage on the rest of the training subset's own motion (rows after
+                # the first `secs`, same excitation, states near the training ones)
+                sd = np.sqrt(var + m.noise_var)
+                scale = np.quantile(np.abs(test10.tau - mean) / np.maximum(sd, 1e-300), level, axis=0) / float(
+                    norm.ppf(0.5 + 0.5 * level))
+                sub10 = sub.subsample(rate_hz)
+                n_rest = sub10.n_samples - data.n_samples
                 rows.append({"model": name, "seconds": secs, "subset": k, "n_train": data.n_samples,
                              "coverage_mean_input": cov[False].tolist(), "coverage_propagated": cov[True].tolist(),
-                             "fit_s": time.perf_counter() - t0})
+                             "noise_std": np.sqrt(m.noise_var).tolist(), "std_scale_for_level": scale.tolist(),
+                             "n_same_motion_rest": n_rest})
+                if n_rest > 0:
+                    rest = sub10.take(np.arange(data.n_samples, sub10.n_samples))
+                    mr, vr = m.predict(rest.q, rest.qd, rest.qdd, propagate=True)
+                    rows[-1]["coverage_same_motion_rest"] = interval_coverage(mr, vr + m.noise_var, rest.tau,
+                                                                              level).tolist()
+                if input_var is not None:
+                    _, var_in = m.predict(test10.q, test10.qd, test10.qdd, propagate=True, input_var=input_var)
+                    rows[-1]["coverage_input_noise"] = interval_coverage(mean, var_in + m.noise_var, test10.tau,
+                                                                         level).tolist()
+                    # the input-noise term's size: median over the test rows of its std, per joint (N m)
+                    rows[-1]["input_noise_std"] = np.median(np.sqrt(np.maximum(var_in - var, 0.0)), 0).tolist()
+                rows[-1]["fit_s"] = time.perf_counter() - t0
                 if progress is not None:
                     progress(rows[-1])
     summary = {}
@@ -74,19 +144,29 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
             sel = [r for r in rows if r["model"] == name and r["seconds"] == secs]
             summary[f"{name}@{secs:g}s"] = {
                 key: np.median(np.array([r[key] for r in sel]), axis=0).round(4).tolist()
-                for key in ("coverage_mean_input", "coverage_propagated")}
-    return {"level": level, "rate_hz": rate_hz, "n_subsets": len(subsets), "n_test_rows": test10.n_samples,
-            "rows": rows, "summary": summary}
+                for key in ("coverage_mean_input", "coverage_propagated", "coverage_input_noise", "noise_std",
+                            "input_noise_std", "std_scale_for_level", "coverage_same_motion_rest")
+                if all(key in r for r in sel)}
+    return {"level": level, "rate_hz": rate_hz, "n_subsets": len(subsets), "n_restarts": n_restarts,
+            "n_test_rows": test10.n_samples, "collection": train.meta.get("collection"),
+            "input_var": None if input_var is None else np.asarray(input_var).tolist(),
+            "qdd_source": train.meta.get("qdd_source"), "rows": rows, "summary": summary}
 
 
 def summary_table(res: dict[str, Any]) -> str:
-    """Markdown: median coverage per joint, mean-input vs propagated variance."""
+    """Markdown: median coverage per joint, mean-input vs propagated variance (and the median fitted noise
+    std in N m, when the result has it)."""
     dof = len(next(iter(res["summary"].values()))["coverage_mean_input"])
     head = "| model @ data | variance | " + " | ".join(f"J{j + 1}" for j in range(dof)) + " |"
     lines = [head, "|" + "---|" * (dof + 2)]
     for key, s in res["summary"].items():
-        for label, field in (("given mean input", "coverage_mean_input"), ("propagated", "coverage_propagated")):
-            lines.append(f"| {key} | {label} | " + " | ".join(f"{v:.3f}" for v in s[field]) + " |")
+        for label, field in (("given mean input", "coverage_mean_input"), ("propagated", "coverage_propagated"),
+                             ("propagated + input noise", "coverage_input_noise"),
+                             ("propagated, rest of the training motion", "coverage_same_motion_rest"),
+                             ("std factor for 95 % (propagated)", "std_scale_for_level"),
+                             ("fitted noise std (N m)", "noise_std"), ("input-noise std (N m)", "input_noise_std")):
+            if field in s:
+                lines.append(f"| {key} | {label} | " + " | ".join(f"{v:.3f}" for v in s[field]) + " |")
     return "\n".join(lines)
 
 
@@ -96,3 +176,41 @@ def write(res: dict[str, Any], out: str | Path) -> None:
     out = Path(out)
     write_json(out / "calibration.json", res)
     atomic_write_text(out / "calibration.md", summary_table(res) + "\n")
+
+
+def compare_arms(arms: dict[str, dict[str, Any]], field: str = "coverage_propagated", base: str | None = None) -> str:
+    """Markdown: the decision statistics of ``docs/calibration.md`` for each arm (a :func:`calibration` result):
+    over all cells (model @ seconds x joint, each the median over subsets) of ``field``, the median cell, the
+    range, the number of cells in :data:`BAND`, and against the arm ``base`` (default: the first) the median of
+    the paired change per cell."""
+    names = list(arms)
+    base = base or names[0]
+
+    def cells(res: dict[str, Any]) -> np.ndarray:
+        return np.array([s[field] for _, s in sorted(res["summary"].items())], float).ravel()
+
+    ref = cells(arms[base])
+    lines = [f"| arm | cells | median | min - max | in {BAND[0]:.2f}-{BAND[1]:.2f} | median change vs {base} |",
+             "|---|---|---|---|---|---|"]
+    for name in names:
+        c = cells(arms[name])
+        if c.shape != ref.shape:
+            raise ValueError(f"arm {name!r}: {c.size} cells, the base arm {base!r} has {ref.size}")
+        inside = int(((c >= BAND[0]) & (c <= BAND[1])).sum())
+        lines.append(f"| {name} | {c.size} | {np.median(c):.3f} | {c.min():.3f} - {c.max():.3f} | {inside} | "
+                     f"{np.median(c - ref):+.3f} |")
+    return "\n".join(lines)
+
+
+def combined_table(arms: dict[str, dict[str, Any]], field: str = "coverage_propagated") -> str:
+    """Markdown: ``field`` (medians over subsets, per joint) of several arms side by side, one row per model @
+    seconds and arm."""
+    first = next(iter(arms.values()))
+    dof = len(next(iter(first["summary"].values()))[field])
+    lines = ["| model @ data | arm | " + " | ".join(f"J{j + 1}" for j in range(dof)) + " |", "|" + "---|" * (dof + 2)]
+    for key in first["summary"]:
+        for name, res in arms.items():
+            vals = res["summary"][key].get(field)
+            cells = " | ".join(f"{v:.3f}" for v in vals) if vals is not None else " | ".join("-" * dof)
+            lines.append(f"| {key} | {name} | {cells} |")
+    return "\n".join(lines)

@@ -38,14 +38,18 @@ it gains: on the 2-core machine (load average 0.1-0.8 from other work) the full 
 serially, 14 s as jobs on 2 processes and 46 s in a 2-env ``AsyncVectorEnv``
 (``python -m scripts.bench_parallel --cases collect-full``, ``docs/bench/parallel_collect_full.json``).
 
+Ablations (``docs/calibration.md``, not the study's data): ``sensor_noise="none"`` records noiseless measurements
+(the motions are the same: the command is open loop and the firmware acts on the simulator's state);
+``qdd_source="true"`` stores the simulator's true accelerations instead of the filtered ones.
+
 Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N]
-[--ray ADDRESS]``.
+[--ray ADDRESS] [--sensor-noise none] [--qdd true]``.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -71,6 +75,13 @@ class CollectConfig:
     warmup_seconds: float = 2.0
     savgol_window: int = 9
     savgol_polyorder: int = 2
+    #: ``"default"``: the env's ``SensorNoise()``; ``"none"``: noiseless measurements (``SensorNoise.none()``),
+    #: the ablation of ``docs/calibration.md``. The motions do not depend on it (open-loop command, the
+    #: firmware loop acts on the simulator's state); the random stream is the same (noise is always drawn).
+    sensor_noise: str = "default"
+    #: ``"savgol"``: q̈ from the measured q̇ by the Savitzky-Golay filter (the study's); ``"true"``: the
+    #: simulator's true accelerations ``info["qacc"]`` (privileged; for the calibration ablation only).
+    qdd_source: str = "savgol"
 
     def __post_init__(self) -> None:
         for name in ("n_subsets", "n_test"):
@@ -89,6 +100,23 @@ class CollectConfig:
                              f"window, got {self.savgol_window!r}/{self.savgol_polyorder!r}")
         if not np.isfinite(self.payload_mass) or self.payload_mass < 0:
             raise ValueError(f"payload_mass: expected a mass >= 0 (kg), got {self.payload_mass!r}")
+        if self.sensor_noise not in SENSOR_NOISE:
+            raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {self.sensor_noise!r}")
+        if self.qdd_source not in QDD_SOURCES:
+            raise ValueError(f"qdd_source: expected one of {QDD_SOURCES}, got {self.qdd_source!r}")
+
+
+#: Values of :attr:`CollectConfig.sensor_noise` and :attr:`CollectConfig.qdd_source`.
+SENSOR_NOISE = ("default", "none")
+QDD_SOURCES = ("savgol", "true")
+#: Fields added after the study data were collected, with the value those data had (for the reuse check).
+_LATER_FIELDS = {"sensor_noise": "default", "qdd_source": "savgol"}
+
+
+def same_collection(stored: dict | None, cfg: CollectConfig) -> bool:
+    """Whether a file's ``meta["collection"]`` was collected with ``cfg`` (files written before
+    ``sensor_noise``/``qdd_source`` existed had their defaults)."""
+    return isinstance(stored, dict) and {**_LATER_FIELDS, **stored} == asdict(cfg)
 
 
 PRESETS: dict[str, CollectConfig] = {
@@ -110,14 +138,18 @@ def _command_source(seed: int, duration: float) -> Callable[[float], np.ndarray]
     return excitation.make_command(seed=seed, duration=duration)
 
 
-def make_env(rate_hz: float, payload_mass: float):
-    """The collection's env: ``JacoPayload-v0`` in velocity mode at ``rate_hz``, no episode time limit."""
+def make_env(rate_hz: float, payload_mass: float, sensor_noise: str = "default"):
+    """The collection's env: ``JacoPayload-v0`` in velocity mode at ``rate_hz``, no episode time limit;
+    ``sensor_noise="none"``: noiseless measurements (see :attr:`CollectConfig.sensor_noise`)."""
     import gymnasium as gym
 
     import jaco_env  # noqa: F401  (registers the environments)
 
+    if sensor_noise not in SENSOR_NOISE:
+        raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {sensor_noise!r}")
+    kw = {"sensor_noise": None} if sensor_noise == "none" else {}
     return gym.make(ENV_ID, control_mode="velocity", control_freq=float(rate_hz),
-                    payload_mass=float(payload_mass), max_episode_steps=10**9)
+                    payload_mass=float(payload_mass), max_episode_steps=10**9, **kw)
 
 
 def _steps(duration: float, cfg: CollectConfig) -> tuple[int, int]:
@@ -136,6 +168,9 @@ def _record(seed: int, rows: np.ndarray, qacc: np.ndarray, cfg: CollectConfig, s
                                           smoothing=SavGol(cfg.savgol_window, cfg.savgol_polyorder),
                                           segment=np.full(t.shape, segment, dtype=np.int64))
     data.meta["qdd_error"] = qdd_error_stats(data.qdd, qacc)
+    if cfg.qdd_source == "true":
+        data = replace(data, qdd=qacc, meta={**data.meta, "qdd_source": "true joint accelerations of the "
+                                              "simulator (info['qacc'], privileged)"})
     return data
 
 
@@ -145,7 +180,7 @@ def record_motion(seed: int, duration: float, cfg: CollectConfig, *, segment: in
     """Run one velocity-commanded motion and return its measured record (qdd differentiated).
 
     ``on_steps(k)``: called every 100 steps with the number of steps done since the last call."""
-    env = make_env(cfg.rate_hz, cfg.payload_mass)
+    env = make_env(cfg.rate_hz, cfg.payload_mass, cfg.sensor_noise)
     try:
         obs, info = env.reset(seed=seed)
         command = _command_source(seed, duration)
@@ -187,7 +222,7 @@ def record_motions_vector(seeds: list[int], duration: float, cfg: CollectConfig,
     import gymnasium as gym
 
     n = len(seeds)
-    fns = [partial(make_env, cfg.rate_hz, cfg.payload_mass)] * n
+    fns = [partial(make_env, cfg.rate_hz, cfg.payload_mass, cfg.sensor_noise)] * n
     venv = (gym.vector.AsyncVectorEnv(fns, context="spawn") if asynchronous else gym.vector.SyncVectorEnv(fns))
     try:
         obs, info = venv.reset(seed=[int(s) for s in seeds])
@@ -300,7 +335,7 @@ def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: boo
     paths = {s: out / f"jaco_{s}.npz" for s in ("train", "test")}
     if not force and all(p.exists() for p in paths.values()):
         loaded = {s: DynamicsData.load(p) for s, p in paths.items()}
-        if all(d.meta.get("collection") == asdict(cfg) for d in loaded.values()):
+        if all(same_collection(d.meta.get("collection"), cfg) for d in loaded.values()):
             return loaded["train"], loaded["test"], {"reused": True, "wall_s": 0.0}
     t0 = time.perf_counter()
     parts = _record_all(cfg, workers, ray_address, vector_env)

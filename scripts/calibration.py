@@ -1,9 +1,12 @@
 """Calibration of the cascades' 95 % predictive intervals on held-out Jaco episodes (issue 10).
 
     python -m scripts.calibration --data out/study/data --out out/calibration [--seconds 10 30] [--subsets 3]
+    python -m scripts.calibration --collect full --sensor-noise none --out out/cal/noiseless [...]
 
 ``--data`` is a folder with the study's ``jaco_train.npz``/``jaco_test.npz`` (``python -m
-scripts.collect_jaco_data``); without it the quick collection preset is recorded into ``<out>/data``.
+scripts.collect_jaco_data``); without it the ``--collect`` preset (default ``quick``) is recorded into
+``<out>/data`` (or reused from there), with ``--sensor-noise none`` noiseless and ``--qdd true`` with the
+simulator's true q̈ (the ablations of ``docs/calibration.md``).
 Writes ``calibration.json`` and ``calibration.md`` into ``--out`` (see :mod:`cascgp_experiments.calibration`).
 """
 
@@ -24,21 +27,43 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--seconds", type=float, nargs="+", default=[10.0, 30.0])
     ap.add_argument("--subsets", type=int, default=3)
     ap.add_argument("--restarts", type=int, default=3)
+    ap.add_argument("--collect", default="quick", help="collection preset when there is no --data (default quick)")
+    ap.add_argument("--sensor-noise", default="default", choices=("default", "none"),
+                    help="new collection only: the env's SensorNoise() or noiseless sensors")
+    ap.add_argument("--qdd", default="savgol", choices=("savgol", "true"),
+                    help="new collection only: q̈ from the Savitzky-Golay filter or the simulator's true q̈")
+    ap.add_argument("--workers", type=int, default=None, help="collection processes (default: every core)")
+    ap.add_argument("--input-noise", action="store_true",
+                    help="also score the propagated variance plus the test-time input-noise term, with the sensor "
+                         "noise and the filter gain of the data's collection (sensor_input_var)")
     a = ap.parse_args(argv)
+    if a.data and (a.sensor_noise != "default" or a.qdd != "savgol" or a.collect != "quick"):
+        ap.error("--collect/--sensor-noise/--qdd apply to a new collection: leave out --data")
     import time
 
     import torch
     from tqdm import tqdm
 
-    from cascgp_experiments.calibration import CASCADES, calibration, study_data, summary_table, write
+    from cascgp_experiments.calibration import (CASCADES, calibration, sensor_input_var, study_data, summary_table,
+                                                 write)
 
     torch.set_num_threads(1)
     out = Path(a.out)
-    train, test = study_data(a.data, out)
+    try:
+        train, test = study_data(a.data, out, preset=a.collect, sensor_noise=a.sensor_noise, qdd_source=a.qdd,
+                                 workers=a.workers)
+    except ValueError as e:
+        ap.error(str(e))
+    input_var = None
+    if a.input_noise:
+        try:
+            input_var = sensor_input_var(train.meta.get("collection"), train.dof)
+        except ValueError as e:
+            ap.error(f"--input-noise: {e}")
     t0 = time.perf_counter()
     bar = tqdm(total=len(CASCADES) * len(a.seconds) * min(a.subsets, 10), desc="calibration fits")
     res = calibration(train, test, seconds=tuple(a.seconds), n_subsets=a.subsets, n_restarts=a.restarts,
-                      progress=lambda row: bar.update())
+                      input_var=input_var, progress=lambda row: bar.update())
     bar.close()
     res["wall_s"] = time.perf_counter() - t0
     res["command"] = "python -m scripts.calibration " + " ".join(argv if argv is not None else __import__("sys").argv[1:])

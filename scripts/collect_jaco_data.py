@@ -3,6 +3,7 @@
 Usage::
 
     python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N | --ray ADDRESS] [--vector-env]
+        [--sensor-noise none] [--qdd true]
 
 The protocol and the files: :mod:`cascgp_experiments.collect`.
 """
@@ -24,6 +25,10 @@ def main(argv: list[str] | None = None) -> None:
     g.add_argument("--smoke", action="store_true", help="2 x 3 s training, 1 x 4 s test")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--payload-mass", type=float, default=None, help="kg (default 0.8)")
+    ap.add_argument("--sensor-noise", default="default", choices=("default", "none"),
+                    help="the env's SensorNoise() (default) or noiseless sensors (an ablation)")
+    ap.add_argument("--qdd", default="savgol", choices=("savgol", "true"),
+                    help="q̈ from the Savitzky-Golay filter (default) or the simulator's true q̈ (an ablation)")
     ap.add_argument("--force", action="store_true", help="collect again even if files exist")
     ap.add_argument("--vector-env", action="store_true",
                     help="run the motions of a split --workers at a time in one Gymnasium AsyncVectorEnv instead of "
@@ -32,7 +37,7 @@ def main(argv: list[str] | None = None) -> None:
     a = ap.parse_args(argv)
     check_args(ap, a)
     base = PRESETS["quick" if a.quick else "smoke" if a.smoke else "full"]
-    kw = asdict(base) | {"seed": a.seed}
+    kw = asdict(base) | {"seed": a.seed, "sensor_noise": a.sensor_noise, "qdd_source": a.qdd}
     if a.payload_mass is not None:
         kw["payload_mass"] = a.payload_mass
     with session(a.ray, a.workers):

@@ -71,3 +71,92 @@ def test_single_query_mean_and_propagated_variance_equal_the_batched_path(name: 
         m1, v1 = model.predict_one_var(test.q[r], test.qd[r], test.qdd[r], hist[r] if df else None)
         np.testing.assert_allclose(m1, mean[r], rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(v1, var[r], rtol=1e-7, atol=1e-12)
+
+
+# ----------------------------------------------------------------------------- input noise (NIGP test-time term)
+@pytest.fixture(scope="module", params=["np-inward", "sp-outward"])
+def fitted(request):
+    arm = make_arm(3, friction=0.3)
+    train = sinusoid_data(arm, 6.0, 10.0, seed=1, noise=0.05)
+    name = request.param
+    model = make_model(name, 3, make_arm(3) if name.startswith("sp") else None,
+                       gp_config=GPFitConfig(n_restarts=2, max_iter=100)).fit(train)
+    return model, sinusoid_data(arm, 20.0, 10.0, seed=5)
+
+
+def test_mean_jacobian_matches_finite_differences(fitted) -> None:
+    model, test = fitted
+    rows = slice(0, 200, 25)
+    q, qd, qdd = test.q[rows], test.qd[rows], test.qdd[rows]
+    J = model.mean_jacobian(q, qd, qdd)
+    assert J.shape == (q.shape[0], 3, 3, 3)
+    h = 1e-5
+    for c, base in enumerate((q, qd, qdd)):
+        for k in range(3):
+            up, dn = [a.copy() for a in (q, qd, qdd)], [a.copy() for a in (q, qd, qdd)]
+            up[c][:, k] += h
+            dn[c][:, k] -= h
+            fd = (model.predict(*up)[0] - model.predict(*dn)[0]) / (2 * h)
+            np.testing.assert_allclose(J[:, :, k, c], fd, rtol=1e-4, atol=1e-5)  # FD round-off ~1e-6
+    np.testing.assert_allclose(model.mean_jacobian(q[0], qd[0], qdd[0]), J[0], rtol=1e-12, atol=1e-14)
+
+
+def test_input_noise_variance_matches_monte_carlo(fitted) -> None:
+    """The first-order term against the spread of the mean prediction over sampled noisy inputs."""
+    model, test = fitted
+    rng = np.random.default_rng(3)
+    sd = np.array([0.02, 0.1, 0.3])  # q, qd, qdd noise std: small against the lengthscales, visible in the mean
+    input_var = np.broadcast_to(sd**2, (3, 3))
+    mean0, var0 = model.predict(test.q, test.qd, test.qdd, propagate=True)
+    mean1, var1 = model.predict(test.q, test.qd, test.qdd, propagate=True, input_var=input_var)
+    np.testing.assert_array_equal(mean0, mean1)
+    extra = var1 - var0
+    assert np.all(extra >= 0)
+    np.testing.assert_array_equal(model.predict(test.q, test.qd, test.qdd, input_var=np.zeros(3))[1],
+                                  model.predict(test.q, test.qd, test.qdd)[1])
+    n = 4000
+    rel = []
+    for r in range(0, test.n_samples, 25):
+        x = [np.repeat(a[r][None], n, 0) + s * rng.standard_normal((n, 3))
+             for a, s in zip((test.q, test.qd, test.qdd), sd)]
+        mc = model.predict(*x)[0].var(axis=0)
+        rel.append(np.abs(extra[r] - mc) / mc)
+    rel = np.array(rel)
+    # first order, MC error about 2 % (4000 draws): median within 10 %, nearly all within 30 %
+    assert np.median(rel) < 0.10 and np.quantile(rel, 0.9) < 0.30, rel
+
+
+def test_input_var_errors() -> None:
+    arm = make_arm(2)
+    train = sinusoid_data(arm, 3.0, 10.0, seed=1, noise=0.05)
+    cfg = GPFitConfig(n_restarts=1, max_iter=20)
+    model = make_model("np-inward", 2, gp_config=cfg).fit(train)
+    q, qd, qdd = train.q[:3], train.qd[:3], train.qdd[:3]
+    with pytest.raises(ValueError, match="broadcasts"):
+        model.predict(q, qd, qdd, input_var=np.ones(4))
+    with pytest.raises(ValueError, match=">= 0"):
+        model.predict(q, qd, qdd, input_var=-np.ones(3))
+    with pytest.raises(ValueError, match="finite"):
+        model.predict(q, qd, qdd, input_var=np.full(3, np.nan))
+    df = make_model("np-inward-df", 2, gp_config=cfg).fit(train)
+    hist = np.stack([q, q], axis=1)
+    with pytest.raises(ValueError, match="derivative-based"):
+        df.predict(q, qd, qdd, hist, input_var=np.ones(3))
+    with pytest.raises(ValueError, match="derivative-based"):
+        df.mean_jacobian(q, qd, qdd)
+
+
+def test_savgol_noise_gain_is_the_variance_of_filtered_white_noise() -> None:
+    from cascgp.data import DynamicsData, SavGol
+
+    sg = SavGol(9, 2)
+    assert sg.noise_gain(0.01) == pytest.approx(1.0 / (60 * 0.01**2))
+    rng = np.random.default_rng(0)
+    t = np.arange(20000) * 0.01
+    qd = 0.005 * rng.standard_normal((t.size, 1))
+    d = DynamicsData.from_measurements(t, np.zeros_like(qd), qd, np.zeros_like(qd), smoothing=sg)
+    inner = d.qdd[4:-4, 0]
+    assert inner.var() == pytest.approx(0.005**2 * sg.noise_gain(0.01), rel=0.05)
+    assert abs(np.corrcoef(inner, qd[4:-4, 0])[0, 1]) < 0.03  # centre coefficient 0: uncorrelated
+    with pytest.raises(ValueError, match="dt"):
+        sg.noise_gain(0.0)

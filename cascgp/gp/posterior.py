@@ -69,6 +69,23 @@ class GPPosterior:
         dk = get_kernel(self.kernel).grad_r2(r2) * (2.0 * (z[:, col, None] - self.Z[None, :, col]))
         return self.y_std * self.signal_var * (dk @ self.alpha) / self.x_scale[col]
 
+    def mean_grad_all(self, x: np.ndarray) -> np.ndarray:
+        r"""Gradient of the posterior mean with respect to every input column at the rows of ``x`` ``(m, d)``,
+        ``(m, d)``: the :meth:`mean_grad` of each column at once,
+
+        .. math::
+
+            \frac{\partial\mu}{\partial x_c} = \frac{2\, y_{std}\, s_f^2}{x_{scale,c}}
+            \Big(z_c \sum_k k'(r^2_k)\,\alpha_k - \sum_k k'(r^2_k)\,\alpha_k Z_{kc}\Big)
+
+        (two matrix products; 0 for ignored columns, whose ``x_scale`` is ``inf``)."""
+        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        z = (x - self.x_mean) / self.x_scale
+        r2 = (z * z).sum(1)[:, None] + (self.Z * self.Z).sum(1)[None, :] - 2.0 * z @ self.Z.T
+        w = get_kernel(self.kernel).grad_r2(r2) * self.alpha[None, :]
+        g = z * w.sum(1)[:, None] - w @ self.Z
+        return 2.0 * self.y_std * self.signal_var * g / self.x_scale
+
 
 def robust_cholesky(K: torch.Tensor, jitter_max: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """Batched Cholesky; jitter only for the members whose factorisation fails.

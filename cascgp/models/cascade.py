@@ -284,7 +284,7 @@ class CascadedGPModel:
         return single, q, qd, qdd, q_hist
 
     def predict(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None, *,
-                propagate: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                propagate: bool = False, input_var: Any = None) -> tuple[np.ndarray, np.ndarray]:
         r"""Predicted joint torques.
 
         Args:
@@ -293,6 +293,9 @@ class CascadedGPModel:
             propagate: cascades only: add the uncertainty of the neighbour's predicted torque to each
                 joint's variance (first-order propagation, below). ``False`` keeps the variance given the
                 chained mean input.
+            input_var: derivative-based models only: variances of the noise of the measured inputs, broadcast
+                to (N, 3) = ``(q_j, qd_j, qdd_j)`` per joint (rad², (rad/s)², (rad/s²)²), independent; adds the
+                test-time input-noise term below. ``None`` (default): inputs are taken as exact.
 
         Returns:
             ``mean``, ``var``: (T, N) (or (N,) for (N,) inputs).  ``mean`` is the full torque
@@ -313,11 +316,104 @@ class CascadedGPModel:
         of second order in :math:`\sqrt{v_t}` over the GP's lengthscale in the torque input; a test
         compares it with Monte Carlo sampling of the cascade. In an SP model the rigid-body part is
         deterministic, so only the GP part carries variance.
+
+        Input noise (``input_var``; NIGP's test-time term, McHutchon & Rasmussen 2011): the query is a noisy
+        measurement :math:`\tilde s = s + \epsilon`, :math:`\epsilon \sim \mathcal N(0, \mathrm{diag}
+        (\sigma^2_s))` over the 3N state entries :math:`s = (q_k, \dot q_k, \ddot q_k)_k`. To first order the
+        predicted torque moves by :math:`J \epsilon`, with :math:`J_{j,s} = d\mu_j / ds` the *total*
+        derivative of the cascaded mean (:meth:`mean_jacobian`: the GP's own state inputs, the chained
+        neighbour torque :math:`d\mu_j/ds \mathrel{+}= \partial\mu_j/\partial\tau \; d\mu_t/ds`, and for SP
+        models the rigid-body torque), so
+
+        .. math::
+
+            v_j \mathrel{+}= \sum_s J_{j,s}^2\, \sigma^2_s .
+
+        It is added after the propagation, which carries only the GP (latent) variance of the neighbour, so
+        the input noise, shared by the whole chain, is counted once. The term is not fitted: the caller passes
+        the sensors' variances (e.g. from the sensor model and :meth:`cascgp.data.SavGol.noise_gain`). The
+        training inputs were noisy too; their effect is in the fitted noise variance, as in an exact GP.
         """
         self._require_fitted()
         single, q, qd, qdd, q_hist = self._check_queries(q, qd, qdd, q_hist)
+        input_var = self._check_input_var(input_var) if input_var is not None else None
         mean, var = self._predict_arrays(q, qd, qdd, q_hist, return_var=True, propagate=propagate)
+        if input_var is not None:
+            var = var + self._input_noise_var(q, qd, qdd, input_var)
         return (mean[0], var[0]) if single else (mean, var)
+
+    def _check_input_var(self, input_var: Any) -> np.ndarray:
+        if self.feature_kind != "db":
+            raise ValueError(f"input_var: the input-noise term needs a derivative-based model (states q, qd, qdd), "
+                             f"got {self.name!r}")
+        v = as_real_array("input_var", input_var, "(N, 3)")
+        try:
+            v = np.broadcast_to(v, (self.dof, 3)).astype(np.float64)
+        except ValueError:
+            raise ValueError(f"input_var: expected a shape that broadcasts to ({self.dof}, 3) (q, qd, qdd "
+                             f"variances per joint), got {v.shape}") from None
+        if not (np.isfinite(v).all() and (v >= 0).all()):
+            raise ValueError("input_var: expected finite variances >= 0")
+        return v
+
+    def mean_jacobian(self, q: Any, qd: Any, qdd: Any) -> np.ndarray:
+        r"""Total derivative of the predicted (cascaded) mean torque with respect to the measured states.
+
+        Args:
+            q, qd, qdd: (T, N) or (N,) (derivative-based models only).
+
+        Returns:
+            ``J`` (T, N, N, 3) (or (N, N, 3)): ``J[t, j, k, c]`` = :math:`d\mu_j / d s_{k,c}` at row ``t`` with
+            :math:`s_k = (q_k, \dot q_k, \ddot q_k)`, through the chained neighbour torques and (SP) the
+            rigid-body torque (see :meth:`predict`). The GP parts are in closed form
+            (:meth:`cascgp.gp.posterior.GPPosterior.mean_grad_all`; 0 where an input is clipped); the rigid-body
+            part by central differences of ``rbd.inverse_dynamics``.
+        """
+        self._require_fitted()
+        if self.feature_kind != "db":
+            raise ValueError(f"mean_jacobian: needs a derivative-based model (states q, qd, qdd), got {self.name!r}")
+        single, q, qd, qdd, _ = self._check_queries(q, qd, qdd, None)
+        J = self._mean_jacobian_arrays(q, qd, qdd).reshape(q.shape[0], self.dof, self.dof, 3)
+        return J[0] if single else J
+
+    def _mean_jacobian_arrays(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+        """(T, N, 3N) total Jacobian of the mean (state columns ``3 k + c`` as in the flattened states)."""
+        T, N = q.shape
+        sflat = self._states(q, qd, qdd, None).reshape(T, -1)
+        mean, _ = self._predict_arrays(q, qd, qdd, None, return_var=False)  # the chained torque inputs
+        J = self._rbd_jacobian(q, qd, qdd) if self.parametric == "sp" else np.zeros((T, N, 3 * N))
+        for j in self.order:  # cascade order: J[:, tj] is complete before joint j uses it
+            sj, tj = self.specs[j]
+            cols = np.concatenate([[3 * s, 3 * s + 1, 3 * s + 2] for s in sj])
+            x = sflat[:, cols]
+            if tj is not None:
+                x = np.concatenate([x, mean[:, tj:tj + 1]], axis=1)
+            P = self._post[j]
+            g = P.mean_grad_all(_clipped(P, x)) * (np.abs((x - P.x_mean) / P.x_scale) <= ZCLIP)
+            J[:, j, cols] += g[:, :len(cols)]
+            if tj is not None:
+                J[:, j] += g[:, -1:] * J[:, tj]
+        return J
+
+    def _rbd_jacobian(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, h: float = 1e-6) -> np.ndarray:
+        """(T, N, 3N) derivative of the rigid-body torque by central differences (step ``h``)."""
+        T, N = q.shape
+        J = np.empty((T, N, 3 * N))
+        for c, which in enumerate(("q", "qd", "qdd")):
+            for k in range(N):
+                args = {"q": q, "qd": qd, "qdd": qdd}
+                hi, lo = dict(args), dict(args)
+                hi[which] = args[which].copy()
+                lo[which] = args[which].copy()
+                hi[which][:, k] += h
+                lo[which][:, k] -= h
+                J[:, :, 3 * k + c] = (self._rbd_torque(**hi) - self._rbd_torque(**lo)) / (2.0 * h)
+        return J
+
+    def _input_noise_var(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, input_var: np.ndarray) -> np.ndarray:
+        r"""(T, N) input-noise variance :math:`\sum_s J_{j,s}^2 \sigma_s^2` (see :meth:`predict`)."""
+        J = self._mean_jacobian_arrays(q, qd, qdd)
+        return (J * J) @ input_var.reshape(-1)
 
     @property
     def noise_var(self) -> np.ndarray:

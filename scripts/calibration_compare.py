@@ -1,0 +1,43 @@
+"""Compare calibration runs (the arms of ``docs/calibration.md``): decision statistics and per-joint tables.
+
+    python -m scripts.calibration_compare noisy=out/cal/noisy noiseless=out/cal/noiseless [...] [--base noisy]
+
+Each ``NAME=DIR`` is a folder with a ``calibration.json`` of ``python -m scripts.calibration``; prints Markdown
+(:func:`cascgp_experiments.calibration.compare_arms` and :func:`~cascgp_experiments.calibration.combined_table`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("arms", nargs="+", metavar="NAME=DIR")
+    ap.add_argument("--base", default=None, help="the arm the changes are taken against (default: the first)")
+    a = ap.parse_args(argv)
+    from cascgp.io import read_json
+    from cascgp_experiments.calibration import combined_table, compare_arms
+
+    arms = {}
+    for spec in a.arms:
+        name, sep, folder = spec.partition("=")
+        if not sep or not name or not folder:
+            ap.error(f"expected NAME=DIR, got {spec!r}")
+        path = Path(folder) / "calibration.json"
+        if not path.is_file():
+            ap.error(f"{name}: no {path}")
+        arms[name] = read_json(path)
+    if a.base is not None and a.base not in arms:
+        ap.error(f"--base {a.base!r}: not one of {list(arms)}")
+    try:
+        for field, title in (("coverage_propagated", "propagated"), ("coverage_mean_input", "given mean input")):
+            print(f"Coverage, {title} variance, over all cells:\n\n{compare_arms(arms, field, a.base)}\n")
+            print(f"Per joint ({title}):\n\n{combined_table(arms, field)}\n")
+    except ValueError as e:
+        ap.error(str(e))
+
+
+if __name__ == "__main__":
+    main()

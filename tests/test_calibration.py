@@ -1,0 +1,162 @@
+"""Tests of the calibration ablations (``docs/calibration.md``): the collection's ``sensor_noise`` and
+``qdd_source`` options, the reuse check for files written before they existed, and the command line's
+error paths. The collections here are a few seconds of simulation (well under a second each)."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cascgp.data import DynamicsData
+
+REPO = Path(__file__).resolve().parents[1]
+
+pytest.importorskip("jaco_env.excitation")
+
+from cascgp_experiments.collect import CollectConfig, collect, same_collection  # noqa: E402
+
+#: A tiny collection: 1 training and 1 test motion of 1.5 s after a 0.2 s warm-up.
+TINY = CollectConfig(n_subsets=1, subset_seconds=1.5, n_test=1, test_seconds=1.5, warmup_seconds=0.2)
+
+
+def test_collect_config_rejects_unknown_options() -> None:
+    with pytest.raises(ValueError, match="sensor_noise"):
+        CollectConfig(sensor_noise="low")
+    with pytest.raises(ValueError, match="qdd_source"):
+        CollectConfig(qdd_source="central")
+    from cascgp_experiments.collect import make_env
+
+    with pytest.raises(ValueError, match="sensor_noise"):
+        make_env(100.0, 0.8, "off")
+
+
+def test_same_collection_accepts_files_from_before_the_options() -> None:
+    old = {k: v for k, v in asdict(CollectConfig()).items() if k not in ("sensor_noise", "qdd_source")}
+    assert same_collection(old, CollectConfig())
+    assert not same_collection(old, CollectConfig(sensor_noise="none"))
+    assert not same_collection(old, CollectConfig(qdd_source="true"))
+    assert same_collection(asdict(CollectConfig(sensor_noise="none")), CollectConfig(sensor_noise="none"))
+    assert not same_collection(None, CollectConfig())
+
+
+@pytest.fixture(scope="module")
+def arms(tmp_path_factory) -> dict[str, tuple[DynamicsData, DynamicsData]]:
+    root = tmp_path_factory.mktemp("arms")
+    out = {}
+    for name, cfg in (("noisy", TINY), ("noiseless", replace(TINY, sensor_noise="none")),
+                      ("true", replace(TINY, sensor_noise="none", qdd_source="true"))):
+        train, test, info = collect(root / name, cfg, workers=1)
+        assert not info["reused"]
+        out[name] = (train, test)
+    return out
+
+
+def test_noiseless_arm_is_the_same_motion_without_the_noise(arms) -> None:
+    (n_tr, _), (z_tr, _) = arms["noisy"], arms["noiseless"]
+    assert z_tr.meta["collection"]["sensor_noise"] == "none"
+    assert n_tr.meta["collection"]["sensor_noise"] == "default"
+    # Same motion: the differences are the sensor noise (q 5e-4 rad, qd 5e-3 rad/s, tau 0.1 N m), no drift.
+    for key, std in (("q", 5e-4), ("qd", 5e-3), ("tau", 0.1)):
+        d = getattr(z_tr, key) - getattr(n_tr, key)
+        assert 0.5 * std < d.std() < 1.5 * std and np.abs(d).max() < 6 * std
+    np.testing.assert_array_equal(z_tr.t, n_tr.t)
+
+
+def test_true_qdd_arm_uses_the_simulator_accelerations(arms) -> None:
+    (z_tr, z_te), (t_tr, t_te) = arms["noiseless"], arms["true"]
+    for z, t in ((z_tr, t_tr), (z_te, t_te)):
+        for key in ("q", "qd", "tau", "t"):
+            np.testing.assert_array_equal(getattr(z, key), getattr(t, key))
+        assert "true joint accelerations" in t.meta["qdd_source"]
+        assert "Savitzky" in z.meta["qdd_source"]
+        # the filtered estimate differs from the truth by the RMSE recorded in the meta
+        rmse = np.sqrt(np.mean((z.qdd - t.qdd) ** 2, axis=0))
+        np.testing.assert_allclose(rmse, z.meta["qdd_error"]["est_rmse"], rtol=1e-9)
+
+
+def test_collect_reuses_files_written_before_the_options(arms, tmp_path: Path) -> None:
+    train, test = arms["noisy"]
+    for split, d in (("train", train), ("test", test)):
+        meta = dict(d.meta)
+        meta["collection"] = {k: v for k, v in meta["collection"].items() if k not in ("sensor_noise", "qdd_source")}
+        replace(d, meta=meta).save(tmp_path / f"jaco_{split}.npz")
+    assert collect(tmp_path, TINY, workers=1)[2]["reused"]
+
+
+def test_study_data_rejects_collection_options_with_a_folder(tmp_path: Path) -> None:
+    from cascgp_experiments.calibration import study_data
+
+    with pytest.raises(ValueError, match="new collection"):
+        study_data(tmp_path, tmp_path, sensor_noise="none")
+    with pytest.raises(ValueError, match="preset"):
+        study_data(None, tmp_path, preset="huge")
+
+
+def test_cli_rejects_data_with_collection_options(tmp_path: Path) -> None:
+    run = subprocess.run([sys.executable, "-m", "scripts.calibration", "--data", str(tmp_path), "--out", str(tmp_path),
+                          "--sensor-noise", "none"], cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "leave out --data" in run.stderr
+
+
+def test_sensor_input_var_from_the_sensor_model_and_the_filter() -> None:
+    from cascgp_experiments.calibration import sensor_input_var
+
+    v = sensor_input_var(asdict(CollectConfig()), 6)
+    assert v.shape == (6, 3)
+    # q 5e-4 rad, qd 5e-3 rad/s; qdd: window 9, order 2 at 100 Hz, gain 1 / (60 dt^2) = 166.7 s^-2
+    np.testing.assert_allclose(v[0], [5e-4**2, 5e-3**2, 5e-3**2 / (60 * 0.01**2)], rtol=1e-12)
+    assert not sensor_input_var(asdict(CollectConfig(sensor_noise="none")), 6).any()
+    assert sensor_input_var(asdict(CollectConfig(qdd_source="true")), 6)[:, 2].max() == 0.0
+    old = {k: v for k, v in asdict(CollectConfig()).items() if k not in ("sensor_noise", "qdd_source")}
+    np.testing.assert_array_equal(sensor_input_var(old, 6), v)
+    with pytest.raises(ValueError, match="collection"):
+        sensor_input_var(None, 6)
+
+
+def test_calibration_scores_the_input_noise_variance(arms) -> None:
+    from cascgp_experiments.calibration import calibration, sensor_input_var, summary_table
+
+    train, test = arms["noisy"]
+    iv = sensor_input_var(train.meta["collection"], train.dof)
+    res = calibration(train, test, seconds=(1.0,), n_subsets=1, models=("np-inward", "sp-outward"), n_restarts=1,
+                      input_var=iv)
+    assert res["input_var"] == iv.tolist() and res["collection"]["sensor_noise"] == "default"
+    for row in res["rows"]:
+        # more variance: the coverage can only rise
+        assert np.all(np.array(row["coverage_input_noise"]) >= np.array(row["coverage_propagated"]))
+        assert len(row["input_noise_std"]) == 6 and min(row["input_noise_std"]) >= 0
+    assert "propagated + input noise" in summary_table(res) and "input-noise std" in summary_table(res)
+    for row in res["rows"]:  # diagnostics: the rest of the training motion, the std factor for 95 %
+        assert ("coverage_same_motion_rest" in row) == (row["n_same_motion_rest"] > 0)
+        assert len(row["std_scale_for_level"]) == 6 and min(row["std_scale_for_level"]) >= 0
+    plain = calibration(train, test, seconds=(1.0,), n_subsets=1, models=("np-inward",), n_restarts=1)
+    assert "coverage_input_noise" not in plain["rows"][0] and "input noise" not in summary_table(plain)
+
+
+def _fake_result(cov: list[list[float]]) -> dict:
+    return {"summary": {f"m@{k}s": {"coverage_propagated": c, "coverage_mean_input": c} for k, c in enumerate(cov)}}
+
+
+def test_compare_arms_counts_cells_in_the_band_and_paired_changes() -> None:
+    from cascgp_experiments.calibration import combined_table, compare_arms
+
+    a = _fake_result([[0.80, 0.85], [0.90, 0.99]])
+    b = _fake_result([[0.90, 0.95], [0.91, 0.97]])
+    lines = compare_arms({"a": a, "b": b}).splitlines()
+    assert lines[2] == "| a | 4 | 0.875 | 0.800 - 0.990 | 1 | +0.000 |"
+    assert lines[3] == "| b | 4 | 0.930 | 0.900 - 0.970 | 4 | +0.055 |"  # paired changes +.10 +.10 +.01 -.02
+    assert "| m@1s | b | 0.910 | 0.970 |" in combined_table({"a": a, "b": b})
+    with pytest.raises(ValueError, match="cells"):
+        compare_arms({"a": a, "c": _fake_result([[0.9, 0.9]])})
+
+
+def test_compare_cli_errors(tmp_path: Path) -> None:
+    for args, msg in ((["noequals"], "NAME=DIR"), ([f"a={tmp_path}"], "no "),):
+        run = subprocess.run([sys.executable, "-m", "scripts.calibration_compare", *args], cwd=REPO,
+                             capture_output=True, text=True, timeout=120)
+        assert run.returncode == 2 and msg in run.stderr, run.stderr
