@@ -147,3 +147,16 @@ def test_reproduction_counts_identical_attempts() -> None:
     rep = ld.reproduction(res, ref)
     assert rep["attempts_compared"] == 2 * 2 * 12 and rep["identical"] == rep["attempts_compared"] - 1
     assert rep["max_abs_difference"] == pytest.approx(1e-3)
+
+
+def test_the_summary_page_renders_from_the_json_alone() -> None:
+    res = _fake(1.5, 2.0)
+    res["ratios"] = ld.ratios(res)
+    res["summary"] = ld.summarise(res["ratios"])
+    res["tests"] = ld.tests_of_hypotheses(res["ratios"])
+    res["wall_seconds"], res["jobs"] = 0.5, {"n_cached": 3, "n_jobs": 18, "job_seconds_sum": 40.0}
+    text = ld.summary_markdown(res)
+    assert "3 of 18 jobs from the cache" in text and "took 40 s" in text
+    assert "divergence hypothesis supported (rule 2): True" in text
+    n_null = res["summary"]["null_last"]
+    assert f"| null_last | 18 | {n_null['median']:.3f} |" in text and f"{n_null['n_meeting']} of 18 |" in text
