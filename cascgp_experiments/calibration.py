@@ -84,8 +84,8 @@ def sensor_input_var(collection: dict, dof: int) -> np.ndarray:
 
 
 def sensor_torque_var(collection: dict) -> float:
-    """The torque sensor's noise variance (N² m²) of a collection (``meta["collection"]``): ``SensorNoise().tau_std²``
-    (0.01 for the env's default sensors). ``ValueError`` for a noiseless collection (``sensor_noise="none"``), whose
+    """The torque sensor's noise variance (N² m²) of a collection (``meta["collection"]``):
+    ``SensorNoise().tau_std²`` (0.01 for the env's default sensors). ``ValueError`` for a noiseless collection (``sensor_noise="none"``), whose
     torques carry no sensor noise to bound the fit by."""
     from jaco_env import SensorNoise
 
