@@ -30,7 +30,8 @@ from cascgp.models import make_model
 from cascgp.rbd import load_nominal
 from cascgp_experiments.common import NOMINAL_URDF
 
-__all__ = ["CASCADES", "BAND", "calibration", "combined_table", "compare_arms", "sensor_input_var", "study_data"]
+__all__ = ["CASCADES", "BAND", "calibration", "combined_table", "compare_arms", "floor_effect", "sensor_input_var",
+           "sensor_torque_var", "study_data"]
 
 #: The issue's target band for the coverage of a 95 % interval.
 BAND = (0.90, 0.98)
@@ -82,15 +83,31 @@ def sensor_input_var(collection: dict, dof: int) -> np.ndarray:
     return np.tile([sn.q_std**2, sn.qd_std**2, qdd_var], (int(dof), 1))
 
 
+def sensor_torque_var(collection: dict) -> float:
+    """The torque sensor's noise variance (N² m²) of a collection (``meta["collection"]``):
+    ``SensorNoise().tau_std²`` (0.01 for the env's default sensors). ``ValueError`` for a noiseless collection (``sensor_noise="none"``), whose
+    torques carry no sensor noise to bound the fit by."""
+    from jaco_env import SensorNoise
+
+    if not isinstance(collection, dict):
+        raise ValueError(f"collection: expected the meta['collection'] of a collected Jaco file, got {collection!r}")
+    if collection.get("sensor_noise", "default") == "none":
+        raise ValueError("collection: noiseless sensors (sensor_noise='none'): there is no torque-sensor noise to "
+                         "take a noise floor from")
+    return float(SensorNoise().tau_std) ** 2
+
+
 def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float, ...] = (10.0, 30.0),
                 n_subsets: int = 3, models: tuple[str, ...] = CASCADES, rate_hz: float = 10.0,
                 n_restarts: int = 3, level: float = 0.95, input_var: np.ndarray | None = None,
-                progress=None) -> dict[str, Any]:
+                noise_floor_nm: float | None = None, progress=None) -> dict[str, Any]:
     """Coverage per model, training size, subset and joint (see the module docstring).
 
     ``input_var`` (dof, 3): variances of the input noise (:func:`sensor_input_var`); with it a third
     variance, the propagated one plus the test-time input-noise term (``predict(..., input_var=...)``), is
-    scored as ``coverage_input_noise``.
+    scored as ``coverage_input_noise``. ``noise_floor_nm``: lower bound of every joint GP's noise variance in
+    N² m² (``make_model(..., noise_floor_nm=...)``; :func:`sensor_torque_var` gives the torque sensor's);
+    ``None``: none, the default fit. Every row also has the held-out RMSE of the mean per joint (``rmse``, N m).
 
     Returns a JSON-serialisable dict: ``rows`` (one per model, seconds, subset, with ``coverage_mean_input``
     and ``coverage_propagated`` lists per joint) and ``summary`` (per model and seconds: the median over
@@ -106,7 +123,8 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
             for k, sub in enumerate(subsets):
                 t0 = time.perf_counter()
                 data = sub.subsample(rate_hz).first_seconds(secs)
-                m = make_model(name, train.dof, rbd if name.startswith("sp") else None, gp_config=cfg).fit(data)
+                m = make_model(name, train.dof, rbd if name.startswith("sp") else None, gp_config=cfg,
+                               noise_floor_nm=noise_floor_nm).fit(data)
                 cov = {}
                 for prop in (False, True):
                     mean, var = m.predict(test10.q, test10.qd, test10.qdd, propagate=prop)
@@ -123,6 +141,7 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
                 rows.append({"model": name, "seconds": secs, "subset": k, "n_train": data.n_samples,
                              "coverage_mean_input": cov[False].tolist(), "coverage_propagated": cov[True].tolist(),
                              "noise_std": np.sqrt(m.noise_var).tolist(), "std_scale_for_level": scale.tolist(),
+                             "rmse": np.sqrt(np.mean((test10.tau - mean) ** 2, axis=0)).tolist(),
                              "n_same_motion_rest": n_rest})
                 if n_rest > 0:
                     rest = sub10.take(np.arange(data.n_samples, sub10.n_samples))
@@ -145,11 +164,12 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
             summary[f"{name}@{secs:g}s"] = {
                 key: np.median(np.array([r[key] for r in sel]), axis=0).round(4).tolist()
                 for key in ("coverage_mean_input", "coverage_propagated", "coverage_input_noise", "noise_std",
-                            "input_noise_std", "std_scale_for_level", "coverage_same_motion_rest")
+                            "input_noise_std", "std_scale_for_level", "coverage_same_motion_rest", "rmse")
                 if all(key in r for r in sel)}
     return {"level": level, "rate_hz": rate_hz, "n_subsets": len(subsets), "n_restarts": n_restarts,
             "n_test_rows": test10.n_samples, "collection": train.meta.get("collection"),
             "input_var": None if input_var is None else np.asarray(input_var).tolist(),
+            "noise_floor_nm": noise_floor_nm,
             "qdd_source": train.meta.get("qdd_source"), "rows": rows, "summary": summary}
 
 
@@ -213,4 +233,47 @@ def combined_table(arms: dict[str, dict[str, Any]], field: str = "coverage_propa
             vals = res["summary"][key].get(field)
             cells = " | ".join(f"{v:.3f}" for v in vals) if vals is not None else " | ".join("-" * dof)
             lines.append(f"| {key} | {name} | {cells} |")
+    return "\n".join(lines)
+
+
+def floor_effect(base: dict[str, Any], floored: dict[str, Any], field: str = "coverage_propagated",
+                 low_std: float = 0.05) -> str:
+    """Markdown: the pre-registered statistics of the noise-floor test in ``docs/calibration.md`` for two
+    :func:`calibration` results on the same subsets, ``base`` (no floor) and ``floored``. Cells are model @ seconds
+    x joint, each the median over subsets. A cell is *collapsed* when in ``base`` at least one of its subsets'
+    fits has a noise std below ``low_std`` (N m). Reports, for all / collapsed / other cells: the count, the
+    median cell of both runs, the cells in :data:`BAND`, the median paired change and how many cells rose or fell,
+    and the median paired ratio of the held-out RMSE of the mean (floored / base) with its range."""
+    keys = sorted(base["summary"])
+    if sorted(floored["summary"]) != keys:
+        raise ValueError("floored: not the same models and training sizes as base")
+    for rb, rf in zip(base["rows"], floored["rows"]):
+        if (rb["model"], rb["seconds"], rb["subset"], rb["n_train"]) != (rf["model"], rf["seconds"], rf["subset"],
+                                                                           rf["n_train"]):
+            raise ValueError("floored: rows are not paired with base's (model, seconds, subset, n_train)")
+    c0 = np.array([base["summary"][k][field] for k in keys], float)
+    c1 = np.array([floored["summary"][k][field] for k in keys], float)
+    collapsed = np.zeros_like(c0, dtype=bool)
+    for i, k in enumerate(keys):
+        name, secs = k.rsplit("@", 1)
+        sel = [r for r in base["rows"] if r["model"] == name and f"{r['seconds']:g}s" == secs]
+        collapsed[i] = (np.array([r["noise_std"] for r in sel]) < low_std).any(axis=0)
+    have_rmse = all("rmse" in base["summary"][k] and "rmse" in floored["summary"][k] for k in keys)
+    if have_rmse:
+        ratio = np.array([floored["summary"][k]["rmse"] for k in keys]) / np.array([base["summary"][k]["rmse"]
+                                                                                     for k in keys])
+    lines = [f"| cells | n | median base | median floored | in {BAND[0]:.2f}-{BAND[1]:.2f} base -> floored | "
+             "median change | up / down / same | median RMSE ratio (range) |", "|---|---|---|---|---|---|---|---|"]
+    for label, sel in (("all", np.ones_like(collapsed)), (f"collapsed (a fit < {low_std:g} N m)", collapsed),
+                       ("other", ~collapsed)):
+        if not sel.any():
+            lines.append(f"| {label} | 0 | - | - | - | - | - | - |")
+            continue
+        a, b = c0[sel], c1[sel]
+        inb = [int(((x >= BAND[0]) & (x <= BAND[1])).sum()) for x in (a, b)]
+        d = b - a
+        rr = (f"{np.median(ratio[sel]):.3f} ({ratio[sel].min():.3f} - {ratio[sel].max():.3f})" if have_rmse
+              else "-")
+        lines.append(f"| {label} | {sel.sum()} | {np.median(a):.3f} | {np.median(b):.3f} | {inb[0]} -> {inb[1]} | "
+                     f"{np.median(d):+.3f} | {(d > 0).sum()} / {(d < 0).sum()} / {(d == 0).sum()} | {rr} |")
     return "\n".join(lines)

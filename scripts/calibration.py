@@ -6,7 +6,8 @@
 ``--data`` is a folder with the study's ``jaco_train.npz``/``jaco_test.npz`` (``python -m
 scripts.collect_jaco_data``); without it the ``--collect`` preset (default ``quick``) is recorded into
 ``<out>/data`` (or reused from there), with ``--sensor-noise none`` noiseless and ``--qdd true`` with the
-simulator's true q̈ (the ablations of ``docs/calibration.md``).
+simulator's true q̈ (the ablations of ``docs/calibration.md``). ``--noise-floor sensor`` bounds every joint GP's
+noise variance below by the torque sensor's (the noise-floor test of ``docs/calibration.md``).
 Writes ``calibration.json`` and ``calibration.md`` into ``--out`` (see :mod:`cascgp_experiments.calibration`).
 """
 
@@ -36,6 +37,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--input-noise", action="store_true",
                     help="also score the propagated variance plus the test-time input-noise term, with the sensor "
                          "noise and the filter gain of the data's collection (sensor_input_var)")
+    ap.add_argument("--noise-floor", default="none", choices=("none", "sensor"),
+                    help="lower bound of every joint GP's noise variance: none (default) or the torque sensor's "
+                         "noise variance tau_std^2 of the data's collection (sensor_torque_var; 0.01 N^2 m^2)")
     a = ap.parse_args(argv)
     if a.data and (a.sensor_noise != "default" or a.qdd != "savgol" or a.collect != "quick"):
         ap.error("--collect/--sensor-noise/--qdd apply to a new collection: leave out --data")
@@ -44,8 +48,8 @@ def main(argv: list[str] | None = None) -> None:
     import torch
     from tqdm import tqdm
 
-    from cascgp_experiments.calibration import (CASCADES, calibration, sensor_input_var, study_data, summary_table,
-                                                 write)
+    from cascgp_experiments.calibration import (CASCADES, calibration, sensor_input_var, sensor_torque_var,
+                                                 study_data, summary_table, write)
 
     torch.set_num_threads(1)
     out = Path(a.out)
@@ -60,10 +64,16 @@ def main(argv: list[str] | None = None) -> None:
             input_var = sensor_input_var(train.meta.get("collection"), train.dof)
         except ValueError as e:
             ap.error(f"--input-noise: {e}")
+    floor = None
+    if a.noise_floor == "sensor":
+        try:
+            floor = sensor_torque_var(train.meta.get("collection"))
+        except ValueError as e:
+            ap.error(f"--noise-floor: {e}")
     t0 = time.perf_counter()
     bar = tqdm(total=len(CASCADES) * len(a.seconds) * min(a.subsets, 10), desc="calibration fits")
     res = calibration(train, test, seconds=tuple(a.seconds), n_subsets=a.subsets, n_restarts=a.restarts,
-                      input_var=input_var, progress=lambda row: bar.update())
+                      input_var=input_var, noise_floor_nm=floor, progress=lambda row: bar.update())
     bar.close()
     res["wall_s"] = time.perf_counter() - t0
     res["command"] = "python -m scripts.calibration " + " ".join(argv if argv is not None else __import__("sys").argv[1:])

@@ -160,3 +160,49 @@ def test_compare_cli_errors(tmp_path: Path) -> None:
         run = subprocess.run([sys.executable, "-m", "scripts.calibration_compare", *args], cwd=REPO,
                              capture_output=True, text=True, timeout=120)
         assert run.returncode == 2 and msg in run.stderr, run.stderr
+
+
+def test_sensor_torque_var_is_the_sensor_spec() -> None:
+    from jaco_env import SensorNoise
+
+    from cascgp_experiments.calibration import sensor_torque_var
+
+    assert sensor_torque_var(asdict(CollectConfig())) == SensorNoise().tau_std ** 2 == pytest.approx(0.01)
+    with pytest.raises(ValueError, match="noiseless"):
+        sensor_torque_var(asdict(CollectConfig(sensor_noise="none")))
+    with pytest.raises(ValueError, match="collection"):
+        sensor_torque_var(None)
+
+
+def test_calibration_with_the_sensor_noise_floor(arms) -> None:
+    from cascgp_experiments.calibration import calibration, floor_effect, sensor_torque_var
+
+    train, test = arms["noisy"]
+    kw = dict(seconds=(1.0,), n_subsets=1, models=("np-inward",), n_restarts=1)
+    base = calibration(train, test, **kw)
+    fl = calibration(train, test, noise_floor_nm=sensor_torque_var(train.meta["collection"]), **kw)
+    assert fl["noise_floor_nm"] == pytest.approx(0.01) and base["noise_floor_nm"] is None
+    assert min(fl["rows"][0]["noise_std"]) >= 0.1 * (1 - 1e-9)
+    assert len(fl["rows"][0]["rmse"]) == 6 and min(fl["rows"][0]["rmse"]) > 0
+    table = floor_effect(base, fl).splitlines()
+    assert table[2].startswith("| all | 6 |") and len(table) == 5
+
+
+def _fake_floor(cov: list[float], std: list[float], rmse: list[float]) -> dict:
+    return {"summary": {"m@10s": {"coverage_propagated": cov, "rmse": rmse}},
+            "rows": [{"model": "m", "seconds": 10.0, "subset": 0, "n_train": 100, "noise_std": std}]}
+
+
+def test_floor_effect_splits_collapsed_and_other_cells() -> None:
+    from cascgp_experiments.calibration import floor_effect
+
+    base = _fake_floor([0.80, 0.85, 0.90], [0.001, 0.1, 0.1], [1.0, 2.0, 1.0])
+    fl = _fake_floor([0.92, 0.85, 0.89], [0.1, 0.1, 0.1], [0.9, 2.0, 1.1])
+    lines = floor_effect(base, fl).splitlines()
+    assert lines[2] == "| all | 3 | 0.850 | 0.890 | 1 -> 1 | +0.000 | 1 / 1 / 1 | 1.000 (0.900 - 1.100) |"
+    assert lines[3].startswith("| collapsed (a fit < 0.05 N m) | 1 | 0.800 | 0.920 | 0 -> 1 | +0.120 | 1 / 0 / 0 |")
+    assert lines[4].startswith("| other | 2 | 0.875 | 0.870 | 1 -> 0 | -0.005 | 0 / 1 / 1 |")
+    other = _fake_floor([0.8, 0.8, 0.8], [0.1, 0.1, 0.1], [1, 1, 1])
+    other["rows"][0]["subset"] = 1
+    with pytest.raises(ValueError, match="paired"):
+        floor_effect(base, other)

@@ -13,6 +13,10 @@ Inputs and targets are normalised per GP: :math:`\tilde x = (x - \mu_x) / \sigma
 :math:`\tilde y = (y - \mu_y) / \sigma_y`. GPs with fewer inputs than the widest are padded with zero columns;
 their lengthscales are masked (gradient zero, never moved, reported as ``inf`` scale). Input columns that are
 constant in the training data are treated the same way (at prediction time their value is ignored).
+With ``GPFitConfig.noise_floor_target`` (a noise-variance bound in target units, e.g. a sensor's) the noise floor
+of GP ``b`` is ``max(noise_floor, noise_floor_target[b] / y_std[b]**2)`` in normalised units
+(:meth:`GPFitConfig.floors`); it is recomputed from the config and ``y_std`` wherever it is used (fit, factors,
+:meth:`GPBank.hyperparameters`, a loaded bank), so a saved bank keeps its floor.
 
 Edge cases (documented behaviour)
 ---------------------------------
@@ -55,6 +59,7 @@ class _Objective:
     mask: torch.Tensor
     chunk: int
     max_jit: np.ndarray
+    floor_gp: np.ndarray | None = None  # per-GP noise floors (normalised), None: cfg.noise_floor
     n_eval: int = 0
     rounds: int = 0
     stage_evals: dict[str, int] = field(default_factory=lambda: {"screen": 0, "full": 0})
@@ -63,8 +68,9 @@ class _Objective:
         def fun(Th: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             cfg = self.cfg
             gsel = torch.as_tensor(gp_of[idx])
+            floor = cfg.noise_floor if self.floor_gp is None else self.floor_gp[gp_of[idx]]
             f, g, jit = nll_and_grad(torch.as_tensor(Th, dtype=DTYPE), X[gsel], y[gsel], self.mask[gsel],
-                                     cfg.kernel, cfg.noise_floor, cfg.jitter_max, chunk=self.chunk,
+                                     cfg.kernel, floor, cfg.jitter_max, chunk=self.chunk,
                                      snr_max=cfg.snr_max)
             np.maximum.at(self.max_jit, gp_of[idx], jit.numpy())
             self.n_eval += len(idx)
@@ -158,10 +164,12 @@ class GPBank:
         th = s.theta[b]
         ls = np.where(s.mask[b, :d] > 0, np.exp(th[:d]) * s.x_std[b, :d], np.inf)
         ys2 = s.y_std[b] ** 2
+        floors = self.config.floors(s.y_std)
         return {
             "lengthscale": ls,
             "signal_var": float(np.exp(th[-2]) * ys2),
-            "noise_var": float(noise_var(self.config, math.exp(th[-2]), math.exp(th[-1])) * ys2),
+            "noise_var": float(noise_var(self.config, math.exp(th[-2]), math.exp(th[-1]),
+                                         None if floors is None else float(floors[b])) * ys2),
         }
 
     def _require_fitted(self) -> BankData:
@@ -221,6 +229,7 @@ class GPBank:
         B, n, D = len(Xs), Xs[0].shape[0], max(a.shape[1] for a in Xs)
         chunk = plan_chunk(cfg, n, D, B)  # memory guard: before any large allocation
         data = BankData.normalise(Xs, ys, D)
+        floor_gp = cfg.floors(data.y_std)  # None unless noise_floor_target is set
         Xn, yn = data.normalised()
 
         rng = np.random.default_rng(cfg.seed)
@@ -228,11 +237,11 @@ class GPBank:
         theta0 = initial_thetas(cfg, Xn, yn, data.mask, data.const_y, rng)
         warm = init is not None
         if init is not None:
-            theta0[:, 0, :] = warm_theta(init.config, init._require_fitted(), data, D)
+            theta0[:, 0, :] = warm_theta(init.config, init._require_fitted(), data, D, new_config=cfg)
         theta0[:, :, :D] *= data.mask[:, None, :]  # inactive lengthscales fixed at 0 (unused)
 
         obj = _Objective(cfg, torch.as_tensor(Xn, dtype=DTYPE), torch.as_tensor(yn, dtype=DTYPE),
-                         torch.as_tensor(data.mask, dtype=DTYPE), chunk, np.zeros(B))
+                         torch.as_tensor(data.mask, dtype=DTYPE), chunk, np.zeros(B), floor_gp)
         rec = _StartRecord.empty(B, R)
         final_theta = theta0[:, 0, :].copy()
         opt_gps = np.flatnonzero(~data.const_y)
@@ -330,7 +339,7 @@ class GPBank:
     def _set_data(self, data: BankData) -> None:
         """Adopt ``data`` (training set, normalisation, hyperparameters) and compute its factors."""
         Xn, yn = data.normalised()
-        self._factors = compute_factors(self.config, Xn, yn, data.mask, data.theta)
+        self._factors = compute_factors(self.config, Xn, yn, data.mask, data.theta, self.config.floors(data.y_std))
         self._data = data
 
     # ------------------------------------------------------------------ prediction

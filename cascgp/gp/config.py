@@ -11,7 +11,7 @@ import numpy as np
 
 from cascgp.gp.kernels import check_kernel
 
-__all__ = ["GPFitConfig", "noise_var"]
+__all__ = ["GPFitConfig", "check_target_floor", "noise_var"]
 
 
 #: Values of fields added after the first saved format, for configs saved without them (old behaviour).
@@ -31,6 +31,10 @@ class GPFitConfig:
         seed: seed of the random starts and of the screening subset.
         history: L-BFGS memory.
         noise_floor: lower bound of the noise variance in normalised units.
+        noise_floor_target: lower bound of the noise variance in *target* units squared (N² m² for torques), e.g.
+            a sensor's known noise variance: a measured target cannot be less noisy than its sensor. A number for
+            every GP of the bank, or a sequence with one value per GP; ``None`` (default): no such bound, the fit
+            is exactly the one without this field. See :meth:`floors` for the conversion.
         jitter_max: largest jitter (relative to the mean diagonal of K) tried when a Cholesky fails.
         init_spread: half-width (in log units) of the random perturbation of the log lengthscales.
         drop_after: drop hopeless starts after this many iterations (``None``: never drop).
@@ -76,6 +80,7 @@ class GPFitConfig:
     screen_keep: int = 2
     screen_max_iter: int = 200
     screen_rel_tol: float = 1e-6
+    noise_floor_target: float | tuple[float, ...] | None = None
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> GPFitConfig:
@@ -117,9 +122,58 @@ class GPFitConfig:
             raise ValueError(f"catch_up_windows: expected a number > 0, got {self.catch_up_windows!r}")
         if self.screen_n is not None and (not isinstance(self.screen_n, int) or self.screen_n < 2):
             raise ValueError(f"screen_n: expected None or an integer >= 2, got {self.screen_n!r}")
+        self.noise_floor_target = check_target_floor(self.noise_floor_target, "noise_floor_target")
+
+    def floors(self, y_std: np.ndarray) -> np.ndarray | None:
+        r"""Per-GP noise-variance floor in normalised units, ``(B,)``, or ``None`` without ``noise_floor_target``.
+
+        A GP's targets are normalised as :math:`\tilde y = (y - \mu_y) / \sigma_y`, so a noise variance
+        :math:`v` in target units is :math:`v / \sigma_y^2` in normalised units. With the bound
+        :math:`v_{\min,b}` (``noise_floor_target``, target units squared) the floor of GP ``b`` is
+
+        .. math:: s_{n,\min,b}^2 = \max\big(\mathrm{noise\_floor},\; v_{\min,b} / \sigma_{y,b}^2\big),
+
+        which replaces ``noise_floor`` in :func:`noise_var` (the fitted noise is
+        :math:`s_{n,\min,b}^2 + s_f^2/\mathrm{snr\_max} + e^{\theta_{d+2}} \ge s_{n,\min,b}^2`, so the noise
+        variance in target units is at least :math:`v_{\min,b}`). ``ValueError`` naming ``noise_floor_target``
+        when a per-GP sequence does not have one value per GP.
+        """
+        if self.noise_floor_target is None:
+            return None
+        ys = np.asarray(y_std, dtype=np.float64).reshape(-1)
+        t = self.noise_floor_target
+        if isinstance(t, tuple):
+            if len(t) != ys.size:
+                raise ValueError(f"noise_floor_target: expected one value per GP ({ys.size}), got {len(t)}")
+            t = np.array(t, dtype=np.float64)
+        return np.maximum(float(self.noise_floor), np.asarray(t, dtype=np.float64) / ys**2)
 
 
-def noise_var(cfg: GPFitConfig, sf2: float, e: float) -> float:
+def check_target_floor(v: Any, name: str) -> float | tuple[float, ...] | None:
+    """``None``, a finite number >= 0 (as ``float``) or a non-empty 1-D sequence of them (as a tuple of floats);
+    anything else is a ``ValueError`` naming ``name``."""
+    if v is None:
+        return None
+    if isinstance(v, (bool, np.bool_)):
+        raise ValueError(f"{name}: expected None, a finite number >= 0 or a 1-D sequence of them, got {v!r}")
+    if isinstance(v, (int, float, np.integer, np.floating)):
+        if not math.isfinite(float(v)) or v < 0:
+            raise ValueError(f"{name}: expected a finite number >= 0 (variance, target units squared), got {v!r}")
+        return float(v)
+    if isinstance(v, (list, tuple, np.ndarray)):
+        a = np.asarray(v)
+        if a.ndim != 1 or a.size == 0 or a.dtype.kind not in "iuf":
+            raise ValueError(f"{name}: expected a non-empty 1-D sequence of numbers (one per GP), got shape "
+                             f"{a.shape} and dtype {a.dtype}")
+        if not np.isfinite(a).all() or (a < 0).any():
+            raise ValueError(f"{name}: expected finite values >= 0 (variances, target units squared), got {a.tolist()}")
+        return tuple(float(x) for x in a)
+    raise ValueError(f"{name}: expected None, a finite number >= 0 or a 1-D sequence of them, got "
+                     f"{type(v).__name__}")
+
+
+def noise_var(cfg: GPFitConfig, sf2: float, e: float, floor: float | None = None) -> float:
     r"""Noise variance (normalised units) from :math:`s_f^2` and :math:`e^{\theta_{d+2}}`:
-    :math:`s_n^2 = s_{n,\min}^2 + s_f^2 / \mathrm{snr\_max} + e^{\theta_{d+2}}`."""
-    return cfg.noise_floor + (sf2 / cfg.snr_max if cfg.snr_max is not None else 0.0) + e
+    :math:`s_n^2 = s_{n,\min}^2 + s_f^2 / \mathrm{snr\_max} + e^{\theta_{d+2}}`, where :math:`s_{n,\min}^2`
+    is ``floor`` (the GP's entry of :meth:`GPFitConfig.floors`) or, when ``None``, ``cfg.noise_floor``."""
+    return (cfg.noise_floor if floor is None else floor) + (sf2 / cfg.snr_max if cfg.snr_max is not None else 0.0) + e

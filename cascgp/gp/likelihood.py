@@ -147,7 +147,7 @@ def nll_and_grad(
     y: torch.Tensor,
     mask: torch.Tensor | None = None,
     kernel: str = "matern52",
-    noise_floor: float = 1e-6,
+    noise_floor: float | np.ndarray = 1e-6,
     jitter_max: float = 1e-2,
     need_grad: bool = True,
     chunk: int | None = None,
@@ -175,7 +175,8 @@ def nll_and_grad(
         y: ``(k, n)`` normalised targets.
         mask: ``(k, D)`` 1 for active input columns, 0 for padding/ignored columns (default: all active).
         kernel: kernel name.
-        noise_floor: :math:`s_{n,\min}^2`.
+        noise_floor: :math:`s_{n,\min}^2`: a number for every member, or an array ``(k,)`` with one per member
+            (the per-GP floors of :meth:`~cascgp.gp.config.GPFitConfig.floors`).
         jitter_max: largest jitter (relative to the mean diagonal of K) tried when a Cholesky fails.
         need_grad: compute the gradient.
         chunk: members per block (``None``: cache-sized).
@@ -205,6 +206,9 @@ def nll_and_grad(
     bufB = torch.empty(chunk, n, n, dtype=DTYPE)
     bufC = torch.empty(chunk, n, n, dtype=DTYPE)
     inv_snr = 0.0 if snr_max is None else 1.0 / snr_max
+    floor_k = None if isinstance(noise_floor, (int, float)) else np.asarray(noise_floor, dtype=np.float64)
+    if floor_k is not None and floor_k.shape != (k_,):
+        raise ValueError(f"noise_floor: expected a number or shape ({k_},), got shape {floor_k.shape}")
     kern = get_kernel(kernel)
     r2s = kern.r2_scale
     with np.errstate(over="ignore", invalid="ignore"):
@@ -235,7 +239,7 @@ def nll_and_grad(
             m = s0 + i
             sf2 = float(sf2_all[m])
             en = float(en_all[m])
-            sn2 = noise_floor + sf2 * inv_snr + en
+            sn2 = (noise_floor if floor_k is None else float(floor_k[m])) + sf2 * inv_snr + en
             if not (row_ok[m] and math.isfinite(sn2) and math.isfinite(sf2)):
                 continue  # a trial point far out (huge step): NLL inf, the line search backs off
             cf, jit = _potrf_jitter(A[i], C[i], sf2, sn2, jitter_max)

@@ -141,10 +141,11 @@ class Factors:
 
 
 def compute_factors(cfg: GPFitConfig, Xn: np.ndarray, yn: np.ndarray, mask: np.ndarray,
-                    theta: np.ndarray) -> Factors:
+                    theta: np.ndarray, floors: np.ndarray | None = None) -> Factors:
     """Cholesky factor, ``alpha`` and final NLL of every GP at ``theta`` on normalised data ``Xn (B, n, D)``,
     ``yn (B, n)`` (one GP at a time: the temporaries are a few ``(n, n)`` matrices; only the ``(B, n, n)``
-    factor is kept). ``RuntimeError`` if a factorisation fails even with jitter 1.0."""
+    factor is kept). ``floors`` ``(B,)``: per-GP noise floors (:meth:`GPFitConfig.floors`; ``None``:
+    ``cfg.noise_floor``). ``RuntimeError`` if a factorisation fails even with jitter 1.0."""
     B, n, D = Xn.shape
     kern = get_kernel(cfg.kernel)
     th = torch.as_tensor(theta, dtype=DTYPE)
@@ -154,7 +155,8 @@ def compute_factors(cfg: GPFitConfig, Xn: np.ndarray, yn: np.ndarray, mask: np.n
     inv_l = torch.exp(-th[:, :D]) * tm
     Z = tX * inv_l[:, None, :]
     sf2 = torch.exp(th[:, D])
-    sn2 = torch.tensor([noise_var(cfg, float(sf2[b]), math.exp(float(th[b, D + 1]))) for b in range(B)],
+    sn2 = torch.tensor([noise_var(cfg, float(sf2[b]), math.exp(float(th[b, D + 1])),
+                                  None if floors is None else float(floors[b])) for b in range(B)],
                        dtype=DTYPE)
     L = torch.empty(B, n, n, dtype=DTYPE)
     alpha = torch.empty(B, n, dtype=DTYPE)

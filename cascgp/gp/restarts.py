@@ -75,11 +75,17 @@ def initial_thetas(cfg: GPFitConfig, Xn: np.ndarray, yn: np.ndarray, mask: np.nd
     return theta0
 
 
-def warm_theta(config: GPFitConfig, old: BankData, new: BankData, D: int) -> np.ndarray:
+def warm_theta(config: GPFitConfig, old: BankData, new: BankData, D: int,
+               new_config: GPFitConfig | None = None) -> np.ndarray:
     r"""A fitted bank's hyperparameters (``config``, ``old``) expressed in the normalisation of ``new`` data of
     width ``D``: start 0 of a warm-started fit. Lengthscales of columns inactive in either set restart at
-    :math:`\sqrt{d}`; the noise keeps its value in target units."""
+    :math:`\sqrt{d}`; the noise keeps its value in target units (raised to the new fit's floor if below it).
+    ``new_config``: the new fit's config; its per-GP floors (``noise_floor_target``) are used when it has them,
+    otherwise ``config``'s floor, as before that field existed."""
     B = old.theta.shape[0]
+    old_fl = config.floors(old.y_std)
+    new_fl = new_config.floors(new.y_std) if new_config is not None else None
+    new_cfg = config if new_fl is None else new_config
     out = np.zeros((B, D + 2))
     Dold = old.theta.shape[1] - 2
     for b in range(B):
@@ -90,8 +96,9 @@ def warm_theta(config: GPFitConfig, old: BankData, new: BankData, D: int) -> np.
         out[b, :d] = ll
         scale = math.log(old.y_std[b] ** 2) - math.log(new.y_std[b] ** 2)
         out[b, D] = th[Dold] + scale
-        sn2 = noise_var(config, math.exp(th[Dold]), math.exp(th[Dold + 1])) * math.exp(scale)
-        floor = noise_var(config, math.exp(out[b, D]), 0.0)
+        sn2 = noise_var(config, math.exp(th[Dold]), math.exp(th[Dold + 1]),
+                        None if old_fl is None else float(old_fl[b])) * math.exp(scale)
+        floor = noise_var(new_cfg, math.exp(out[b, D]), 0.0, None if new_fl is None else float(new_fl[b]))
         out[b, D + 1] = math.log(max(sn2 - floor, 1e-8))
     return out
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +18,7 @@ import numpy as np
 from cascgp.data import DynamicsData, as_real_array
 from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
 from cascgp.gp import GPBank, GPFitConfig
+from cascgp.gp.config import check_target_floor
 from cascgp.gp.checks import check_scale
 from cascgp.models.fastpath import ZCLIP, FastPath, FastVariance
 
@@ -88,6 +90,10 @@ class CascadedGPModel:
             gp_config = GPFitConfig()
         if not isinstance(gp_config, GPFitConfig):
             raise TypeError(f"gp_config: expected GPFitConfig or None, got {type(gp_config).__name__}")
+        t = gp_config.noise_floor_target
+        if isinstance(t, tuple) and len(t) != self.dof:
+            raise ValueError(f"gp_config.noise_floor_target: expected one noise-variance floor per joint "
+                             f"({self.dof}, N m^2), got {len(t)}")
         self.gp_config = gp_config
         if not np.isfinite(df_delta) or df_delta <= 0:
             raise ValueError(f"df_delta: expected a positive time step (s), got {df_delta!r}")
@@ -211,7 +217,7 @@ class CascadedGPModel:
                 if tj is not None:
                     x = np.concatenate([x, tau_hat[:, tj:tj + 1]], axis=1)
                 ib = init_banks[k] if init_banks else None
-                bank = GPBank(self.gp_config).fit([x], [targets[:, j]], init=ib)
+                bank = GPBank(self._joint_config(j)).fit([x], [targets[:, j]], init=ib)
                 banks[k] = bank
                 where[j] = (k, 0)
                 m, _ = bank.posterior(0).predict(x, return_var=False)
@@ -221,6 +227,12 @@ class CascadedGPModel:
         self.n_train = int(S.shape[0])
         self._cache()
         return self
+
+    def _joint_config(self, j: int) -> GPFitConfig:
+        """The fit config of a one-GP bank holding joint ``j`` (a per-joint ``noise_floor_target`` reduced to
+        joint ``j``'s value; otherwise ``gp_config`` itself)."""
+        t = self.gp_config.noise_floor_target
+        return replace(self.gp_config, noise_floor_target=(t[j],)) if isinstance(t, tuple) else self.gp_config
 
     def adopt_banks(self, banks: list[GPBank], where: list[tuple[int, int]], n_train: int) -> None:
         """Install fitted banks (``where[j] = (bank, GP)`` locates joint j's GP), e.g. read from a file;
@@ -605,9 +617,29 @@ def _clipped(P: Any, x: np.ndarray) -> np.ndarray:
 
 
 def make_model(name: str, dof: int, rbd: Any = None, *, gp_config: Any = None, df_delta: float = 0.1,
-               train_on_predicted: bool = False) -> CascadedGPModel:
-    """Build an unfitted model.  ``name`` in :data:`MODEL_NAMES`; ``rbd`` (required for ``sp-*``):
+               train_on_predicted: bool = False, noise_floor_nm: Any = None) -> CascadedGPModel:
+    r"""Build an unfitted model.  ``name`` in :data:`MODEL_NAMES`; ``rbd`` (required for ``sp-*``):
     an object with ``dof`` and ``inverse_dynamics(q, qd, qdd)`` (e.g.
-    :class:`cascgp.rbd.RigidBodyModel`) whose DOF equals ``dof``.  See :class:`CascadedGPModel`."""
+    :class:`cascgp.rbd.RigidBodyModel`) whose DOF equals ``dof``.  See :class:`CascadedGPModel`.
+
+    ``noise_floor_nm`` (opt-in, default ``None``: no floor, the fit is exactly the one without it): a lower bound
+    of each joint's fitted noise variance in N² m² (torque units squared), one number for every joint or one per
+    joint (shape ``(dof,)``), e.g. the torque sensor's noise variance :math:`\sigma_	au^2` (a measured torque
+    cannot be less noisy than its sensor). It sets ``gp_config.noise_floor_target``; each GP converts it with its
+    target scale :math:`\sigma_y` (N m) to the normalised floor
+    :math:`\max(\mathrm{noise\_floor}, \sigma_	au^2 / \sigma_y^2)` (:meth:`cascgp.gp.GPFitConfig.floors`), so
+    that its noise variance is :math:`\ge \sigma_	au^2` in N² m². ``ValueError`` naming ``noise_floor_nm`` for a
+    negative or non-finite value, a wrong shape, or a ``gp_config`` that already sets ``noise_floor_target``."""
+    if noise_floor_nm is not None:
+        cfg = GPFitConfig() if gp_config is None else gp_config
+        if not isinstance(cfg, GPFitConfig):
+            raise TypeError(f"gp_config: expected GPFitConfig or None, got {type(cfg).__name__}")
+        if cfg.noise_floor_target is not None:
+            raise ValueError("noise_floor_nm: gp_config already sets noise_floor_target; give the floor once")
+        floor = check_target_floor(noise_floor_nm, "noise_floor_nm")
+        if isinstance(floor, tuple) and len(floor) != dof:
+            raise ValueError(f"noise_floor_nm: expected one number or shape ({dof},) (one per joint, N m^2), got "
+                             f"{len(floor)} values")
+        gp_config = replace(cfg, noise_floor_target=floor)
     return CascadedGPModel(name, dof, rbd, gp_config=gp_config, df_delta=df_delta,
                            train_on_predicted=train_on_predicted)
