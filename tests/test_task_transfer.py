@@ -4,7 +4,8 @@ Two tasks in different parts of the workspace, payload unknown to every controll
 - PD only and the nominal RBD feedforward attempt each task once;
 - the SP inward cascade (the paper's), the gated one and the gated one learning online each attempt
   task A four times (retrained after each attempt on all data so far), then task B four times, then
-  revisit A once. All learners see the same seeds.
+  revisit A once. All learners see the same seeds. After each attempt of the ungated cascade, the gated
+  controller also runs on its model (paired: the gate's own effect, everything else equal).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ TASK_A, TASK_B = "front", "left"
 #: than the last attempt there before, although the buffer now also holds task B and is thinned to the cap.
 REVISIT_TOLERANCE = 0.15
 LEARNERS = ("sp-inward", "sp-inward-gated", "sp-inward-gated-online")
+GATED = "sp-inward-gated"
 
 
 @pytest.fixture(scope="module")
@@ -37,8 +39,9 @@ def runs():
     args = (rbd, jaco_feedback(), cfg.retrain())
     opts = cfg.reset_options()
     out = {name: run_controller(name, env, once, *args, reset_options=opts) for name in ("pd", "rbd")}
-    for name in LEARNERS:
-        out[name] = run_controller(name, env, learn, *args, reset_options=opts)
+    for name in LEARNERS:  # the ungated learner also runs the gated controller on its own model (paired)
+        out[name] = run_controller(name, env, learn, *args, reset_options=opts,
+                                   paired=(GATED,) if name == "sp-inward" else ())
     env.close()
     return {name: run.attempts for name, run in out.items()}
 
@@ -101,11 +104,24 @@ def test_gated_still_learns(runs, task):
     assert _rmse(runs["sp-inward-gated"], task, k=3) < 0.5 * _rmse(runs["rbd"], task)
 
 
-def test_gate_costs_at_most_ten_percent_after_three_attempts_on_the_first_task(runs):
-    """Issue 10's criterion, gated within 10 % of ungated after three retrainings, asserted where this run
-    meets it (task A). On task B it is NOT met in this run (gated 0.064 vs ungated 0.048 rad): the Wiener
-    gain also shrinks small, real corrections on the compliant wrist. Reported in README, not hidden."""
+def test_gated_learner_within_ten_percent_of_the_ungated_after_three_attempts_on_the_first_task(runs):
+    """Issue 10's criterion, the gated learner within 10 % of the ungated one after three retrainings, asserted
+    where this run meets it (task A: 0.122 vs 0.135 rad). On task B this run misses it (0.064 vs 0.048, 1.35 x).
+    Two learners that collect their own data drift apart: on four seeds of the full transfer, two *ungated*
+    learners that differ only in the random starts of their fits are within 10 % on 10 of 16 tasks, as gated
+    vs ungated is, and the gated learner's gap is in its model, not in the gate (docs/learner_divergence.md).
+    The paired test below checks the gate's own effect on both tasks."""
     assert _rmse(runs["sp-inward-gated"], TASK_A, k=3) <= 1.10 * _rmse(runs["sp-inward"], TASK_A, k=3)
+
+
+@pytest.mark.parametrize("task", [TASK_A, TASK_B])
+def test_the_gate_on_the_same_model_costs_at_most_ten_percent_after_three_attempts(runs, task):
+    """Issue 10's criterion on the gate's own effect: after three retrainings on a task, the gated controller on
+    the ungated learner's model is within 10 % of that learner (measured in this run: 1.03 on task A, 1.01 on
+    task B). Two learners that collect their own data drift apart as much without a gate as with one
+    (docs/learner_divergence.md); this paired form is free of that drift."""
+    ungated = [a for a in runs["sp-inward"] if a["task"] == task and a["task_attempt"] == 3][0]
+    assert ungated["paired"][GATED]["tracking_rmse"] <= 1.10 * ungated["tracking_rmse"]
 
 
 def test_online_learning_lowers_the_first_attempt_on_a_new_task(runs):
