@@ -68,7 +68,7 @@ from cascgp_experiments.gate_eval import GATE_EVAL_CONFIG, GATE_EVAL_SEEDS, _sta
 from cascgp_experiments.transfer import TransferConfig
 
 __all__ = ["NULL_FIT_SEED_OFFSET", "LEARNERS", "reference_uncertainty", "divergence_job", "divergence_jobs",
-           "run_divergence", "ratios", "summarise", "tests_of_hypotheses"]
+           "run_divergence", "ratios", "summarise", "per_task", "tests_of_hypotheses"]
 
 #: Added to UL''s GP seeds: seeds 100-119 never overlap the 0-19 that UL and GL use on seeds 0-3.
 NULL_FIT_SEED_OFFSET = 100
@@ -159,6 +159,7 @@ def run_divergence(out: Path, cfg: TransferConfig = GATE_EVAL_CONFIG, seeds: tup
     results["ratios"] = ratios(results)
     results["summary"] = summarise(results["ratios"])
     results["tests"] = tests_of_hypotheses(results["ratios"])
+    results["per_task"] = per_task(results["ratios"])
     write_json(out / "learner_divergence.json", results)
     atomic_write_text(out / "learner_divergence.md", summary_markdown(results))
     plot(results, out / "learner_divergence.png")
@@ -223,6 +224,19 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     return {q: _stats([r["ratio"] for r in rows if r["quantity"] == q],
                       1.10 if q in ("null_last", "gate_learners_last") else None)
             for q in dict.fromkeys(r["quantity"] for r in rows)}
+
+
+def per_task(rows: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, float]]]:
+    """Per task and quantity: the median ratio and the median ``|log ratio|`` over the seeds (finite ratios)."""
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for task in dict.fromkeys(r["task"] for r in rows):
+        for q in dict.fromkeys(r["quantity"] for r in rows):
+            v = np.array([r["ratio"] for r in rows if r["task"] == task and r["quantity"] == q], dtype=float)
+            v = v[np.isfinite(v) & (v > 0)]
+            if v.size:
+                out.setdefault(task, {})[q] = {"n": int(v.size), "median": float(np.median(v)),
+                                               "median_abs_log": float(np.median(np.abs(np.log(v))))}
+    return out
 
 
 def tests_of_hypotheses(rows: list[dict[str, Any]]) -> dict[str, Any]:
@@ -297,6 +311,13 @@ def summary_markdown(results: dict[str, Any]) -> str:
     lines.append(f"- divergence hypothesis supported (rule 2): {t['divergence_hypothesis_supported']}")
     lines.append(f"- median |log| share: gate on GL's model {t['median_abs_log_share']['gate_on_gl_model']:.3f}, "
                  f"GL's model vs UL {t['median_abs_log_share']['gl_model_vs_ul']:.3f}")
+    if "per_task" in results:
+        qs = list(s)
+        lines += ["", "Per task, median over seeds (median |log ratio| in brackets):", "",
+                  "| task | " + " | ".join(qs) + " |", "|---|" + "---|" * len(qs)]
+        for task, d in results["per_task"].items():
+            lines.append(f"| {task} | " + " | ".join(f"{d[q]['median']:.3f} ({d[q]['median_abs_log']:.3f})"
+                                                  if q in d else "-" for q in qs) + " |")
     lines += ["", "| seed | task | quantity | numerator | denominator | ratio |", "|---|---|---|---|---|---|"]
     for r in results["ratios"]:
         lines.append(f"| {r['seed']} | {r['task']} | {r['quantity']} | {r['num']:.4g} | {r['den']:.4g} | {r['ratio']:.3f} |")

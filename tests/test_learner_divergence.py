@@ -160,3 +160,13 @@ def test_the_summary_page_renders_from_the_json_alone() -> None:
     assert "divergence hypothesis supported (rule 2): True" in text
     n_null = res["summary"]["null_last"]
     assert f"| null_last | 18 | {n_null['median']:.3f} |" in text and f"{n_null['n_meeting']} of 18 |" in text
+
+
+def test_per_task_medians_are_those_of_the_seeds() -> None:
+    rows = ld.ratios(_fake(1.5, 2.0))
+    pt = ld.per_task(rows)
+    v = [r["ratio"] for r in rows if r["task"] == "left" and r["quantity"] == "gate_learners_last"]
+    assert pt["left"]["gate_learners_last"]["n"] == 6
+    assert pt["left"]["gate_learners_last"]["median"] == pytest.approx(np.median(v))
+    assert pt["left"]["gate_learners_last"]["median_abs_log"] == pytest.approx(np.median(np.abs(np.log(v))))
+    assert "early_tracking_gl_vs_ul" not in pt["front"]
