@@ -158,8 +158,8 @@ class FeedforwardController:
     :math:`(1 - w_j)^2 d_j^2`; the posterior mean has already moved away from its prior only as far as the data
     warrant. A gate is insurance against the model being wrong by more than :math:`v_j` (e.g. on a new part of
     the workspace), paid for with that cost where the model is right. Measured (docs/learner_divergence.md): on
-    one task of four, where the learned correction was right but uncertain, the Wiener gate's cost on the first
-    attempts made the learner collect worse data, and its model stayed about 1.35 x worse after three refits.
+    any one model the Wiener gate costs about nothing in the median, but a learner that uses it collects other
+    data, and on one task of four its model stayed about 1.35 x worse after three refits (cause not identified).
 
     The controller is called every control tick with the time, the measured state and
     the task's reference ``reference(t) -> (q_d, qd_d, qdd_d)``. Derivative-free models

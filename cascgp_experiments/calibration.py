@@ -100,13 +100,13 @@ def sensor_torque_var(collection: dict) -> float:
 def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float, ...] = (10.0, 30.0),
                 n_subsets: int = 3, models: tuple[str, ...] = CASCADES, rate_hz: float = 10.0,
                 n_restarts: int = 3, level: float = 0.95, input_var: np.ndarray | None = None,
-                noise_floor_nm: float | None = None, progress=None) -> dict[str, Any]:
+                noise_var_floor: float | None = None, progress=None) -> dict[str, Any]:
     """Coverage per model, training size, subset and joint (see the module docstring).
 
     ``input_var`` (dof, 3): variances of the input noise (:func:`sensor_input_var`); with it a third
     variance, the propagated one plus the test-time input-noise term (``predict(..., input_var=...)``), is
-    scored as ``coverage_input_noise``. ``noise_floor_nm``: lower bound of every joint GP's noise variance in
-    N² m² (``make_model(..., noise_floor_nm=...)``; :func:`sensor_torque_var` gives the torque sensor's);
+    scored as ``coverage_input_noise``. ``noise_var_floor``: lower bound of every joint GP's noise variance in
+    N² m² (``make_model(..., noise_var_floor=...)``; :func:`sensor_torque_var` gives the torque sensor's);
     ``None``: none, the default fit. Every row also has the held-out RMSE of the mean per joint (``rmse``, N m).
 
     Returns a JSON-serialisable dict: ``rows`` (one per model, seconds, subset, with ``coverage_mean_input``
@@ -124,7 +124,7 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
                 t0 = time.perf_counter()
                 data = sub.subsample(rate_hz).first_seconds(secs)
                 m = make_model(name, train.dof, rbd if name.startswith("sp") else None, gp_config=cfg,
-                               noise_floor_nm=noise_floor_nm).fit(data)
+                               noise_var_floor=noise_var_floor).fit(data)
                 cov = {}
                 for prop in (False, True):
                     mean, var = m.predict(test10.q, test10.qd, test10.qdd, propagate=prop)
@@ -169,7 +169,7 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
     return {"level": level, "rate_hz": rate_hz, "n_subsets": len(subsets), "n_restarts": n_restarts,
             "n_test_rows": test10.n_samples, "collection": train.meta.get("collection"),
             "input_var": None if input_var is None else np.asarray(input_var).tolist(),
-            "noise_floor_nm": noise_floor_nm,
+            "noise_var_floor": noise_var_floor,
             "qdd_source": train.meta.get("qdd_source"), "rows": rows, "summary": summary}
 
 
@@ -247,6 +247,8 @@ def floor_effect(base: dict[str, Any], floored: dict[str, Any], field: str = "co
     keys = sorted(base["summary"])
     if sorted(floored["summary"]) != keys:
         raise ValueError("floored: not the same models and training sizes as base")
+    if len(base["rows"]) != len(floored["rows"]):
+        raise ValueError(f"floored: {len(floored['rows'])} rows, base has {len(base['rows'])}; not the same runs")
     for rb, rf in zip(base["rows"], floored["rows"]):
         if (rb["model"], rb["seconds"], rb["subset"], rb["n_train"]) != (rf["model"], rf["seconds"], rf["subset"],
                                                                            rf["n_train"]):

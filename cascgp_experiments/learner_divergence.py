@@ -183,6 +183,9 @@ def reproduction(results: dict[str, Any], reference: dict[str, Any]) -> dict[str
         if ref is None:
             continue
         for label, name in names.items():
+            if len(run[label]) != len(ref[name]):
+                raise ValueError(f"reference: seed {seed} {name} has {len(ref[name])} attempts, this run's {label} "
+                                 f"{len(run[label])}; not the same settings")
             for a, b in zip(run[label], ref[name]):
                 n += 1
                 equal += a["tracking_rmse"] == b["tracking_rmse"]

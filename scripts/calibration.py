@@ -73,7 +73,7 @@ def main(argv: list[str] | None = None) -> None:
     t0 = time.perf_counter()
     bar = tqdm(total=len(CASCADES) * len(a.seconds) * min(a.subsets, 10), desc="calibration fits")
     res = calibration(train, test, seconds=tuple(a.seconds), n_subsets=a.subsets, n_restarts=a.restarts,
-                      input_var=input_var, noise_floor_nm=floor, progress=lambda row: bar.update())
+                      input_var=input_var, noise_var_floor=floor, progress=lambda row: bar.update())
     bar.close()
     res["wall_s"] = time.perf_counter() - t0
     res["command"] = "python -m scripts.calibration " + " ".join(argv if argv is not None else __import__("sys").argv[1:])

@@ -180,8 +180,8 @@ def test_calibration_with_the_sensor_noise_floor(arms) -> None:
     train, test = arms["noisy"]
     kw = dict(seconds=(1.0,), n_subsets=1, models=("np-inward",), n_restarts=1)
     base = calibration(train, test, **kw)
-    fl = calibration(train, test, noise_floor_nm=sensor_torque_var(train.meta["collection"]), **kw)
-    assert fl["noise_floor_nm"] == pytest.approx(0.01) and base["noise_floor_nm"] is None
+    fl = calibration(train, test, noise_var_floor=sensor_torque_var(train.meta["collection"]), **kw)
+    assert fl["noise_var_floor"] == pytest.approx(0.01) and base["noise_var_floor"] is None
     assert min(fl["rows"][0]["noise_std"]) >= 0.1 * (1 - 1e-9)
     assert len(fl["rows"][0]["rmse"]) == 6 and min(fl["rows"][0]["rmse"]) > 0
     table = floor_effect(base, fl).splitlines()

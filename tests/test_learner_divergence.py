@@ -170,3 +170,10 @@ def test_per_task_medians_are_those_of_the_seeds() -> None:
     assert pt["left"]["gate_learners_last"]["median"] == pytest.approx(np.median(v))
     assert pt["left"]["gate_learners_last"]["median_abs_log"] == pytest.approx(np.median(np.abs(np.log(v))))
     assert "early_tracking_gl_vs_ul" not in pt["front"]
+
+
+def test_reproduction_refuses_a_reference_of_other_settings() -> None:
+    res = _fake(1.5, 2.0, seeds=range(1))
+    ref = {"runs": {"0": {ld.GATED: res["runs"]["0"]["GL"][:-1], ld.UNGATED: res["runs"]["0"]["UL"]}}}
+    with pytest.raises(ValueError, match="reference: seed 0 sp-inward-gated has 11 attempts"):
+        ld.reproduction(res, ref)

@@ -1,4 +1,4 @@
-"""Physical noise floor (``GPFitConfig.noise_floor_target``, ``make_model(..., noise_floor_nm=...)``): a lower bound
+"""Physical noise floor (``GPFitConfig.noise_floor_target``, ``make_model(..., noise_var_floor=...)``): a lower bound
 of each GP's noise variance in target units, converted per GP with its ``y_std``; off by default."""
 
 from __future__ import annotations
@@ -67,7 +67,8 @@ def test_no_floor_is_the_default_fit_bit_for_bit():
     cfg = GPFitConfig(n_restarts=2, max_iter=60)
     assert cfg.noise_floor_target is None and cfg.floors(np.ones(1)) is None
     a = GPBank(cfg).fit([X], [y])
-    b = GPBank(dataclasses.replace(cfg, noise_floor_target=None)).fit([X], [y])
+    # a floor of 0 goes through the floor's code path (max(noise_floor, 0 / y_std^2)) and must change nothing
+    b = GPBank(dataclasses.replace(cfg, noise_floor_target=0.0)).fit([X], [y])
     np.testing.assert_array_equal(a.theta, b.theta)
     assert a.fit_info == b.fit_info
     # a config saved before the field existed loads with no floor
@@ -95,7 +96,7 @@ def test_cascade_floor_per_joint(arm3, arm3_train, arm3_test, tmp_path, train_on
     cfg = GPFitConfig(n_restarts=2, max_iter=60)
     floor = (0.01, 0.02, 0.0)
     m = make_model("np-inward", 3, gp_config=cfg, train_on_predicted=train_on_predicted,
-                   noise_floor_nm=floor).fit(arm3_train)
+                   noise_var_floor=floor).fit(arm3_train)
     assert m.gp_config.noise_floor_target == floor
     nv = m.noise_var
     assert np.all(nv >= np.array(floor) * (1 - 1e-12))
@@ -116,8 +117,8 @@ def test_cascade_floor_per_joint(arm3, arm3_train, arm3_test, tmp_path, train_on
 @pytest.mark.parametrize("bad", [-0.01, math.nan, math.inf, [0.01, 0.01], [[0.01, 0.01, 0.01]], [0.01, -1, 0.01],
                                  "0.01", True])
 def test_bad_floor_values_name_the_field(bad):
-    with pytest.raises(ValueError, match="noise_floor_nm"):
-        make_model("np-inward", 3, noise_floor_nm=bad)
+    with pytest.raises(ValueError, match="noise_var_floor"):
+        make_model("np-inward", 3, noise_var_floor=bad)
     if not (isinstance(bad, list) and len(bad) == 2):  # a 2-vector is a valid config value (2 GPs)
         with pytest.raises(ValueError, match="noise_floor_target"):
             GPFitConfig(noise_floor_target=bad)
@@ -126,8 +127,8 @@ def test_bad_floor_values_name_the_field(bad):
 def test_floor_shape_errors_name_the_field():
     with pytest.raises(ValueError, match="gp_config.noise_floor_target"):
         make_model("np-inward", 3, gp_config=GPFitConfig(noise_floor_target=(0.01, 0.01)))
-    with pytest.raises(ValueError, match="noise_floor_nm"):
-        make_model("np-inward", 3, gp_config=GPFitConfig(noise_floor_target=0.01), noise_floor_nm=0.01)
+    with pytest.raises(ValueError, match="noise_var_floor"):
+        make_model("np-inward", 3, gp_config=GPFitConfig(noise_floor_target=0.01), noise_var_floor=0.01)
     rng = np.random.default_rng(4)
     X, y = _smooth(rng, n=20)
     with pytest.raises(ValueError, match="noise_floor_target"):

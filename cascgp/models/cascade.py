@@ -617,28 +617,28 @@ def _clipped(P: Any, x: np.ndarray) -> np.ndarray:
 
 
 def make_model(name: str, dof: int, rbd: Any = None, *, gp_config: Any = None, df_delta: float = 0.1,
-               train_on_predicted: bool = False, noise_floor_nm: Any = None) -> CascadedGPModel:
+               train_on_predicted: bool = False, noise_var_floor: Any = None) -> CascadedGPModel:
     r"""Build an unfitted model.  ``name`` in :data:`MODEL_NAMES`; ``rbd`` (required for ``sp-*``):
     an object with ``dof`` and ``inverse_dynamics(q, qd, qdd)`` (e.g.
     :class:`cascgp.rbd.RigidBodyModel`) whose DOF equals ``dof``.  See :class:`CascadedGPModel`.
 
-    ``noise_floor_nm`` (opt-in, default ``None``: no floor, the fit is exactly the one without it): a lower bound
+    ``noise_var_floor`` (opt-in, default ``None``: no floor, the fit is exactly the one without it): a lower bound
     of each joint's fitted noise variance in N² m² (torque units squared), one number for every joint or one per
-    joint (shape ``(dof,)``), e.g. the torque sensor's noise variance :math:`\sigma_	au^2` (a measured torque
+    joint (shape ``(dof,)``), e.g. the torque sensor's noise variance :math:`\sigma_\tau^2` (a measured torque
     cannot be less noisy than its sensor). It sets ``gp_config.noise_floor_target``; each GP converts it with its
     target scale :math:`\sigma_y` (N m) to the normalised floor
-    :math:`\max(\mathrm{noise\_floor}, \sigma_	au^2 / \sigma_y^2)` (:meth:`cascgp.gp.GPFitConfig.floors`), so
-    that its noise variance is :math:`\ge \sigma_	au^2` in N² m². ``ValueError`` naming ``noise_floor_nm`` for a
+    :math:`\max(\mathrm{noise\_floor}, \sigma_\tau^2 / \sigma_y^2)` (:meth:`cascgp.gp.GPFitConfig.floors`), so
+    that its noise variance is :math:`\ge \sigma_\tau^2` in N² m². ``ValueError`` naming ``noise_var_floor`` for a
     negative or non-finite value, a wrong shape, or a ``gp_config`` that already sets ``noise_floor_target``."""
-    if noise_floor_nm is not None:
+    if noise_var_floor is not None:
         cfg = GPFitConfig() if gp_config is None else gp_config
         if not isinstance(cfg, GPFitConfig):
             raise TypeError(f"gp_config: expected GPFitConfig or None, got {type(cfg).__name__}")
         if cfg.noise_floor_target is not None:
-            raise ValueError("noise_floor_nm: gp_config already sets noise_floor_target; give the floor once")
-        floor = check_target_floor(noise_floor_nm, "noise_floor_nm")
+            raise ValueError("noise_var_floor: gp_config already sets noise_floor_target; give the floor once")
+        floor = check_target_floor(noise_var_floor, "noise_var_floor")
         if isinstance(floor, tuple) and len(floor) != dof:
-            raise ValueError(f"noise_floor_nm: expected one number or shape ({dof},) (one per joint, N m^2), got "
+            raise ValueError(f"noise_var_floor: expected one number or shape ({dof},) (one per joint, N^2 m^2), got "
                              f"{len(floor)} values")
         gp_config = replace(cfg, noise_floor_target=floor)
     return CascadedGPModel(name, dof, rbd, gp_config=gp_config, df_delta=df_delta,
