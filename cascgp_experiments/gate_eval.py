@@ -52,6 +52,50 @@ PAIRED = (GATED, GATED + "-online", UNGATED + "-online")
 CRITERIA = {"gate_learners_last": 1.10, "gated_first_vs_rbd": 1.02}
 
 
+def add_protocol_args(p: Any) -> None:
+    """The command-line options shared by the seed studies built on :data:`GATE_EVAL_CONFIG` (``scripts.gate_eval``,
+    ``scripts.learner_divergence``): ``--out --seeds --tasks --attempts --restarts --cap``."""
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--seeds", type=str, default=",".join(map(str, GATE_EVAL_SEEDS)), help="comma-separated seeds")
+    p.add_argument("--tasks", type=str, default=None, help="comma-separated tasks (default: the full transfer's)")
+    p.add_argument("--attempts", type=int, default=GATE_EVAL_CONFIG.attempts, help="attempts per task")
+    p.add_argument("--restarts", type=int, default=GATE_EVAL_CONFIG.restarts, help="GP restarts per retraining")
+    p.add_argument("--cap", type=int, default=GATE_EVAL_CONFIG.cap, help="maximum training-set size")
+
+
+def protocol_from_args(p: Any, a: Any, *, min_attempts: int, two_tasks_why: str
+                       ) -> tuple[TransferConfig, tuple[int, ...]]:
+    """The settings and seeds of :func:`add_protocol_args`' options (``p.error`` for bad ones: seeds not integers,
+    fewer than ``min_attempts`` attempts, fewer than two tasks, explained by ``two_tasks_why``)."""
+    try:
+        seeds = tuple(int(s) for s in a.seeds.split(","))
+    except ValueError:
+        p.error(f"--seeds: expected comma-separated integers, got {a.seeds!r}")
+    if a.attempts < min_attempts:
+        p.error(f"--attempts must be at least {min_attempts}")
+    cfg = replace(GATE_EVAL_CONFIG, attempts=a.attempts, restarts=a.restarts, cap=a.cap,
+                  **({"tasks": tuple(a.tasks.split(","))} if a.tasks else {}))
+    if len(cfg.tasks) < 2:
+        p.error(f"--tasks: at least two tasks ({two_tasks_why})")
+    return cfg, seeds
+
+
+def scatter_ratios(ax: Any, rows: list[dict[str, Any]], medians: dict[str, float | None], colors: Any = None
+                   ) -> list[str]:
+    """Every ratio of ``rows`` for each quantity of ``medians`` (one dot per seed and task, ``colors(row)`` or blue),
+    the quantity's median as a black bar (none when None), the quantities as x labels; returns them."""
+    quantities = list(medians)
+    for i, quantity in enumerate(quantities):
+        sel = [r for r in rows if r["quantity"] == quantity]
+        x = i + np.linspace(-0.2, 0.2, len(sel)) if len(sel) > 1 else np.array([i])
+        ax.scatter(x, [r["ratio"] for r in sel], c=[colors(r) if colors else "C0" for r in sel], s=18)
+        if medians[quantity] is not None:
+            ax.hlines(medians[quantity], i - 0.3, i + 0.3, color="k")
+    ax.axhline(1.0, color="0.7", lw=1, zorder=0)
+    ax.set_xticks(range(len(quantities)), [q.replace("_", "\n") for q in quantities], fontsize=7)
+    return quantities
+
+
 def gate_jobs(cfg: TransferConfig, seeds: tuple[int, ...]) -> list[dict[str, Any]]:
     """One job per (seed, controller), seed-major (a stopped run keeps whole seeds)."""
     jobs = []
@@ -91,7 +135,9 @@ def run_gate_eval(out: Path, cfg: TransferConfig = GATE_EVAL_CONFIG, seeds: tupl
     return results
 
 
-def _one(attempts: list[dict[str, Any]], task: str, k: int | None = None, phase: str = "train") -> dict[str, Any]:
+def find_attempt(attempts: list[dict[str, Any]], task: str, k: int | None = None,
+                 phase: str = "train") -> dict[str, Any]:
+    """The one record of ``phase`` on ``task`` (attempt ``k`` there, or any); ``ValueError`` unless exactly one."""
     sel = [a for a in attempts if a["task"] == task and a["phase"] == phase and (k is None or a["task_attempt"] == k)]
     if len(sel) != 1:
         raise ValueError(f"expected one {phase} attempt {k} on task {task!r}, found {len(sel)}")
@@ -115,25 +161,25 @@ def ratios(results: dict[str, Any]) -> list[dict[str, Any]]:
                          "ratio": ratio})
 
         for task in tasks:
-            u = _one(ung, task, last)
+            u = find_attempt(ung, task, last)
             add("gate_same_model_last", task, u["paired"][GATED]["tracking_rmse"], u["tracking_rmse"])
-            add("gate_learners_last", task, _one(gat, task, last)["tracking_rmse"], u["tracking_rmse"])
+            add("gate_learners_last", task, find_attempt(gat, task, last)["tracking_rmse"], u["tracking_rmse"])
         for task in tasks[1:]:
-            r = _one(rbd, task, 0)["tracking_rmse"]
-            u = _one(ung, task, 0)
-            add("gated_first_vs_rbd", task, _one(gat, task, 0)["tracking_rmse"], r)
+            r = find_attempt(rbd, task, 0)["tracking_rmse"]
+            u = find_attempt(ung, task, 0)
+            add("gated_first_vs_rbd", task, find_attempt(gat, task, 0)["tracking_rmse"], r)
             add("gate_same_model_first_vs_rbd", task, u["paired"][GATED]["tracking_rmse"], r)
             add("ungated_first_vs_rbd", task, u["tracking_rmse"], r)
             p = u["paired"]
             add("online_first_same_model", task, p[UNGATED + "-online"]["tracking_rmse"], u["tracking_rmse"])
             add("gated_online_first_same_model", task, p[GATED + "-online"]["tracking_rmse"], p[GATED]["tracking_rmse"])
-        u, g = _one(ung, tasks[0], phase="revisit"), _one(gat, tasks[0], phase="revisit")
+        u, g = find_attempt(ung, tasks[0], phase="revisit"), find_attempt(gat, tasks[0], phase="revisit")
         add("gate_same_model_revisit", tasks[0], u["paired"][GATED]["tracking_rmse"], u["tracking_rmse"])
         add("gate_learners_revisit", tasks[0], g["tracking_rmse"], u["tracking_rmse"])
     return rows
 
 
-def _stats(values: list[float], limit: float | None) -> dict[str, Any]:
+def ratio_stats(values: list[float], limit: float | None) -> dict[str, Any]:
     """Median, quartiles and range of the finite ratios; ``n_nonfinite`` counts the others (none in a sound run)."""
     a = np.asarray(values, dtype=float)
     v = a[np.isfinite(a)]
@@ -156,7 +202,7 @@ def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
         limit = CRITERIA.get(quantity)
         groups = {"all": sel, "seen": [r for r in sel if r["seed"] in SEEDS_SEEN_WHEN_CHOSEN],
                   "new": [r for r in sel if r["seed"] not in SEEDS_SEEN_WHEN_CHOSEN]}
-        out[quantity] = {g: _stats([r["ratio"] for r in rs], limit) for g, rs in groups.items() if rs}
+        out[quantity] = {g: ratio_stats([r["ratio"] for r in rs], limit) for g, rs in groups.items() if rs}
     return out
 
 
@@ -191,19 +237,13 @@ def plot(results: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    quantities = list(results["summary"])
     fig, ax = plt.subplots(figsize=(9, 4.5))
+    medians = {q: g["all"].get("median") for q, g in results["summary"].items()}
+    quantities = scatter_ratios(ax, results["ratios"], medians,
+                                lambda r: "C1" if r["seed"] in SEEDS_SEEN_WHEN_CHOSEN else "C0")
     for i, quantity in enumerate(quantities):
-        sel = [r for r in results["ratios"] if r["quantity"] == quantity]
-        x = i + np.linspace(-0.2, 0.2, len(sel)) if len(sel) > 1 else np.array([i])
-        colors = ["C1" if r["seed"] in SEEDS_SEEN_WHEN_CHOSEN else "C0" for r in sel]
-        ax.scatter(x, [r["ratio"] for r in sel], c=colors, s=18)
-        if results["summary"][quantity]["all"]["n"]:
-            ax.hlines(results["summary"][quantity]["all"]["median"], i - 0.3, i + 0.3, color="k")
         if quantity in CRITERIA:
             ax.hlines(CRITERIA[quantity], i - 0.35, i + 0.35, color="r", linestyles="dashed")
-    ax.axhline(1.0, color="0.7", lw=1, zorder=0)
-    ax.set_xticks(range(len(quantities)), [q.replace("_", "\n") for q in quantities], fontsize=7)
     ax.set_ylabel("ratio of tracking RMSEs")
     ax.set_title("Gated feedforward, paired across seeds (orange: seed the rule was chosen on; "
                  "black: median; red: criterion)", fontsize=9)

@@ -64,7 +64,8 @@ import numpy as np
 from cascgp.controller import gate_weights
 from cascgp.io import atomic_write_text, write_json
 from cascgp_experiments.common import save_figure
-from cascgp_experiments.gate_eval import GATE_EVAL_CONFIG, GATE_EVAL_SEEDS, _stats
+from cascgp_experiments.gate_eval import (GATE_EVAL_CONFIG, GATE_EVAL_SEEDS, find_attempt, ratio_stats,
+                                          scatter_ratios)
 from cascgp_experiments.transfer import TransferConfig
 
 __all__ = ["NULL_FIT_SEED_OFFSET", "LEARNERS", "reference_uncertainty", "divergence_job", "divergence_jobs",
@@ -166,13 +167,6 @@ def run_divergence(out: Path, cfg: TransferConfig = GATE_EVAL_CONFIG, seeds: tup
     return results
 
 
-def _one(attempts: list[dict[str, Any]], task: str, k: int) -> dict[str, Any]:
-    sel = [a for a in attempts if a["task"] == task and a["phase"] == "train" and a["task_attempt"] == k]
-    if len(sel) != 1:
-        raise ValueError(f"expected one train attempt {k} on task {task!r}, found {len(sel)}")
-    return sel[0]
-
-
 def reproduction(results: dict[str, Any], reference: dict[str, Any]) -> dict[str, Any]:
     """How many of GL's and UL's attempt RMSEs equal the gate evaluation's (same seeds and settings)."""
     names = {"GL": GATED, "UL": UNGATED}
@@ -208,7 +202,7 @@ def ratios(results: dict[str, Any]) -> list[dict[str, Any]]:
     for seed, run in results["runs"].items():
         gl, ul, null = run["GL"], run["UL"], run["UL'"]
         for task in tasks:
-            g, u, n = _one(gl, task, last), _one(ul, task, last), _one(null, task, last)
+            g, u, n = find_attempt(gl, task, last), find_attempt(ul, task, last), find_attempt(null, task, last)
             g_ungated = g["paired"][UNGATED]["tracking_rmse"]
             add(seed, task, "null_last", n["tracking_rmse"], u["tracking_rmse"])
             add(seed, task, "gate_learners_last", g["tracking_rmse"], u["tracking_rmse"])
@@ -217,14 +211,14 @@ def ratios(results: dict[str, Any]) -> list[dict[str, Any]]:
             add(seed, task, "rel_var_gl_vs_ul", float(np.mean(g["before"]["rel_var"])),
                 float(np.mean(u["before"]["rel_var"])))
             if task != tasks[0]:
-                early = [[_one(r, task, k)["tracking_rmse"] for k in range(min(3, last))] for r in (gl, ul)]
+                early = [[find_attempt(r, task, k)["tracking_rmse"] for k in range(min(3, last))] for r in (gl, ul)]
                 add(seed, task, "early_tracking_gl_vs_ul", float(np.mean(early[0])), float(np.mean(early[1])))
     return rows
 
 
 def summarise(rows: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
     """Per quantity: median, quartiles, range and, for the two learner ratios, the count <= 1.10."""
-    return {q: _stats([r["ratio"] for r in rows if r["quantity"] == q],
+    return {q: ratio_stats([r["ratio"] for r in rows if r["quantity"] == q],
                       1.10 if q in ("null_last", "gate_learners_last") else None)
             for q in dict.fromkeys(r["quantity"] for r in rows)}
 
@@ -334,18 +328,11 @@ def plot(results: dict[str, Any], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    quantities = list(results["summary"])
     fig, ax = plt.subplots(figsize=(9, 4.5))
-    for i, q in enumerate(quantities):
-        v = [r["ratio"] for r in results["ratios"] if r["quantity"] == q]
-        ax.scatter(i + np.linspace(-0.2, 0.2, len(v)), v, s=18, c="C0")
-        if results["summary"][q]["n"]:
-            ax.hlines(results["summary"][q]["median"], i - 0.3, i + 0.3, color="k")
+    scatter_ratios(ax, results["ratios"], {q: st.get("median") for q, st in results["summary"].items()})
     for y in (1 / 1.1, 1.1):
         ax.axhline(y, color="r", ls="--", lw=0.8)
-    ax.axhline(1.0, color="0.7", lw=1, zorder=0)
     ax.set_yscale("log")
-    ax.set_xticks(range(len(quantities)), [q.replace("_", "\n") for q in quantities], fontsize=7)
     ax.set_ylabel("ratio")
     ax.set_title("Gated vs ungated learners: null (fit seed only), decomposition, uncertainty along the reference",
                  fontsize=9)

@@ -14,38 +14,23 @@ cached under ``--out/cache`` (a stopped run resumes).
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 from pathlib import Path
 
 from cascgp.io import read_json
 from cascgp_experiments.execution import add_execution_args, check_args, session
-from cascgp_experiments.gate_eval import GATE_EVAL_CONFIG, GATE_EVAL_SEEDS
+from cascgp_experiments.gate_eval import add_protocol_args, protocol_from_args
 from cascgp_experiments.learner_divergence import run_divergence
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, required=True, help="output folder")
-    p.add_argument("--seeds", type=str, default=",".join(map(str, GATE_EVAL_SEEDS)), help="comma-separated seeds")
-    p.add_argument("--tasks", type=str, default=None, help="comma-separated tasks (default: the full transfer's)")
-    p.add_argument("--attempts", type=int, default=GATE_EVAL_CONFIG.attempts, help="attempts per task")
-    p.add_argument("--restarts", type=int, default=GATE_EVAL_CONFIG.restarts, help="GP restarts per retraining")
-    p.add_argument("--cap", type=int, default=GATE_EVAL_CONFIG.cap, help="maximum training-set size")
+    add_protocol_args(p)
     p.add_argument("--reference", type=Path, default=None,
                    help="the gate evaluation's JSON (docs/gate_eval.json) to check the reproduction against")
     add_execution_args(p)
     a = p.parse_args(argv)
     check_args(p, a)
-    try:
-        seeds = tuple(int(s) for s in a.seeds.split(","))
-    except ValueError:
-        p.error(f"--seeds: expected comma-separated integers, got {a.seeds!r}")
-    if a.attempts < 2:
-        p.error("--attempts must be at least 2 (the last attempt on a task is compared)")
-    cfg = replace(GATE_EVAL_CONFIG, attempts=a.attempts, restarts=a.restarts, cap=a.cap,
-                  **({"tasks": tuple(a.tasks.split(","))} if a.tasks else {}))
-    if len(cfg.tasks) < 2:
-        p.error("--tasks: at least two tasks")
+    cfg, seeds = protocol_from_args(p, a, min_attempts=2, two_tasks_why="the early attempts on a new task are compared")
     if a.reference is not None and not a.reference.is_file():
         p.error(f"--reference: no file {a.reference}")
     reference = read_json(a.reference) if a.reference is not None else None
