@@ -64,10 +64,15 @@ class GPPosterior:
         x = np.atleast_2d(np.asarray(x, dtype=np.float64))
         if not np.isfinite(self.x_scale[col]):
             return np.zeros(x.shape[0])
+        z, kprime = self._kernel_slope(x)
+        dk = kprime * (2.0 * (z[:, col, None] - self.Z[None, :, col]))
+        return self.y_std * self.signal_var * (dk @ self.alpha) / self.x_scale[col]
+
+    def _kernel_slope(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Normalised queries ``z`` (m, d) and :math:`k'(r^2)` (m, n) against the training inputs."""
         z = (x - self.x_mean) / self.x_scale
         r2 = (z * z).sum(1)[:, None] + (self.Z * self.Z).sum(1)[None, :] - 2.0 * z @ self.Z.T
-        dk = get_kernel(self.kernel).grad_r2(r2) * (2.0 * (z[:, col, None] - self.Z[None, :, col]))
-        return self.y_std * self.signal_var * (dk @ self.alpha) / self.x_scale[col]
+        return z, get_kernel(self.kernel).grad_r2(r2)
 
     def mean_grad_all(self, x: np.ndarray) -> np.ndarray:
         r"""Gradient of the posterior mean with respect to every input column at the rows of ``x`` ``(m, d)``,
@@ -79,10 +84,8 @@ class GPPosterior:
             \Big(z_c \sum_k k'(r^2_k)\,\alpha_k - \sum_k k'(r^2_k)\,\alpha_k Z_{kc}\Big)
 
         (two matrix products; 0 for ignored columns, whose ``x_scale`` is ``inf``)."""
-        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
-        z = (x - self.x_mean) / self.x_scale
-        r2 = (z * z).sum(1)[:, None] + (self.Z * self.Z).sum(1)[None, :] - 2.0 * z @ self.Z.T
-        w = get_kernel(self.kernel).grad_r2(r2) * self.alpha[None, :]
+        z, kprime = self._kernel_slope(np.atleast_2d(np.asarray(x, dtype=np.float64)))
+        w = kprime * self.alpha[None, :]
         g = z * w.sum(1)[:, None] - w @ self.Z
         return 2.0 * self.y_std * self.signal_var * g / self.x_scale
 

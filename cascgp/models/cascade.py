@@ -351,7 +351,8 @@ class CascadedGPModel:
         input_var = self._check_input_var(input_var) if input_var is not None else None
         mean, var = self._predict_arrays(q, qd, qdd, q_hist, return_var=True, propagate=propagate)
         if input_var is not None:
-            var = var + self._input_noise_var(q, qd, qdd, input_var)
+            J = self._mean_jacobian_arrays(q, qd, qdd, mean)  # the chained inputs are this prediction's mean
+            var = var + (J * J) @ input_var.reshape(-1)  # sum_s J_js^2 sigma_s^2 (see above)
         return (mean[0], var[0]) if single else (mean, var)
 
     def _check_input_var(self, input_var: Any) -> np.ndarray:
@@ -388,11 +389,14 @@ class CascadedGPModel:
         J = self._mean_jacobian_arrays(q, qd, qdd).reshape(q.shape[0], self.dof, self.dof, 3)
         return J[0] if single else J
 
-    def _mean_jacobian_arrays(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
-        """(T, N, 3N) total Jacobian of the mean (state columns ``3 k + c`` as in the flattened states)."""
+    def _mean_jacobian_arrays(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                              mean: np.ndarray | None = None) -> np.ndarray:
+        """(T, N, 3N) total Jacobian of the mean (state columns ``3 k + c`` as in the flattened states);
+        ``mean``: the predicted torques at these states (the chained inputs) when the caller has them."""
         T, N = q.shape
         sflat = self._states(q, qd, qdd, None).reshape(T, -1)
-        mean, _ = self._predict_arrays(q, qd, qdd, None, return_var=False)  # the chained torque inputs
+        if mean is None:
+            mean, _ = self._predict_arrays(q, qd, qdd, None, return_var=False)
         J = self._rbd_jacobian(q, qd, qdd) if self.parametric == "sp" else np.zeros((T, N, 3 * N))
         for j in self.order:  # cascade order: J[:, tj] is complete before joint j uses it
             sj, tj = self.specs[j]
@@ -411,21 +415,15 @@ class CascadedGPModel:
         """(T, N, 3N) derivative of the rigid-body torque by central differences (step ``h``)."""
         T, N = q.shape
         J = np.empty((T, N, 3 * N))
-        for c, which in enumerate(("q", "qd", "qdd")):
+        states = (q, qd, qdd)
+        for c in range(3):
             for k in range(N):
-                args = {"q": q, "qd": qd, "qdd": qdd}
-                hi, lo = dict(args), dict(args)
-                hi[which] = args[which].copy()
-                lo[which] = args[which].copy()
-                hi[which][:, k] += h
-                lo[which][:, k] -= h
-                J[:, :, 3 * k + c] = (self._rbd_torque(**hi) - self._rbd_torque(**lo)) / (2.0 * h)
+                step = np.zeros_like(states[c])
+                step[:, k] = h
+                hi = [s + step if i == c else s for i, s in enumerate(states)]
+                lo = [s - step if i == c else s for i, s in enumerate(states)]
+                J[:, :, 3 * k + c] = (self._rbd_torque(*hi) - self._rbd_torque(*lo)) / (2.0 * h)
         return J
-
-    def _input_noise_var(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, input_var: np.ndarray) -> np.ndarray:
-        r"""(T, N) input-noise variance :math:`\sum_s J_{j,s}^2 \sigma_s^2` (see :meth:`predict`)."""
-        J = self._mean_jacobian_arrays(q, qd, qdd)
-        return (J * J) @ input_var.reshape(-1)
 
     @property
     def noise_var(self) -> np.ndarray:
