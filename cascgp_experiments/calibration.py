@@ -198,6 +198,16 @@ def write(res: dict[str, Any], out: str | Path) -> None:
     atomic_write_text(out / "calibration.md", summary_table(res) + "\n")
 
 
+def _cells(res: dict[str, Any], field: str) -> np.ndarray:
+    """``field`` of every model @ seconds (sorted) and joint: (cells, dof), each the median over subsets."""
+    return np.array([s[field] for _, s in sorted(res["summary"].items())], float)
+
+
+def _n_in_band(c: np.ndarray) -> int:
+    """How many of the coverages ``c`` lie in :data:`BAND`."""
+    return int(((c >= BAND[0]) & (c <= BAND[1])).sum())
+
+
 def compare_arms(arms: dict[str, dict[str, Any]], field: str = "coverage_propagated", base: str | None = None) -> str:
     """Markdown: the decision statistics of ``docs/calibration.md`` for each arm (a :func:`calibration` result):
     over all cells (model @ seconds x joint, each the median over subsets) of ``field``, the median cell, the
@@ -205,19 +215,14 @@ def compare_arms(arms: dict[str, dict[str, Any]], field: str = "coverage_propaga
     the paired change per cell."""
     names = list(arms)
     base = base or names[0]
-
-    def cells(res: dict[str, Any]) -> np.ndarray:
-        return np.array([s[field] for _, s in sorted(res["summary"].items())], float).ravel()
-
-    ref = cells(arms[base])
+    ref = _cells(arms[base], field).ravel()
     lines = [f"| arm | cells | median | min - max | in {BAND[0]:.2f}-{BAND[1]:.2f} | median change vs {base} |",
              "|---|---|---|---|---|---|"]
     for name in names:
-        c = cells(arms[name])
+        c = _cells(arms[name], field).ravel()
         if c.shape != ref.shape:
             raise ValueError(f"arm {name!r}: {c.size} cells, the base arm {base!r} has {ref.size}")
-        inside = int(((c >= BAND[0]) & (c <= BAND[1])).sum())
-        lines.append(f"| {name} | {c.size} | {np.median(c):.3f} | {c.min():.3f} - {c.max():.3f} | {inside} | "
+        lines.append(f"| {name} | {c.size} | {np.median(c):.3f} | {c.min():.3f} - {c.max():.3f} | {_n_in_band(c)} | "
                      f"{np.median(c - ref):+.3f} |")
     return "\n".join(lines)
 
@@ -253,8 +258,7 @@ def floor_effect(base: dict[str, Any], floored: dict[str, Any], field: str = "co
         if (rb["model"], rb["seconds"], rb["subset"], rb["n_train"]) != (rf["model"], rf["seconds"], rf["subset"],
                                                                            rf["n_train"]):
             raise ValueError("floored: rows are not paired with base's (model, seconds, subset, n_train)")
-    c0 = np.array([base["summary"][k][field] for k in keys], float)
-    c1 = np.array([floored["summary"][k][field] for k in keys], float)
+    c0, c1 = _cells(base, field), _cells(floored, field)
     collapsed = np.zeros_like(c0, dtype=bool)
     for i, k in enumerate(keys):
         name, secs = k.rsplit("@", 1)
@@ -272,7 +276,7 @@ def floor_effect(base: dict[str, Any], floored: dict[str, Any], field: str = "co
             lines.append(f"| {label} | 0 | - | - | - | - | - | - |")
             continue
         a, b = c0[sel], c1[sel]
-        inb = [int(((x >= BAND[0]) & (x <= BAND[1])).sum()) for x in (a, b)]
+        inb = [_n_in_band(x) for x in (a, b)]
         d = b - a
         rr = (f"{np.median(ratio[sel]):.3f} ({ratio[sel].min():.3f} - {ratio[sel].max():.3f})" if have_rmse
               else "-")
