@@ -1,0 +1,49 @@
+"""Per-joint look inside the gated and ungated learners' models on "left" (issue 10; protocol and reading
+rules in :mod:`cascgp_experiments.lag_diagnosis`).
+
+Usage::
+
+    python -m scripts.lag_diagnosis --out out/lag_diagnosis \
+        --reference docs/gate_eval.json docs/learner_divergence_seeds4-7.json     # the protocol, seeds 0-7
+    python -m scripts.lag_diagnosis --out out/lag_diagnosis --seeds 0             # fewer seeds
+
+Writes ``lag_diagnosis.json`` (every attempt with the per-joint diagnostics, the GL / UL rows, the causes'
+counts) and ``lag_diagnosis.md`` to ``--out``; finished jobs are cached under ``--out/cache``.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from cascgp.io import read_json
+from cascgp_experiments.execution import add_execution_args, check_args, session
+from cascgp_experiments.lag_diagnosis import LAG_SEEDS, run_diagnosis
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", type=Path, required=True, help="output folder")
+    p.add_argument("--seeds", type=str, default=",".join(map(str, LAG_SEEDS)), help="comma-separated seeds")
+    p.add_argument("--reference", type=Path, nargs="*", default=[],
+                   help="earlier runs' JSONs (gate_eval, learner_divergence) to check the attempts against")
+    add_execution_args(p)
+    a = p.parse_args(argv)
+    check_args(p, a)
+    try:
+        seeds = tuple(int(s) for s in a.seeds.split(","))
+    except ValueError:
+        p.error(f"--seeds: expected comma-separated integers, got {a.seeds!r}")
+    for r in a.reference:
+        if not r.is_file():
+            p.error(f"--reference: no file {r}")
+    with session(a.ray, a.workers):
+        res = run_diagnosis(a.out, seeds=seeds, workers=a.workers, ray_address=a.ray,
+                            references=tuple(read_json(r) for r in a.reference))
+    print((a.out / "lag_diagnosis.md").read_text())
+    print(f"wall {res['wall_seconds']:.0f} s; results: {a.out / 'lag_diagnosis.json'}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
