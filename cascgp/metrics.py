@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.stats import norm
 
-__all__ = ["rmse", "nrmse", "interval_coverage"]
+__all__ = ["rmse", "nrmse", "interval_coverage", "std_scale_for_level"]
 
 
 def _pair(pred: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -62,3 +62,23 @@ def interval_coverage(mean: np.ndarray, var: np.ndarray, target: np.ndarray, lev
         raise ValueError(f"level: expected a probability in (0, 1), got {level!r}")
     z = float(norm.ppf(0.5 + 0.5 * level))
     return np.mean(np.abs(y - p) <= z * np.sqrt(v), axis=0)
+
+
+def std_scale_for_level(mean: np.ndarray, var: np.ndarray, target: np.ndarray, level: float = 0.95) -> np.ndarray:
+    r"""Per joint, the factor :math:`c` on the predictive standard deviation that makes the central interval of
+    probability ``level`` cover exactly that fraction of ``target``: the ``level`` quantile of
+    :math:`|y - \mu| / \sqrt{v}` divided by :math:`z_{(1+\text{level})/2}`.
+
+    :math:`c > 1`: the intervals are too narrow (overconfident); :math:`c < 1`: too wide. Fitted on held-out data
+    and applied to new predictions (:math:`\sqrt{v} \to c \sqrt{v}`), it is the one-parameter recalibration of
+    a Gaussian predictive distribution (a quantile fit; Kuleshov et al. 2018 fit the whole CDF). Shapes as
+    :func:`interval_coverage`; ``var`` > 0 where the error is non-zero (a zero variance with an error gives inf)."""
+    p, y = _pair(mean, target)
+    v, _ = _pair(var, target)
+    if (v < 0).any():
+        raise ValueError("var: negative variance")
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level: expected a probability in (0, 1), got {level!r}")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(np.abs(y - p) == 0, 0.0, np.abs(y - p) / np.sqrt(v))
+    return np.quantile(ratio, level, axis=0) / float(norm.ppf(0.5 + 0.5 * level))

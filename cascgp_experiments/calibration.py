@@ -25,13 +25,13 @@ from scipy.stats import norm
 
 from cascgp.data import DynamicsData, SavGol
 from cascgp.gp import GPFitConfig
-from cascgp.metrics import interval_coverage
+from cascgp.metrics import interval_coverage, std_scale_for_level
 from cascgp.models import make_model
 from cascgp.rbd import load_nominal
 from cascgp_experiments.common import NOMINAL_URDF
 
-__all__ = ["CASCADES", "BAND", "calibration", "combined_table", "compare_arms", "floor_effect", "sensor_input_var",
-           "sensor_torque_var", "study_data"]
+__all__ = ["CASCADES", "BAND", "calibration", "combined_table", "compare_arms", "floor_effect",
+           "recalibration_effect", "sensor_input_var", "sensor_torque_var", "study_data"]
 
 #: The issue's target band for the coverage of a 95 % interval.
 BAND = (0.90, 0.98)
@@ -100,7 +100,7 @@ def sensor_torque_var(collection: dict) -> float:
 def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float, ...] = (10.0, 30.0),
                 n_subsets: int = 3, models: tuple[str, ...] = CASCADES, rate_hz: float = 10.0,
                 n_restarts: int = 3, level: float = 0.95, input_var: np.ndarray | None = None,
-                noise_var_floor: float | None = None, progress=None) -> dict[str, Any]:
+                noise_var_floor: float | None = None, recalibrate: bool = False, progress=None) -> dict[str, Any]:
     """Coverage per model, training size, subset and joint (see the module docstring).
 
     ``input_var`` (dof, 3): variances of the input noise (:func:`sensor_input_var`); with it a third
@@ -108,13 +108,24 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
     scored as ``coverage_input_noise``. ``noise_var_floor``: lower bound of every joint GP's noise variance in
     N² m² (``make_model(..., noise_var_floor=...)``; :func:`sensor_torque_var` gives the torque sensor's);
     ``None``: none, the default fit. Every row also has the held-out RMSE of the mean per joint (``rmse``, N m).
+    ``recalibrate``: the model trained on subset k also predicts training motion ``n_subsets + k`` (a motion it
+    has not seen, never a test motion), the per-joint factor on its propagated predictive std that covers
+    ``level`` there is fitted (:func:`cascgp.metrics.std_scale_for_level`, ``recal_scale``), and the test
+    coverage with the std so scaled is scored (``coverage_recalibrated``).
 
     Returns a JSON-serialisable dict: ``rows`` (one per model, seconds, subset, with ``coverage_mean_input``
     and ``coverage_propagated`` lists per joint) and ``summary`` (per model and seconds: the median over
     subsets of each joint's coverage, both variances).
     """
     rbd = load_nominal(NOMINAL_URDF)
-    subsets = train.split(10)[:n_subsets] if train.segments.size >= n_subsets else [train]
+    motions = train.split(10)
+    subsets = motions[:n_subsets] if train.segments.size >= n_subsets else [train]
+    if recalibrate:  # the motion a factor is fitted on must share no segment (motion) with any training subset
+        seen = set(np.concatenate([sub.segment for sub in subsets]).tolist())
+        if (len(subsets) + n_subsets > len(motions)
+                or any(seen & set(motions[n_subsets + k].segment.tolist()) for k in range(len(subsets)))):
+            raise ValueError(f"recalibrate: needs {2 * n_subsets} separate training motions (one unseen per "
+                             f"subset); the training data have {train.segments.size}")
     test10 = test.subsample(rate_hz)
     cfg = GPFitConfig(n_restarts=n_restarts)
     rows = []
@@ -133,9 +144,7 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
                 # diagnostics: the factor on the predictive std that would make the 95 % interval cover 95 % of
                 # the test torques, and the coverage on the rest of the training subset's own motion (rows after
                 # the first `secs`, same excitation, states near the training ones)
-                sd = np.sqrt(var + m.noise_var)
-                scale = np.quantile(np.abs(test10.tau - mean) / np.maximum(sd, 1e-300), level, axis=0) / float(
-                    norm.ppf(0.5 + 0.5 * level))
+                scale = std_scale_for_level(mean, var + m.noise_var, test10.tau, level)
                 sub10 = sub.subsample(rate_hz)
                 n_rest = sub10.n_samples - data.n_samples
                 rows.append({"model": name, "seconds": secs, "subset": k, "n_train": data.n_samples,
@@ -148,6 +157,13 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
                     mr, vr = m.predict(rest.q, rest.qd, rest.qdd, propagate=True)
                     rows[-1]["coverage_same_motion_rest"] = interval_coverage(mr, vr + m.noise_var, rest.tau,
                                                                               level).tolist()
+                if recalibrate:
+                    cal = motions[n_subsets + k].subsample(rate_hz)
+                    mc, vc = m.predict(cal.q, cal.qd, cal.qdd, propagate=True)
+                    c = std_scale_for_level(mc, vc + m.noise_var, cal.tau, level)
+                    rows[-1]["recal_scale"] = c.tolist()
+                    rows[-1]["coverage_recalibrated"] = interval_coverage(mean, c**2 * (var + m.noise_var),
+                                                                          test10.tau, level).tolist()
                 if input_var is not None:
                     _, var_in = m.predict(test10.q, test10.qd, test10.qdd, propagate=True, input_var=input_var)
                     rows[-1]["coverage_input_noise"] = interval_coverage(mean, var_in + m.noise_var, test10.tau,
@@ -164,7 +180,8 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
             summary[f"{name}@{secs:g}s"] = {
                 key: np.median(np.array([r[key] for r in sel]), axis=0).round(4).tolist()
                 for key in ("coverage_mean_input", "coverage_propagated", "coverage_input_noise", "noise_std",
-                            "input_noise_std", "std_scale_for_level", "coverage_same_motion_rest", "rmse")
+                            "input_noise_std", "std_scale_for_level", "coverage_same_motion_rest", "rmse",
+                            "recal_scale", "coverage_recalibrated")
                 if all(key in r for r in sel)}
     return {"level": level, "rate_hz": rate_hz, "n_subsets": len(subsets), "n_restarts": n_restarts,
             "n_test_rows": test10.n_samples, "collection": train.meta.get("collection"),
@@ -184,6 +201,8 @@ def summary_table(res: dict[str, Any]) -> str:
                              ("propagated + input noise", "coverage_input_noise"),
                              ("propagated, rest of the training motion", "coverage_same_motion_rest"),
                              ("std factor for 95 % (propagated)", "std_scale_for_level"),
+                             ("recalibrated on an unseen training motion", "coverage_recalibrated"),
+                             ("its std factor (fitted on that motion)", "recal_scale"),
                              ("fitted noise std (N m)", "noise_std"), ("input-noise std (N m)", "input_noise_std")):
             if field in s:
                 lines.append(f"| {key} | {label} | " + " | ".join(f"{v:.3f}" for v in s[field]) + " |")
@@ -238,6 +257,24 @@ def combined_table(arms: dict[str, dict[str, Any]], field: str = "coverage_propa
             vals = res["summary"][key].get(field)
             cells = " | ".join(f"{v:.3f}" for v in vals) if vals is not None else " | ".join("-" * dof)
             lines.append(f"| {key} | {name} | {cells} |")
+    return "\n".join(lines)
+
+
+def recalibration_effect(res: dict[str, Any]) -> str:
+    """Markdown: the pre-registered statistics of the recalibration test in ``docs/calibration.md`` for one
+    :func:`calibration` result run with ``recalibrate=True``: over all cells (model @ seconds x joint, each the
+    median over subsets), the propagated and the recalibrated coverage side by side: median cell, cells in
+    :data:`BAND`, below and above it, and the median paired change with how many cells rose or fell."""
+    if any("coverage_recalibrated" not in s for s in res["summary"].values()):
+        raise ValueError("res: no recalibrated coverage (run calibration(..., recalibrate=True))")
+    a, b = _cells(res, "coverage_propagated").ravel(), _cells(res, "coverage_recalibrated").ravel()
+    d = b - a
+    lines = [f"| variance | cells | median | min - max | in {BAND[0]:.2f}-{BAND[1]:.2f} | below | above | "
+             "median change | up / down / same |", "|---|---|---|---|---|---|---|---|---|"]
+    for label, c in (("propagated", a), ("recalibrated", b)):
+        ch = f"{np.median(d):+.3f} | {(d > 0).sum()} / {(d < 0).sum()} / {(d == 0).sum()}" if c is b else "- | -"
+        lines.append(f"| {label} | {c.size} | {np.median(c):.3f} | {c.min():.3f} - {c.max():.3f} | {_n_in_band(c)} | "
+                     f"{int((c < BAND[0]).sum())} | {int((c > BAND[1]).sum())} | {ch} |")
     return "\n".join(lines)
 
 

@@ -7,7 +7,8 @@
 scripts.collect_jaco_data``); without it the ``--collect`` preset (default ``quick``) is recorded into
 ``<out>/data`` (or reused from there), with ``--sensor-noise none`` noiseless and ``--qdd true`` with the
 simulator's true q̈ (the ablations of ``docs/calibration.md``). ``--noise-floor sensor`` bounds every joint GP's
-noise variance below by the torque sensor's (the noise-floor test of ``docs/calibration.md``).
+noise variance below by the torque sensor's (the noise-floor test of ``docs/calibration.md``); ``--recalibrate``
+scales each joint's std by a factor fitted on an unseen training motion (the recalibration test there).
 Writes ``calibration.json`` and ``calibration.md`` into ``--out`` (see :mod:`cascgp_experiments.calibration`).
 """
 
@@ -40,16 +41,23 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--noise-floor", default="none", choices=("none", "sensor"),
                     help="lower bound of every joint GP's noise variance: none (default) or the torque sensor's "
                          "noise variance tau_std^2 of the data's collection (sensor_torque_var; 0.01 N^2 m^2)")
+    ap.add_argument("--recalibrate", action="store_true",
+                    help="also fit a per-joint std factor on an unseen training motion (motion n_subsets + k for "
+                         "subset k) and score the test coverage with it (the recalibration test of "
+                         "docs/calibration.md)")
     a = ap.parse_args(argv)
     if a.data and (a.sensor_noise != "default" or a.qdd != "savgol" or a.collect != "quick"):
         ap.error("--collect/--sensor-noise/--qdd apply to a new collection: leave out --data")
+    if a.recalibrate and not 1 <= a.subsets <= 5:
+        ap.error(f"--recalibrate: --subsets must be 1-5 (each subset needs an unseen training motion of the 10), "
+                 f"got {a.subsets}")
     import time
 
     import torch
     from tqdm import tqdm
 
-    from cascgp_experiments.calibration import (CASCADES, calibration, sensor_input_var, sensor_torque_var,
-                                                 study_data, summary_table, write)
+    from cascgp_experiments.calibration import (CASCADES, calibration, recalibration_effect, sensor_input_var,
+                                                 sensor_torque_var, study_data, summary_table, write)
 
     torch.set_num_threads(1)
     out = Path(a.out)
@@ -73,12 +81,15 @@ def main(argv: list[str] | None = None) -> None:
     t0 = time.perf_counter()
     bar = tqdm(total=len(CASCADES) * len(a.seconds) * min(a.subsets, 10), desc="calibration fits")
     res = calibration(train, test, seconds=tuple(a.seconds), n_subsets=a.subsets, n_restarts=a.restarts,
-                      input_var=input_var, noise_var_floor=floor, progress=lambda row: bar.update())
+                      input_var=input_var, noise_var_floor=floor, recalibrate=a.recalibrate,
+                      progress=lambda row: bar.update())
     bar.close()
     res["wall_s"] = time.perf_counter() - t0
     res["command"] = "python -m scripts.calibration " + " ".join(argv if argv is not None else __import__("sys").argv[1:])
     write(res, out)
     print(summary_table(res))
+    if a.recalibrate:
+        print(recalibration_effect(res))
     print(f"wrote {out / 'calibration.json'}")
 
 

@@ -206,3 +206,33 @@ def test_floor_effect_splits_collapsed_and_other_cells() -> None:
     other["rows"][0]["subset"] = 1
     with pytest.raises(ValueError, match="paired"):
         floor_effect(base, other)
+
+
+def test_calibration_recalibrates_on_an_unseen_training_motion(arms, tmp_path: Path) -> None:
+    from cascgp_experiments.calibration import calibration, recalibration_effect
+
+    train, test, _ = collect(tmp_path, replace(TINY, n_subsets=10, subset_seconds=0.8), workers=1)
+    res = calibration(train, test, seconds=(0.5,), n_subsets=2, models=("sp-inward",), n_restarts=1,
+                      recalibrate=True)
+    assert len(res["rows"]) == 2
+    for row in res["rows"]:
+        c = np.array(row["recal_scale"])
+        prop, recal = np.array(row["coverage_propagated"]), np.array(row["coverage_recalibrated"])
+        assert c.shape == (6,) and (c > 0).all()
+        # a factor above 1 widens every interval (coverage cannot fall), below 1 narrows them
+        assert (recal[c >= 1] >= prop[c >= 1]).all() and (recal[c <= 1] <= prop[c <= 1]).all()
+    table = recalibration_effect(res).splitlines()
+    assert table[2].startswith("| propagated | 6 |") and table[3].startswith("| recalibrated | 6 |")
+    for n_subsets, data in ((6, train), (1, arms["noisy"][0])):  # too few motions; one motion only
+        with pytest.raises(ValueError, match="recalibrate"):
+            calibration(data, test, seconds=(0.5,), n_subsets=n_subsets, models=("sp-inward",), n_restarts=1,
+                        recalibrate=True)
+    with pytest.raises(ValueError, match="recalibrated"):
+        recalibration_effect(calibration(train, test, seconds=(0.5,), n_subsets=1, models=("sp-inward",),
+                                         n_restarts=1))
+
+
+def test_cli_recalibrate_needs_unseen_motions(tmp_path: Path) -> None:
+    r = subprocess.run([sys.executable, "-m", "scripts.calibration", "--out", str(tmp_path), "--recalibrate",
+                        "--subsets", "6"], cwd=REPO, capture_output=True, text=True)
+    assert r.returncode == 2 and "--recalibrate" in r.stderr

@@ -42,3 +42,26 @@ def test_interval_coverage_of_a_gaussian_sample_and_errors():
         interval_coverage(np.zeros(3), -np.ones(3), np.zeros(3))
     with pytest.raises(ValueError, match="level"):
         interval_coverage(np.zeros(3), np.ones(3), np.zeros(3), level=1.0)
+
+
+def test_std_scale_for_level_closed_form_and_its_invariant():
+    from cascgp.metrics import interval_coverage, std_scale_for_level
+
+    rng = np.random.default_rng(3)
+    y = rng.normal(size=(20000, 2)) * np.array([1.0, 3.0])  # true sds 1 and 3
+    # predicted sd 1 on both joints: the factor must be the true sd (to sampling error of the 95 % quantile)
+    c = std_scale_for_level(np.zeros_like(y), np.ones_like(y), y)
+    np.testing.assert_allclose(c, [1.0, 3.0], rtol=0.03)
+    # the definition: the level-quantile of |error|/sd over z (here exactly, one column of known errors)
+    e = np.arange(1.0, 101.0)[:, None]
+    assert std_scale_for_level(np.zeros_like(e), np.full_like(e, 4.0), e, 0.9)[0] == pytest.approx(
+        np.quantile(e[:, 0] / 2.0, 0.9) / 1.6448536269514722)
+    # invariant: the scaled intervals cover the level on the data the factor was fitted on
+    cov = interval_coverage(np.zeros_like(y), c**2 * np.ones_like(y), y)
+    np.testing.assert_allclose(cov, 0.95, atol=1e-3)
+    # zero error with zero variance is covered (factor 0), not a NaN
+    assert std_scale_for_level(np.zeros((3, 1)), np.zeros((3, 1)), np.zeros((3, 1)))[0] == 0.0
+    with pytest.raises(ValueError, match="var"):
+        std_scale_for_level(np.zeros(3), -np.ones(3), np.zeros(3))
+    with pytest.raises(ValueError, match="level"):
+        std_scale_for_level(np.zeros(3), np.ones(3), np.zeros(3), level=1.0)
