@@ -7,8 +7,11 @@ Usage::
         --reference docs/gate_eval.json docs/learner_divergence_seeds4-7.json     # the protocol, seeds 0-7
     python -m scripts.lag_diagnosis --out out/lag_diagnosis --seeds 0             # fewer seeds
 
+    python -m scripts.lag_diagnosis --refit --out out/lag_refit \
+        --reference docs/learner_divergence.json docs/learner_divergence_seeds4-7.json  # step 2: data or fit?
+
 Writes ``lag_diagnosis.json`` (every attempt with the per-joint diagnostics, the GL / UL rows, the causes'
-counts) and ``lag_diagnosis.md`` to ``--out``; finished jobs are cached under ``--out/cache``.
+counts) and ``lag_diagnosis.md`` (with ``--refit``: ``lag_refit.json``/``.md``) to ``--out``; finished jobs are cached under ``--out/cache``.
 """
 
 from __future__ import annotations
@@ -18,7 +21,7 @@ from pathlib import Path
 
 from cascgp.io import read_json
 from cascgp_experiments.execution import add_execution_args, check_args, session
-from cascgp_experiments.lag_diagnosis import LAG_SEEDS, run_diagnosis
+from cascgp_experiments.lag_diagnosis import LAG_SEEDS, run_diagnosis, run_refit
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -27,6 +30,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--seeds", type=str, default=",".join(map(str, LAG_SEEDS)), help="comma-separated seeds")
     p.add_argument("--reference", type=Path, nargs="*", default=[],
                    help="earlier runs' JSONs (gate_eval, learner_divergence) to check the attempts against")
+    p.add_argument("--refit", action="store_true",
+                   help="step 2: refit each learner's last training set afresh (data or fit?); --reference: the "
+                        "divergence experiment's JSONs")
     add_execution_args(p)
     a = p.parse_args(argv)
     check_args(p, a)
@@ -37,11 +43,12 @@ def main(argv: list[str] | None = None) -> int:
     for r in a.reference:
         if not r.is_file():
             p.error(f"--reference: no file {r}")
+    refs = tuple(read_json(r) for r in a.reference)
+    run, name = (run_refit, "lag_refit") if a.refit else (run_diagnosis, "lag_diagnosis")
     with session(a.ray, a.workers):
-        res = run_diagnosis(a.out, seeds=seeds, workers=a.workers, ray_address=a.ray,
-                            references=tuple(read_json(r) for r in a.reference))
-    print((a.out / "lag_diagnosis.md").read_text())
-    print(f"wall {res['wall_seconds']:.0f} s; results: {a.out / 'lag_diagnosis.json'}")
+        res = run(a.out, seeds=seeds, workers=a.workers, ray_address=a.ray, references=refs)
+    print((a.out / f"{name}.md").read_text())
+    print(f"wall {res['wall_seconds']:.0f} s; results: {a.out / f'{name}.json'}")
     return 0
 
 
