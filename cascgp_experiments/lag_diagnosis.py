@@ -177,7 +177,8 @@ def refit_job(config: dict[str, Any], label: str) -> dict[str, Any]:
     """The second step (module docstring) for one (seed, learner): the loop up to the last "left" attempt with
     its buffer kept, then the loop's model and :data:`REFIT_SEEDS` fresh fits on its training set, each run
     ungated on that attempt's episode. Returns per model the tracking RMSE, the per-joint feedforward error vs
-    the oracle (``ff_err_rms``) and the fit seconds; and the loop's own record of the attempt."""
+    the oracle (``ff_err_rms``), the per-joint NLL of the fit (``best_nll``) and the fit seconds; and the loop's
+    own record of the attempt."""
     import tempfile
 
     from cascgp.buffer import DataBuffer
@@ -203,7 +204,10 @@ def refit_job(config: dict[str, Any], label: str) -> dict[str, Any]:
                           options={"task": DIAGNOSED_TASK, **cfg.reset_options()})
         mean, _ = model.predict(q, qd, qdd)
         return {"tracking_rmse": res.summary()["tracking_rmse"],
-                "ff_err_rms": np.sqrt(np.mean((mean - oracle_ff) ** 2, axis=0)).tolist()}
+                "ff_err_rms": np.sqrt(np.mean((mean - oracle_ff) ** 2, axis=0)).tolist(),
+                # per joint, the fit's negative log marginal likelihood (normalised units; every model here is
+                # fitted on the same training set, so the values compare: lower is the better optimum)
+                "best_nll": [float(f["best_nll"]) for f in model.fit_info]}
 
     env = cfg.make_env()
     try:

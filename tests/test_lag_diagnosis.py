@@ -1,0 +1,95 @@
+"""The lag diagnosis' pieces (cascgp_experiments.lag_diagnosis): the per-joint diagnostics of a model along a
+reference (on the planar test arm), and the reading rules of both steps on synthetic records."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cascgp.gp import GPFitConfig
+from cascgp.models import make_model
+from cascgp_experiments import lag_diagnosis as lag
+
+
+def test_model_diagnostics_along_a_reference(arm3_train, arm3_rbd) -> None:
+    data = arm3_train.take(np.arange(60))
+    model = make_model("sp-inward", data.dof, rbd=arm3_rbd, gp_config=GPFitConfig(n_restarts=2, max_iter=100)).fit(data)
+    q, qd, qdd = data.q[:20], data.qd[:20], data.qdd[:20]
+    oracle = data.tau[:20]
+    out = lag.model_diagnostics(model, arm3_rbd, oracle, q, qd, qdd)
+    mean, _ = model.predict(q, qd, qdd)
+    np.testing.assert_allclose(out["ff_err_rms"], np.sqrt(np.mean((mean - oracle) ** 2, axis=0)))
+    np.testing.assert_allclose(out["rbd_err_rms"],
+                               np.sqrt(np.mean((arm3_rbd.inverse_dynamics(q, qd, qdd) - oracle) ** 2, axis=0)))
+    np.testing.assert_allclose(np.square(out["noise_sd"]), model.noise_var)
+    assert out["n_train"] == 60 and len(out["lengthscale"]) == 3
+    # the first joint of an inward cascade (the last one) sees only its own state: on training rows, distance 0
+    assert out["near_dist"][2] == 0.0
+    # the others are fed the *predicted* neighbour torque, not the measured one they were trained on: near, not 0
+    assert all(0.0 < d < 1.0 for d in out["near_dist"][:2])
+    far = lag.model_diagnostics(model, arm3_rbd, oracle, q + 3.0, qd, qdd)
+    assert all(f > n for f, n in zip(far["near_dist"], out["near_dist"]))
+
+
+def _step1_runs(near_gl: float, lag_seeds_only: bool = True) -> dict:
+    """Synthetic step-1 runs: on the lag seeds GL's J4/J6 feedforward error is 2 x UL's and its nearest-data
+    distance ``near_gl`` x UL's; on the contrast seeds they are equal (or, ``lag_seeds_only=False``, the same
+    as the lag seeds)."""
+    runs = {}
+    for s in lag.LAG_SEEDS:
+        factor = 2.0 if (s in lag.LAG_SEEDS_WITH_LAG or not lag_seeds_only) else 1.0
+        near = near_gl if (s in lag.LAG_SEEDS_WITH_LAG or not lag_seeds_only) else 1.0
+        gl, ul = [], []
+        for k in range(2):
+            common = {"rbd_err_rms": [1.0] * 6, "noise_sd": [0.1] * 6, "lengthscale": [[1.0, 2.0, 3.0]] * 6}
+            ul.append({"task": "left", "task_attempt": k, "tracking_rmse": 0.1,
+                       "before": {**common, "ff_err_rms": [0.2] * 6, "near_dist": [0.05] * 6}})
+            gl.append({"task": "left", "task_attempt": k, "tracking_rmse": 0.1 * factor ** (k + 1) * 0.9,
+                       "before": {**common, "ff_err_rms": [0.2 * factor ** (k + 1)] * 6,
+                                  "near_dist": [0.05 * near] * 6}})
+        runs[str(s)] = {"GL": gl, "UL": ul}
+    return runs
+
+
+def test_step1_reading_rules() -> None:
+    s = lag.summarise_diagnosis(_step1_runs(near_gl=1.5))
+    assert s["causes"]["J6"]["coverage_supported"] and not s["causes"]["J6"]["fit_supported"]
+    assert s["causes"]["J4"]["coverage_lag_seeds"] == 6 and s["causes"]["J4"]["coverage_contrast_seeds"] == 0
+    # equally near data with the same hyperparameters: neither cause
+    s = lag.summarise_diagnosis(_step1_runs(near_gl=1.0))
+    assert not any(c["coverage_supported"] or c["fit_supported"] for c in s["causes"].values())
+    # the contrast seeds show the same pattern: not supported
+    s = lag.summarise_diagnosis(_step1_runs(near_gl=1.5, lag_seeds_only=False))
+    assert not s["causes"]["J6"]["coverage_supported"]
+    assert s["yardstick"]["n"] == 16 and s["yardstick"]["spearman_rho"] > 0.5
+
+
+def _step2_runs(fresh_gl: float) -> dict:
+    """Synthetic step-2 runs: GL's loop model tracks 1.5 x UL's; fresh fits of GL's data ``fresh_gl`` x UL's."""
+    runs = {}
+    for s in lag.LAG_SEEDS:
+        ul_fresh = [{"tracking_rmse": 0.1 * f, "ff_err_rms": [0.2 * f] * 6} for f in (0.9, 1.0, 1.1)]
+        gl_fresh = [{"tracking_rmse": 0.1 * fresh_gl * f, "ff_err_rms": [0.2 * fresh_gl * f] * 6}
+                    for f in (0.9, 1.0, 1.1)]
+        runs[str(s)] = {
+            "GL": {"attempt": {"attempt": 7, "tracking_rmse": 0.16}, "fresh": gl_fresh,
+                   "loop": {"tracking_rmse": 0.15, "ff_err_rms": [0.3] * 6}},
+            "UL": {"attempt": {"attempt": 7, "tracking_rmse": 0.1}, "fresh": ul_fresh,
+                   "loop": {"tracking_rmse": 0.1, "ff_err_rms": [0.2] * 6}}}
+    return runs
+
+
+def test_step2_reading_rules_and_reproduction() -> None:
+    ref = {"runs": {"0": {"GL": [{}] * 7 + [{"paired": {lag.UNGATED_NAME: {"tracking_rmse": 0.15}}}]}}}
+    s = lag.summarise_refit(_step2_runs(1.0), (ref,))
+    assert s["reading"]["tracking"]["verdict"] == "fit" and s["reading"]["ff"]["verdict"] == "fit"
+    row0, row1 = s["rows"][0], s["rows"][1]
+    assert row0["reproduced"] == {"GL": True, "UL": True} and row1["reproduced"]["GL"] is None
+    np.testing.assert_allclose([row0["tracking"]["loop"], row0["tracking"]["fresh"]], [1.5, 1.0])
+    np.testing.assert_allclose(row0["tracking"]["gl_fresh_vs_loop"], 0.1 / 0.15)
+    assert lag.summarise_refit(_step2_runs(1.5))["reading"]["tracking"]["verdict"] == "data"
+    mixed = _step2_runs(1.0)
+    for seed in ("0", "1", "2"):  # half the lag seeds' data give worse models, half not
+        mixed[seed]["GL"] = _step2_runs(1.5)[seed]["GL"]
+    assert lag.summarise_refit(mixed)["reading"]["tracking"]["verdict"] == "mixed"
+    md = lag.refit_markdown({"summary": s})
+    assert "fit" in md.splitlines()[-1] and md.count("(contrast)") == 2
