@@ -48,20 +48,26 @@ def nrmse(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
     return np.sqrt(np.mean((p - y) ** 2, axis=0)) / rng
 
 
-def interval_coverage(mean: np.ndarray, var: np.ndarray, target: np.ndarray, level: float = 0.95) -> np.ndarray:
-    r"""Fraction of targets inside the central Gaussian interval of probability ``level``, per joint:
-    :math:`|y - \mu| \le z_{(1+\text{level})/2}\,\sqrt{v}` (1.96 standard deviations for 95 %).
-
-    ``var`` must be the variance of a *measurement* (latent variance plus noise) to compare with measured
-    targets. A calibrated model gives about ``level``. Shapes as :func:`rmse`; ``var`` >= 0."""
+def _interval_inputs(mean: np.ndarray, var: np.ndarray, target: np.ndarray, level: float
+                     ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Checked ``|target - mean|``, ``var`` (2-D) and the interval's :math:`z_{(1+\text{level})/2}`."""
     p, y = _pair(mean, target)
     v, _ = _pair(var, target)
     if (v < 0).any():
         raise ValueError("var: negative variance")
     if not 0.0 < level < 1.0:
         raise ValueError(f"level: expected a probability in (0, 1), got {level!r}")
-    z = float(norm.ppf(0.5 + 0.5 * level))
-    return np.mean(np.abs(y - p) <= z * np.sqrt(v), axis=0)
+    return np.abs(y - p), v, float(norm.ppf(0.5 + 0.5 * level))
+
+
+def interval_coverage(mean: np.ndarray, var: np.ndarray, target: np.ndarray, level: float = 0.95) -> np.ndarray:
+    r"""Fraction of targets inside the central Gaussian interval of probability ``level``, per joint:
+    :math:`|y - \mu| \le z_{(1+\text{level})/2}\,\sqrt{v}` (1.96 standard deviations for 95 %).
+
+    ``var`` must be the variance of a *measurement* (latent variance plus noise) to compare with measured
+    targets. A calibrated model gives about ``level``. Shapes as :func:`rmse`; ``var`` >= 0."""
+    err, v, z = _interval_inputs(mean, var, target, level)
+    return np.mean(err <= z * np.sqrt(v), axis=0)
 
 
 def std_scale_for_level(mean: np.ndarray, var: np.ndarray, target: np.ndarray, level: float = 0.95) -> np.ndarray:
@@ -73,12 +79,7 @@ def std_scale_for_level(mean: np.ndarray, var: np.ndarray, target: np.ndarray, l
     and applied to new predictions (:math:`\sqrt{v} \to c \sqrt{v}`), it is the one-parameter recalibration of
     a Gaussian predictive distribution (a quantile fit; Kuleshov et al. 2018 fit the whole CDF). Shapes as
     :func:`interval_coverage`; ``var`` > 0 where the error is non-zero (a zero variance with an error gives inf)."""
-    p, y = _pair(mean, target)
-    v, _ = _pair(var, target)
-    if (v < 0).any():
-        raise ValueError("var: negative variance")
-    if not 0.0 < level < 1.0:
-        raise ValueError(f"level: expected a probability in (0, 1), got {level!r}")
+    err, v, z = _interval_inputs(mean, var, target, level)
     with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(np.abs(y - p) == 0, 0.0, np.abs(y - p) / np.sqrt(v))
-    return np.quantile(ratio, level, axis=0) / float(norm.ppf(0.5 + 0.5 * level))
+        ratio = np.where(err == 0, 0.0, err / np.sqrt(v))
+    return np.quantile(ratio, level, axis=0) / z
