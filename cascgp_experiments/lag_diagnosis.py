@@ -60,6 +60,16 @@ seeds reported beside):
 * otherwise mixed, reported with the numbers. The same counts on the feedforward error vs the oracle (J1-J6 RMS)
   are reported as secondary. Also reported: fresh refits of UL's data against UL's loop model (does the fit chain
   cost UL too?).
+
+Third step: which data? (:func:`factorial_job`; written and committed after step 2's verdict, "data", before
+this step ran.) Per seed 0-7 both learners run up to the last "left" attempt; their 7 training episodes are
+split into the "front" four and the first three "left" ones, and the four combinations (front from GL or UL) x
+(left from GL or UL) are fitted afresh exactly as in step 2 (buffer order front then left, 10 Hz, cap 500; 10
+starts; GP seeds 1000 and 1001) and run ungated on the last "left" attempt's episode. Checks: (UL, UL) and (GL,
+GL) reproduce step 2's fresh fits with the same GP seeds (``docs/lag_refit.json``). Per seed, with the median over
+the two GP seeds, ``front_effect`` = (GL front, UL left) / (UL, UL), ``left_effect`` = (UL front, GL left) / (UL,
+UL), ``both`` = (GL, GL) / (UL, UL). Reading (six lag seeds): a phase's data are a cause if its effect is above 1.1
+on at least 5 of 6; the larger median ``|log|`` is the larger share; both or neither are reported as such.
 """
 
 from __future__ import annotations
@@ -76,7 +86,8 @@ from cascgp_experiments.gate_eval import GATE_EVAL_CONFIG
 from cascgp_experiments.transfer import TransferConfig
 
 __all__ = ["LAG_CONFIG", "LAG_SEEDS", "LAG_LEARNERS", "DIAGNOSED_TASK", "model_diagnostics", "diagnosis_job",
-           "run_diagnosis", "summarise_diagnosis", "refit_job", "run_refit", "summarise_refit"]
+           "run_diagnosis", "summarise_diagnosis", "refit_job", "run_refit", "summarise_refit", "factorial_job",
+           "run_factorial", "summarise_factorial"]
 
 #: The gate evaluation's settings, cut after "left" (same attempts up to there; no revisit).
 LAG_CONFIG = replace(GATE_EVAL_CONFIG, tasks=("front", "left"), revisit=False)
@@ -89,6 +100,7 @@ DIAGNOSED_TASK = "left"
 REFERENCE_RATE_HZ = 10.0
 REFIT_SEEDS = (1000, 1001, 1002)
 REFIT_RESTARTS = 10
+FACTORIAL_SEEDS = (1000, 1001)
 COLLAPSED_NOISE_SD = 0.05  # N m: half the torque sensor's 0.1 N m (jaco_env.sensors.SensorNoise)
 
 
@@ -173,61 +185,179 @@ def diagnosis_job(config: dict[str, Any], label: str) -> list[dict[str, Any]]:
     return run.attempts
 
 
-def refit_job(config: dict[str, Any], label: str) -> dict[str, Any]:
-    """The second step (module docstring) for one (seed, learner): the loop up to the last "left" attempt with
-    its buffer kept, then the loop's model and :data:`REFIT_SEEDS` fresh fits on its training set, each run
-    ungated on that attempt's episode. Returns per model the tracking RMSE, the per-joint feedforward error vs
-    the oracle (``ff_err_rms``), the per-joint NLL of the fit (``best_nll``) and the fit seconds; and the loop's
-    own record of the attempt."""
-    import tempfile
-
-    from cascgp.buffer import DataBuffer
+def _left_evaluator(cfg: TransferConfig, rbd: Any, oracle_ff: np.ndarray,
+                    ref: tuple[np.ndarray, np.ndarray, np.ndarray], last: int) -> Any:
+    """``evaluate(model, env)``: the ungated controller on ``model`` for attempt ``last``'s episode (its env
+    seed): tracking RMSE, per-joint feedforward error vs the oracle along the reference, per-joint fit NLL."""
     from cascgp.episodes import run_episode
-    from cascgp.gp import GPFitConfig
-    from cascgp.learning import make_controller, run_controller
-    from cascgp.models import make_model
+    from cascgp.learning import make_controller
     from cascgp_experiments.transfer import jaco_feedback
-
-    cfg = TransferConfig.from_dict(config)
-    rbd, oracle_ff, (q, qd, qdd) = _left_setup(cfg)
-    plan = cfg.plan()
-    last = max(i for i, (task, _, _) in enumerate(plan) if task == DIAGNOSED_TASK)
-    held: dict[str, Any] = {}
-
-    def keep(_name: str, i: int, _attempt: tuple[str, int, str], model: Any) -> None:
-        if i == last:
-            held["model"] = model
 
     def evaluate(model: Any, env: Any) -> dict[str, Any]:
         controller = make_controller(UNGATED_NAME, rbd, model, jaco_feedback())
         res = run_episode(env, controller, seed=cfg.seed * 1000 + last,
                           options={"task": DIAGNOSED_TASK, **cfg.reset_options()})
-        mean, _ = model.predict(q, qd, qdd)
+        mean, _ = model.predict(*ref)
         return {"tracking_rmse": res.summary()["tracking_rmse"],
                 "ff_err_rms": np.sqrt(np.mean((mean - oracle_ff) ** 2, axis=0)).tolist(),
                 # per joint, the fit's negative log marginal likelihood (normalised units; every model here is
                 # fitted on the same training set, so the values compare: lower is the better optimum)
                 "best_nll": [float(f["best_nll"]) for f in model.fit_info]}
 
+    return evaluate
+
+
+def _learner_episodes(cfg: TransferConfig, label: str, env: Any, rbd: Any, last: int
+                      ) -> tuple[Any, list[Any], dict[str, Any]]:
+    """Run learner ``label`` up to attempt ``last`` of the plan: the model that attempt used, the episodes
+    recorded before it, and its record."""
+    import tempfile
+
+    from cascgp.buffer import DataBuffer
+    from cascgp.learning import run_controller
+    from cascgp_experiments.transfer import jaco_feedback
+
+    held: dict[str, Any] = {}
+
+    def keep(_name: str, i: int, _attempt: tuple[str, int, str], model: Any) -> None:
+        if i == last:
+            held["model"] = model
+
+    with tempfile.TemporaryDirectory() as tmp:
+        run = run_controller(LAG_LEARNERS[label], env, cfg.plan()[: last + 1], rbd, jaco_feedback(), cfg.retrain(),
+                             reset_options=cfg.reset_options(), before_attempt=keep, buffer_dir=tmp)
+        episodes = list(DataBuffer(tmp).episodes[:last])
+    return held["model"], episodes, run.attempts[last]
+
+
+def _fresh_fit(rbd: Any, episodes: list[Any], cfg: TransferConfig, seed: int) -> tuple[Any, float, int]:
+    """A model fitted from scratch (:data:`REFIT_RESTARTS` starts, GP seed ``seed``) on the training set the
+    loop would build from ``episodes``; the fit seconds and the training rows."""
+    from cascgp.buffer import DataBuffer
+    from cascgp.gp import GPFitConfig
+    from cascgp.models import make_model
+
+    buffer = DataBuffer()
+    for episode in episodes:
+        buffer.append(episode)
+    data = buffer.training_set(cfg.rate_hz, cfg.cap)
+    t0 = time.perf_counter()
+    model = make_model(UNGATED_NAME, rbd.dof, rbd, gp_config=GPFitConfig(n_restarts=REFIT_RESTARTS, seed=seed))
+    return model.fit(data), time.perf_counter() - t0, data.n_samples
+
+
+def _last_left(cfg: TransferConfig) -> int:
+    return max(i for i, (task, _, _) in enumerate(cfg.plan()) if task == DIAGNOSED_TASK)
+
+
+def refit_job(config: dict[str, Any], label: str) -> dict[str, Any]:
+    """The second step (module docstring) for one (seed, learner): the loop up to the last "left" attempt with
+    its buffer kept, then the loop's model and :data:`REFIT_SEEDS` fresh fits on its training set, each run
+    ungated on that attempt's episode. Returns per model the tracking RMSE, the per-joint feedforward error vs
+    the oracle (``ff_err_rms``), the per-joint NLL of the fit (``best_nll``) and the fit seconds; and the loop's
+    own record of the attempt."""
+    cfg = TransferConfig.from_dict(config)
+    rbd, oracle_ff, ref = _left_setup(cfg)
+    last = _last_left(cfg)
+    evaluate = _left_evaluator(cfg, rbd, oracle_ff, ref, last)
     env = cfg.make_env()
     try:
-        with tempfile.TemporaryDirectory() as tmp:
-            run = run_controller(LAG_LEARNERS[label], env, plan[: last + 1], rbd, jaco_feedback(), cfg.retrain(),
-                                 reset_options=cfg.reset_options(), before_attempt=keep, buffer_dir=tmp)
-            buffer = DataBuffer()
-            for episode in DataBuffer(tmp).episodes[:last]:
-                buffer.append(episode)
-        data = buffer.training_set(cfg.rate_hz, cfg.cap)
-        out = {"attempt": run.attempts[last], "n_train": data.n_samples,
-               "loop": {**evaluate(held["model"], env), "n_train": int(held["model"].n_train)}, "fresh": []}
+        loop_model, episodes, record = _learner_episodes(cfg, label, env, rbd, last)
+        out = {"attempt": record, "loop": {**evaluate(loop_model, env), "n_train": int(loop_model.n_train)},
+               "fresh": []}
         for seed in REFIT_SEEDS:
-            t0 = time.perf_counter()
-            model = make_model(UNGATED_NAME, rbd.dof, rbd, gp_config=GPFitConfig(n_restarts=REFIT_RESTARTS,
-                                                                                  seed=seed)).fit(data)
-            out["fresh"].append({"seed": seed, "fit_seconds": time.perf_counter() - t0, **evaluate(model, env)})
+            model, secs, out["n_train"] = _fresh_fit(rbd, episodes, cfg, seed)
+            out["fresh"].append({"seed": seed, "fit_seconds": secs, **evaluate(model, env)})
     finally:
         env.close()
     return out
+
+
+def factorial_job(config: dict[str, Any]) -> dict[str, Any]:
+    """The third step (module docstring) for one seed: both learners' episodes, the four (front, left) origin
+    combinations fitted afresh with :data:`FACTORIAL_SEEDS`, each run ungated on the last "left" attempt's
+    episode. Returns ``{"GL/UL": [per GP seed: {seed, fit_seconds, tracking_rmse, ff_err_rms, best_nll}]}``,
+    keyed by the origin of the front and of the left episodes."""
+    cfg = TransferConfig.from_dict(config)
+    rbd, oracle_ff, ref = _left_setup(cfg)
+    last = _last_left(cfg)
+    n_front = sum(task != DIAGNOSED_TASK for task, _, _ in cfg.plan()[:last])
+    evaluate = _left_evaluator(cfg, rbd, oracle_ff, ref, last)
+    env = cfg.make_env()
+    try:
+        episodes = {label: _learner_episodes(cfg, label, env, rbd, last)[1] for label in LAG_LEARNERS}
+        out: dict[str, Any] = {}
+        for front in LAG_LEARNERS:
+            for left in LAG_LEARNERS:
+                eps = episodes[front][:n_front] + episodes[left][n_front:]
+                out[f"{front}/{left}"] = []
+                for seed in FACTORIAL_SEEDS:
+                    model, secs, _ = _fresh_fit(rbd, eps, cfg, seed)
+                    out[f"{front}/{left}"].append({"seed": seed, "fit_seconds": secs, **evaluate(model, env)})
+    finally:
+        env.close()
+    return out
+
+
+def run_factorial(out: Path, cfg: TransferConfig = LAG_CONFIG, seeds: tuple[int, ...] = LAG_SEEDS, *,
+                  workers: int | None = None, ray_address: str | None = None, show_progress: bool = True,
+                  references: tuple[dict[str, Any], ...] = ()) -> dict[str, Any]:
+    """Run every seed's :func:`factorial_job` (cached under ``out/cache``), write ``lag_factorial.json``/``.md``.
+    ``references``: step 2's ``lag_refit.json``, whose fresh fits (UL, UL) and (GL, GL) must reproduce."""
+    from cascgp_experiments.execution import run_jobs
+
+    out = Path(out)
+    jobs = [{"config": replace(cfg, seed=int(s)).to_dict()} for s in seeds]
+    t0 = time.perf_counter()
+    res = run_jobs(factorial_job, jobs, workers=workers, ray_address=ray_address, cache_dir=out / "cache",
+                   desc="factorial jobs", label=lambda j: f"seed {j['config']['seed']}", show_progress=show_progress)
+    runs = {str(job["config"]["seed"]): r for job, r in zip(jobs, res)}
+    results = {"config": {**cfg.to_dict(), "seeds": list(seeds), "factorial_seeds": list(FACTORIAL_SEEDS),
+                          "refit_restarts": REFIT_RESTARTS},
+               "wall_seconds": time.perf_counter() - t0, "jobs": res.stats(), "runs": runs,
+               "summary": summarise_factorial(runs, references)}
+    write_json(out / "lag_factorial.json", results)
+    atomic_write_text(out / "lag_factorial.md", factorial_markdown(results))
+    return results
+
+
+def summarise_factorial(runs: dict[str, dict[str, Any]], references: tuple[dict[str, Any], ...] = ()
+                        ) -> dict[str, Any]:
+    """Per seed the three effects (module docstring; tracking, median over the GP seeds), the reproduction of
+    step 2's fresh fits, and the reading's counts."""
+    rows = []
+    for seed, run in sorted(runs.items(), key=lambda kv: int(kv[0])):
+        t = {k: float(np.median([r["tracking_rmse"] for r in v])) for k, v in run.items()}
+        base = t["UL/UL"]
+        ref = next((r["runs"][seed] for r in references if seed in r["runs"]), None)
+        reproduced = None
+        if ref is not None:
+            pairs = [(run[f"{lab}/{lab}"], {f["seed"]: f["tracking_rmse"] for f in ref[lab]["fresh"]})
+                     for lab in LAG_LEARNERS]
+            reproduced = all(r["tracking_rmse"] == by_seed.get(r["seed"]) for mine, by_seed in pairs for r in mine)
+        rows.append({"seed": int(seed), "reproduced": reproduced, "tracking": t,
+                     "front_effect": t["GL/UL"] / base, "left_effect": t["UL/GL"] / base, "both": t["GL/GL"] / base})
+    lag = [r for r in rows if r["seed"] in LAG_SEEDS_WITH_LAG]
+    reading = {}
+    for key in ("front_effect", "left_effect", "both"):
+        v = np.array([r[key] for r in lag])
+        reading[key] = {"above_1.1": int((v > 1.1).sum()), "n": len(lag), "median": float(np.median(v)),
+                        "median_abs_log": float(np.median(np.abs(np.log(v)))), "cause": bool((v > 1.1).sum() >= 5)}
+    return {"rows": rows, "reading": reading}
+
+
+def factorial_markdown(results: dict[str, Any]) -> str:
+    """The per-seed table and the reading."""
+    s = results["summary"]
+    lines = ["| seed | reproduced | UL/UL tracking (rad) | front effect (GL front) | left effect (GL left) | both |",
+             "|---|---|---|---|---|---|"]
+    for r in s["rows"]:
+        lines.append(f"| {r['seed']}{'' if r['seed'] in LAG_SEEDS_WITH_LAG else ' (contrast)'} | {r['reproduced']} | "
+                     f"{r['tracking']['UL/UL']:.4f} | {r['front_effect']:.2f} | {r['left_effect']:.2f} | "
+                     f"{r['both']:.2f} |")
+    lines += [""] + [f"{k}: above 1.1 on {v['above_1.1']} of {v['n']} lag seeds, median {v['median']:.2f}, median "
+                     f"|log| {v['median_abs_log']:.3f}; a cause by the rule: {v['cause']}" for k, v in s["reading"].items()]
+    return "\n".join(lines) + "\n"
 
 
 def run_refit(out: Path, cfg: TransferConfig = LAG_CONFIG, seeds: tuple[int, ...] = LAG_SEEDS, *,
