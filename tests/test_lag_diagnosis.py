@@ -93,3 +93,44 @@ def test_step2_reading_rules_and_reproduction() -> None:
     assert lag.summarise_refit(mixed)["reading"]["tracking"]["verdict"] == "mixed"
     md = lag.refit_markdown({"summary": s})
     assert "fit" in md.splitlines()[-1] and md.count("(contrast)") == 2
+
+
+def _step3_runs(front: float, left: float) -> dict:
+    """Synthetic step-3 runs: GL's front episodes multiply the tracking by ``front``, its left ones by ``left``."""
+    runs = {}
+    for s in lag.LAG_SEEDS:
+        f, l_ = (front, left) if s in lag.LAG_SEEDS_WITH_LAG else (1.0, 1.0)
+        runs[str(s)] = {f"{a}/{b}": [{"seed": seed, "tracking_rmse": 0.1 * (f if a == "GL" else 1.0)
+                                      * (l_ if b == "GL" else 1.0) * g}
+                                     for seed, g in zip(lag.FACTORIAL_SEEDS, (0.95, 1.05))]
+                        for a in lag.LAG_LEARNERS for b in lag.LAG_LEARNERS}
+    return runs
+
+
+def test_step3_effects_reading_and_reproduction() -> None:
+    runs = _step3_runs(front=1.0, left=1.5)
+    ref = {"runs": {"0": {lab: {"fresh": [{"seed": r["seed"], "tracking_rmse": r["tracking_rmse"]}
+                                          for r in runs["0"][f"{lab}/{lab}"]]} for lab in lag.LAG_LEARNERS}}}
+    s = lag.summarise_factorial(runs, (ref,))
+    np.testing.assert_allclose([s["rows"][0][k] for k in ("front_effect", "left_effect", "both")], [1.0, 1.5, 1.5])
+    assert s["rows"][0]["reproduced"] is True and s["rows"][1]["reproduced"] is None
+    assert s["reading"]["left_effect"]["cause"] and not s["reading"]["front_effect"]["cause"]
+    ref["runs"]["0"]["GL"]["fresh"][0]["tracking_rmse"] += 1e-9  # one fit that does not reproduce
+    assert lag.summarise_factorial(runs, (ref,))["rows"][0]["reproduced"] is False
+    s = lag.summarise_factorial(_step3_runs(front=1.3, left=1.0))
+    assert s["reading"]["front_effect"]["cause"] and not s["reading"]["left_effect"]["cause"]
+    md = lag.factorial_markdown({"summary": s})
+    assert md.count("(contrast)") == 2 and "front_effect: above 1.1 on 6 of 6" in md
+
+
+def test_cli_errors(tmp_path) -> None:
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    for args, msg in ((["--refit", "--factorial"], "one step at a time"), (["--seeds", "a,b"], "--seeds"),
+                      (["--reference", str(tmp_path / "none.json")], "--reference")):
+        r = subprocess.run([sys.executable, "-m", "scripts.lag_diagnosis", "--out", str(tmp_path), *args], cwd=repo,
+                           capture_output=True, text=True)
+        assert r.returncode == 2 and msg in r.stderr, r.stderr
