@@ -50,7 +50,7 @@ def nrmse(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
 
 def _interval_inputs(mean: np.ndarray, var: np.ndarray, target: np.ndarray, level: float
                      ) -> tuple[np.ndarray, np.ndarray, float]:
-    """Checked ``|target - mean|``, ``var`` (2-D) and the interval's :math:`z_{(1+\text{level})/2}`."""
+    r"""Checked ``|target - mean|``, ``var`` (2-D) and the interval's :math:`z_{(1+\text{level})/2}`."""
     p, y = _pair(mean, target)
     v, _ = _pair(var, target)
     if (v < 0).any():
@@ -72,14 +72,19 @@ def interval_coverage(mean: np.ndarray, var: np.ndarray, target: np.ndarray, lev
 
 def std_scale_for_level(mean: np.ndarray, var: np.ndarray, target: np.ndarray, level: float = 0.95) -> np.ndarray:
     r"""Per joint, the factor :math:`c` on the predictive standard deviation that makes the central interval of
-    probability ``level`` cover exactly that fraction of ``target``: the ``level`` quantile of
-    :math:`|y - \mu| / \sqrt{v}` divided by :math:`z_{(1+\text{level})/2}`.
+    probability ``level`` cover that fraction of ``target``: the ``level`` quantile of :math:`|y - \mu| / \sqrt{v}`
+    (linear interpolation, so on ``n`` rows the coverage can fall short by up to :math:`1/n`) divided by
+    :math:`z_{(1+\text{level})/2}`.
 
     :math:`c > 1`: the intervals are too narrow (overconfident); :math:`c < 1`: too wide. Fitted on held-out data
     and applied to new predictions (:math:`\sqrt{v} \to c \sqrt{v}`), it is the one-parameter recalibration of
     a Gaussian predictive distribution (a quantile fit; Kuleshov et al. 2018 fit the whole CDF). Shapes as
-    :func:`interval_coverage`; ``var`` > 0 where the error is non-zero (a zero variance with an error gives inf)."""
+    :func:`interval_coverage`. A row with zero error counts as ratio 0; a zero variance with a non-zero error has
+    no finite factor: ``ValueError`` naming ``var``."""
     err, v, z = _interval_inputs(mean, var, target, level)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(err == 0, 0.0, err / np.sqrt(v))
+    bad = (v == 0) & (err > 0)
+    if bad.any():
+        r, j = (int(i) for i in np.argwhere(bad)[0])
+        raise ValueError(f"var: zero variance with a non-zero error (row {r}, column {j}): no finite std factor")
+    ratio = np.divide(err, np.sqrt(v), out=np.zeros_like(err), where=err > 0)
     return np.quantile(ratio, level, axis=0) / z

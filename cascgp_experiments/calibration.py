@@ -21,7 +21,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.stats import norm
 
 from cascgp.data import DynamicsData, SavGol
 from cascgp.gp import GPFitConfig
@@ -124,8 +123,9 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
         seen = set(np.concatenate([sub.segment for sub in subsets]).tolist())
         if (len(subsets) + n_subsets > len(motions)
                 or any(seen & set(motions[n_subsets + k].segment.tolist()) for k in range(len(subsets)))):
-            raise ValueError(f"recalibrate: needs {2 * n_subsets} separate training motions (one unseen per "
-                             f"subset); the training data have {train.segments.size}")
+            raise ValueError(f"recalibrate: needs a training motion (segment) unseen by each of the "
+                             f"{n_subsets} subsets, i.e. at least {2 * n_subsets} motions split evenly; the training "
+                             f"data have {train.segments.size} segment(s)")
     test10 = test.subsample(rate_hz)
     cfg = GPFitConfig(n_restarts=n_restarts)
     rows = []

@@ -82,6 +82,7 @@ from typing import Any
 import numpy as np
 
 from cascgp.io import atomic_write_text, write_json
+from cascgp.metrics import rmse
 from cascgp_experiments.gate_eval import GATE_EVAL_CONFIG
 from cascgp_experiments.transfer import TransferConfig
 
@@ -94,6 +95,8 @@ LAG_CONFIG = replace(GATE_EVAL_CONFIG, tasks=("front", "left"), revisit=False)
 LAG_SEEDS = (0, 1, 2, 3, 4, 5, 6, 7)
 #: The seeds on which learner_divergence found the lag on "left" (the others are the contrast).
 LAG_SEEDS_WITH_LAG = (0, 1, 2, 5, 6, 7)
+#: Every reading rule calls a pattern a cause when it holds on at least this many of the six lag seeds.
+MIN_LAG_SEEDS = 5
 LAG_LEARNERS = {"GL": "sp-inward-gated", "UL": "sp-inward"}
 UNGATED_NAME = "sp-inward"
 DIAGNOSED_TASK = "left"
@@ -104,10 +107,15 @@ FACTORIAL_SEEDS = (1000, 1001)
 COLLAPSED_NOISE_SD = 0.05  # N m: half the torque sensor's 0.1 N m (jaco_env.sensors.SensorNoise)
 
 
+def _arm_rms(per_joint: list[float]) -> float:
+    """The J1-J6 RMS of per-joint RMS errors."""
+    return float(np.sqrt(np.mean(np.square(per_joint))))
+
+
 def _cascade_inputs(model: Any, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, mean: np.ndarray, j: int
                     ) -> np.ndarray:
-    """Joint ``j``'s GP inputs at the reference: its state columns, then the neighbour's predicted torque, (the whole
-    predicted torque, RBD part included for SP), as :meth:`cascgp.models.CascadedGPModel.predict` feeds them."""
+    """Joint ``j``'s GP inputs at the reference as :meth:`cascgp.models.CascadedGPModel.predict` feeds them: its
+    state columns, then the neighbour's whole predicted torque (RBD part included for SP)."""
     joints, neighbour = model.specs[j]
     cols = [np.stack([q[:, s], qd[:, s], qdd[:, s]], axis=1) for s in joints]
     if neighbour is not None:
@@ -123,8 +131,7 @@ def model_diagnostics(model: Any, nominal: Any, oracle_ff: np.ndarray, q: np.nda
     mean, _ = model.predict(q, qd, qdd)
     rbd = np.asarray(nominal.inverse_dynamics(q, qd, qdd), dtype=float)
     out: dict[str, Any] = {
-        "ff_err_rms": np.sqrt(np.mean((mean - oracle_ff) ** 2, axis=0)).tolist(),
-        "rbd_err_rms": np.sqrt(np.mean((rbd - oracle_ff) ** 2, axis=0)).tolist(),
+        "ff_err_rms": rmse(mean, oracle_ff).tolist(), "rbd_err_rms": rmse(rbd, oracle_ff).tolist(),
         "noise_sd": np.sqrt(model.noise_var).tolist(), "signal_sd": np.sqrt(model.signal_var).tolist(),
         "n_train": int(model.n_train), "lengthscale": [], "near_dist": []}
     for j, (k, b) in enumerate(model.where):
@@ -199,7 +206,7 @@ def _left_evaluator(cfg: TransferConfig, rbd: Any, oracle_ff: np.ndarray,
                           options={"task": DIAGNOSED_TASK, **cfg.reset_options()})
         mean, _ = model.predict(*ref)
         return {"tracking_rmse": res.summary()["tracking_rmse"],
-                "ff_err_rms": np.sqrt(np.mean((mean - oracle_ff) ** 2, axis=0)).tolist(),
+                "ff_err_rms": rmse(mean, oracle_ff).tolist(),
                 # per joint, the fit's negative log marginal likelihood (normalised units; every model here is
                 # fitted on the same training set, so the values compare: lower is the better optimum)
                 "best_nll": [float(f["best_nll"]) for f in model.fit_info]}
@@ -304,21 +311,14 @@ def run_factorial(out: Path, cfg: TransferConfig = LAG_CONFIG, seeds: tuple[int,
                   references: tuple[dict[str, Any], ...] = ()) -> dict[str, Any]:
     """Run every seed's :func:`factorial_job` (cached under ``out/cache``), write ``lag_factorial.json``/``.md``.
     ``references``: step 2's ``lag_refit.json``, whose fresh fits (UL, UL) and (GL, GL) must reproduce."""
-    from cascgp_experiments.execution import run_jobs
-
-    out = Path(out)
     jobs = [{"config": replace(cfg, seed=int(s)).to_dict()} for s in seeds]
-    t0 = time.perf_counter()
-    res = run_jobs(factorial_job, jobs, workers=workers, ray_address=ray_address, cache_dir=out / "cache",
-                   desc="factorial jobs", label=lambda j: f"seed {j['config']['seed']}", show_progress=show_progress)
+    res, stats, wall = _run_cached(factorial_job, jobs, out, workers=workers, ray_address=ray_address,
+                                   show_progress=show_progress, desc="factorial jobs", label=_label)
     runs = {str(job["config"]["seed"]): r for job, r in zip(jobs, res)}
     results = {"config": {**cfg.to_dict(), "seeds": list(seeds), "factorial_seeds": list(FACTORIAL_SEEDS),
                           "refit_restarts": REFIT_RESTARTS},
-               "wall_seconds": time.perf_counter() - t0, "jobs": res.stats(), "runs": runs,
-               "summary": summarise_factorial(runs, references)}
-    write_json(out / "lag_factorial.json", results)
-    atomic_write_text(out / "lag_factorial.md", factorial_markdown(results))
-    return results
+               "wall_seconds": wall, "jobs": stats, "runs": runs, "summary": summarise_factorial(runs, references)}
+    return _write(out, "lag_factorial", results, factorial_markdown)
 
 
 def summarise_factorial(runs: dict[str, dict[str, Any]], references: tuple[dict[str, Any], ...] = ()
@@ -342,7 +342,7 @@ def summarise_factorial(runs: dict[str, dict[str, Any]], references: tuple[dict[
     for key in ("front_effect", "left_effect", "both"):
         v = np.array([r[key] for r in lag])
         reading[key] = {"above_1.1": int((v > 1.1).sum()), "n": len(lag), "median": float(np.median(v)),
-                        "median_abs_log": float(np.median(np.abs(np.log(v)))), "cause": bool((v > 1.1).sum() >= 5)}
+                        "median_abs_log": float(np.median(np.abs(np.log(v)))), "cause": bool((v > 1.1).sum() >= MIN_LAG_SEEDS)}
     return {"rows": rows, "reading": reading}
 
 
@@ -366,24 +366,14 @@ def run_refit(out: Path, cfg: TransferConfig = LAG_CONFIG, seeds: tuple[int, ...
     """Run every (seed, learner) :func:`refit_job` (cached under ``out/cache``), write ``lag_refit.json``/``.md``.
     ``references``: the divergence experiment's JSONs, whose paired episodes (the ungated controller on GL's
     model) GL's loop model must reproduce."""
-    from cascgp_experiments.execution import run_jobs
-
-    out = Path(out)
-    jobs = [{"config": replace(cfg, seed=int(s)).to_dict(), "label": label} for s in seeds for label in LAG_LEARNERS]
-    t0 = time.perf_counter()
-    res = run_jobs(refit_job, jobs, workers=workers, ray_address=ray_address, cache_dir=out / "cache",
-                   desc="refit jobs", label=lambda j: f"seed {j['config']['seed']} {j['label']}",
-                   show_progress=show_progress)
-    runs: dict[str, dict[str, Any]] = {}
-    for job, r in zip(jobs, res):
-        runs.setdefault(str(job["config"]["seed"]), {})[job["label"]] = r
+    jobs = _learner_jobs(cfg, seeds)
+    res, stats, wall = _run_cached(refit_job, jobs, out, workers=workers, ray_address=ray_address,
+                                   show_progress=show_progress, desc="refit jobs", label=_label)
+    runs = _by_seed_and_label(jobs, res)
     results = {"config": {**cfg.to_dict(), "seeds": list(seeds), "refit_seeds": list(REFIT_SEEDS),
                           "refit_restarts": REFIT_RESTARTS},
-               "wall_seconds": time.perf_counter() - t0, "jobs": res.stats(), "runs": runs,
-               "summary": summarise_refit(runs, references)}
-    write_json(out / "lag_refit.json", results)
-    atomic_write_text(out / "lag_refit.md", refit_markdown(results))
-    return results
+               "wall_seconds": wall, "jobs": stats, "runs": runs, "summary": summarise_refit(runs, references)}
+    return _write(out, "lag_refit", results, refit_markdown)
 
 
 def summarise_refit(runs: dict[str, dict[str, Any]], references: tuple[dict[str, Any], ...] = ()
@@ -393,7 +383,7 @@ def summarise_refit(runs: dict[str, dict[str, Any]], references: tuple[dict[str,
     UL's loop model run again equals UL's attempt; GL's (run ungated) equals the reference's paired episode
     (None without a reference for the seed)."""
     def arm(r: dict[str, Any]) -> float:
-        return float(np.sqrt(np.mean(np.square(r["ff_err_rms"]))))
+        return _arm_rms(r["ff_err_rms"])
 
     rows = []
     for seed, run in sorted(runs.items(), key=lambda kv: int(kv[0])):
@@ -415,7 +405,7 @@ def summarise_refit(runs: dict[str, dict[str, Any]], references: tuple[dict[str,
         fit = sum(0.9 <= r[key]["fresh"] <= 1.1 for r in lag)
         data = sum(r[key]["fresh"] > 1.1 for r in lag)
         reading[key] = {"fit_lag_seeds": fit, "data_lag_seeds": data, "n_lag_seeds": len(lag),
-                        "verdict": "fit" if fit >= 5 else "data" if data >= 5 else "mixed"}
+                        "verdict": "fit" if fit >= MIN_LAG_SEEDS else "data" if data >= MIN_LAG_SEEDS else "mixed"}
     return {"rows": rows, "reading": reading}
 
 
@@ -434,30 +424,54 @@ def refit_markdown(results: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _run_cached(fn: Any, jobs: list[dict[str, Any]], out: Path, *, workers: int | None, ray_address: str | None,
+                show_progress: bool, desc: str, label: Any, **kw: Any) -> tuple[list[Any], dict[str, Any], float]:
+    """Every job of ``fn`` through :func:`cascgp_experiments.execution.run_jobs` (cached under ``out/cache``):
+    the results in job order, the run's statistics and its wall seconds."""
+    from cascgp_experiments.execution import run_jobs
+
+    t0 = time.perf_counter()
+    res = run_jobs(fn, jobs, workers=workers, ray_address=ray_address, cache_dir=Path(out) / "cache", desc=desc,
+                   label=label, show_progress=show_progress, **kw)
+    return list(res), res.stats(), time.perf_counter() - t0
+
+
+def _write(out: Path, name: str, results: dict[str, Any], markdown: Any) -> dict[str, Any]:
+    """``results`` as ``out/<name>.json`` and ``markdown(results)`` as ``out/<name>.md``; returns ``results``."""
+    write_json(Path(out) / f"{name}.json", results)
+    atomic_write_text(Path(out) / f"{name}.md", markdown(results))
+    return results
+
+
+def _learner_jobs(cfg: TransferConfig, seeds: tuple[int, ...]) -> list[dict[str, Any]]:
+    return [{"config": replace(cfg, seed=int(s)).to_dict(), "label": label} for s in seeds for label in LAG_LEARNERS]
+
+
+def _by_seed_and_label(jobs: list[dict[str, Any]], res: list[Any]) -> dict[str, dict[str, Any]]:
+    runs: dict[str, dict[str, Any]] = {}
+    for job, r in zip(jobs, res):
+        runs.setdefault(str(job["config"]["seed"]), {})[job["label"]] = r
+    return runs
+
+
+def _label(job: dict[str, Any]) -> str:
+    return f"seed {job['config']['seed']}" + (f" {job['label']}" if "label" in job else "")
+
+
 def run_diagnosis(out: Path, cfg: TransferConfig = LAG_CONFIG, seeds: tuple[int, ...] = LAG_SEEDS, *,
                   workers: int | None = None, ray_address: str | None = None, show_progress: bool = True,
                   references: tuple[dict[str, Any], ...] = ()) -> dict[str, Any]:
     """Run every (seed, learner) job (cached under ``out/cache``), write ``lag_diagnosis.json``/``.md`` into
     ``out``. ``references``: earlier results with ``runs[seed][controller]`` attempt lists (the gate evaluation)
     or ``runs[seed][label]`` (the divergence experiment) to check the attempts against."""
-    from cascgp_experiments.execution import run_jobs
-
-    out = Path(out)
-    jobs = [{"config": replace(cfg, seed=int(s)).to_dict(), "label": label} for s in seeds for label in LAG_LEARNERS]
-    t0 = time.perf_counter()
-    res = run_jobs(diagnosis_job, jobs, workers=workers, ray_address=ray_address, cache_dir=out / "cache", desc="attempts",
-                   units=[len(cfg.plan())] * len(jobs), unit="attempt",
-                   label=lambda j: f"seed {j['config']['seed']} {j['label']}", show_progress=show_progress)
-    runs: dict[str, dict[str, list[dict[str, Any]]]] = {}
-    for job, attempts in zip(jobs, res):
-        runs.setdefault(str(job["config"]["seed"]), {})[job["label"]] = attempts
-    results: dict[str, Any] = {"config": {**cfg.to_dict(), "seeds": list(seeds)},
-                               "wall_seconds": time.perf_counter() - t0, "jobs": res.stats(), "runs": runs,
-                               "reproduction": reproduction(runs, references)}
-    results["summary"] = summarise_diagnosis(runs)
-    write_json(out / "lag_diagnosis.json", results)
-    atomic_write_text(out / "lag_diagnosis.md", summary_markdown(results))
-    return results
+    jobs = _learner_jobs(cfg, seeds)
+    res, stats, wall = _run_cached(diagnosis_job, jobs, out, workers=workers, ray_address=ray_address,
+                                   show_progress=show_progress, desc="attempts", label=_label,
+                                   units=[len(cfg.plan())] * len(jobs), unit="attempt")
+    runs = _by_seed_and_label(jobs, res)
+    results = {"config": {**cfg.to_dict(), "seeds": list(seeds)}, "wall_seconds": wall, "jobs": stats, "runs": runs,
+               "reproduction": reproduction(runs, references), "summary": summarise_diagnosis(runs)}
+    return _write(out, "lag_diagnosis", results, summary_markdown)
 
 
 def reproduction(runs: dict[str, dict[str, list[dict[str, Any]]]], references: tuple[dict[str, Any], ...]
@@ -486,7 +500,9 @@ def _spearman(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
 
 def summarise_diagnosis(runs: dict[str, dict[str, list[dict[str, Any]]]]) -> dict[str, Any]:
     """Per seed and "left" attempt, GL / UL of tracking and of every diagnostic; the yardstick check and the
-    two candidate causes' counts (module docstring)."""
+    two candidate causes' counts (module docstring). As coded: a joint's "worst" attempt per seed is the one with
+    the largest GL / UL ``ff_err_rms`` ratio, and a "noise collapse" counts when GL's GP is collapsed and UL's is
+    not (``docs/lag_diagnosis.md`` reports how the other readings of the rule come out)."""
     rows = []
     for seed, run in sorted(runs.items(), key=lambda kv: int(kv[0])):
         gl = [a for a in run["GL"] if a["task"] == DIAGNOSED_TASK]
@@ -496,8 +512,7 @@ def summarise_diagnosis(runs: dict[str, dict[str, list[dict[str, Any]]]]) -> dic
             rows.append({
                 "seed": int(seed), "attempt": int(a["task_attempt"]),
                 "tracking": a["tracking_rmse"] / b["tracking_rmse"],
-                "ff_all": float(np.sqrt(np.mean(np.square(ga["ff_err_rms"])))
-                                / np.sqrt(np.mean(np.square(ub["ff_err_rms"])))),
+                "ff_all": _arm_rms(ga["ff_err_rms"]) / _arm_rms(ub["ff_err_rms"]),
                 "ff": (np.array(ga["ff_err_rms"]) / np.array(ub["ff_err_rms"])).tolist(),
                 "ff_gl_vs_rbd": (np.array(ga["ff_err_rms"]) / np.array(ga["rbd_err_rms"])).tolist(),
                 "ff_ul_vs_rbd": (np.array(ub["ff_err_rms"]) / np.array(ub["rbd_err_rms"])).tolist(),
@@ -528,7 +543,7 @@ def summarise_diagnosis(runs: dict[str, dict[str, list[dict[str, Any]]]]) -> dic
             "per_seed": per_seed,
             **{f"{c}_lag_seeds": sum(x[c] for x in lag) for c in ("coverage", "fit")},
             **{f"{c}_contrast_seeds": sum(x[c] for x in contrast) for c in ("coverage", "fit")},
-            **{f"{c}_supported": (sum(x[c] for x in lag) >= 5 and len(lag) == 6
+            **{f"{c}_supported": (sum(x[c] for x in lag) >= MIN_LAG_SEEDS and len(lag) == len(LAG_SEEDS_WITH_LAG)
                                   and not (contrast and all(x[c] for x in contrast)))
                for c in ("coverage", "fit")},
         }

@@ -221,6 +221,27 @@ def test_calibration_recalibrates_on_an_unseen_training_motion(arms, tmp_path: P
         assert c.shape == (6,) and (c > 0).all()
         # a factor above 1 widens every interval (coverage cannot fall), below 1 narrows them
         assert (recal[c >= 1] >= prop[c >= 1]).all() and (recal[c <= 1] <= prop[c <= 1]).all()
+    # the factor is fitted on the unseen motion n_subsets + k (not on the training motion k): recompute it with
+    # the same fit (seeded, one thread) on each candidate motion
+    from cascgp.gp import GPFitConfig
+    from cascgp.metrics import std_scale_for_level
+    from cascgp.models import make_model
+    from cascgp.rbd import load_nominal
+    from cascgp_experiments.common import NOMINAL_URDF
+
+    rbd = load_nominal(NOMINAL_URDF)
+    motions = train.split(10)
+    for k, row in enumerate(res["rows"]):
+        m = make_model("sp-inward", 6, rbd, gp_config=GPFitConfig(n_restarts=1)).fit(
+            motions[k].subsample(10.0).first_seconds(0.5))
+
+        def factor(motion):
+            cal = motion.subsample(10.0)
+            mean, var = m.predict(cal.q, cal.qd, cal.qdd, propagate=True)
+            return std_scale_for_level(mean, var + m.noise_var, cal.tau)
+
+        np.testing.assert_allclose(row["recal_scale"], factor(motions[2 + k]), rtol=1e-12)
+        assert not np.allclose(row["recal_scale"], factor(motions[k]))
     table = recalibration_effect(res).splitlines()
     assert table[2].startswith("| propagated | 6 |") and table[3].startswith("| recalibrated | 6 |")
     for n_subsets, data in ((6, train), (1, arms["noisy"][0])):  # too few motions; one motion only

@@ -30,35 +30,42 @@ def test_model_diagnostics_along_a_reference(arm3_train, arm3_rbd) -> None:
     assert all(f > n for f, n in zip(far["near_dist"], out["near_dist"]))
 
 
-def _step1_runs(near_gl: float, lag_seeds_only: bool = True) -> dict:
-    """Synthetic step-1 runs: on the lag seeds GL's J4/J6 feedforward error is 2 x UL's and its nearest-data
-    distance ``near_gl`` x UL's; on the contrast seeds they are equal (or, ``lag_seeds_only=False``, the same
-    as the lag seeds)."""
+def _step1_runs(near_gl: tuple[float, float], lag_seeds_only: bool = True, noise_gl: float = 0.1) -> dict:
+    """Synthetic step-1 runs, two "left" attempts: on the lag seeds GL's J4/J6 feedforward error is 2 x UL's at
+    attempt 0 and 4 x at attempt 1 (the worst), its nearest-data distance ``near_gl[k]`` x UL's at attempt k and
+    its noise std ``noise_gl``; on the contrast seeds GL equals UL (or, ``lag_seeds_only=False``, is as on the lag
+    seeds)."""
     runs = {}
     for s in lag.LAG_SEEDS:
-        factor = 2.0 if (s in lag.LAG_SEEDS_WITH_LAG or not lag_seeds_only) else 1.0
-        near = near_gl if (s in lag.LAG_SEEDS_WITH_LAG or not lag_seeds_only) else 1.0
+        like_lag = s in lag.LAG_SEEDS_WITH_LAG or not lag_seeds_only
         gl, ul = [], []
         for k in range(2):
-            common = {"rbd_err_rms": [1.0] * 6, "noise_sd": [0.1] * 6, "lengthscale": [[1.0, 2.0, 3.0]] * 6}
+            factor, near, noise = (2.0 ** (k + 1), near_gl[k], noise_gl) if like_lag else (1.0, 1.0, 0.1)
+            common = {"rbd_err_rms": [1.0] * 6, "lengthscale": [[1.0, 2.0, 3.0]] * 6}
             ul.append({"task": "left", "task_attempt": k, "tracking_rmse": 0.1,
-                       "before": {**common, "ff_err_rms": [0.2] * 6, "near_dist": [0.05] * 6}})
-            gl.append({"task": "left", "task_attempt": k, "tracking_rmse": 0.1 * factor ** (k + 1) * 0.9,
-                       "before": {**common, "ff_err_rms": [0.2 * factor ** (k + 1)] * 6,
-                                  "near_dist": [0.05 * near] * 6}})
+                       "before": {**common, "ff_err_rms": [0.2] * 6, "near_dist": [0.05] * 6, "noise_sd": [0.1] * 6}})
+            gl.append({"task": "left", "task_attempt": k, "tracking_rmse": 0.1 * factor * 0.9,
+                       "before": {**common, "ff_err_rms": [0.2 * factor] * 6, "near_dist": [0.05 * near] * 6,
+                                  "noise_sd": [noise] * 6}})
         runs[str(s)] = {"GL": gl, "UL": ul}
     return runs
 
 
 def test_step1_reading_rules() -> None:
-    s = lag.summarise_diagnosis(_step1_runs(near_gl=1.5))
+    # farther data at the worst attempt (1), nearer at the other: coverage, read at the worst attempt
+    s = lag.summarise_diagnosis(_step1_runs(near_gl=(0.5, 1.5)))
     assert s["causes"]["J6"]["coverage_supported"] and not s["causes"]["J6"]["fit_supported"]
     assert s["causes"]["J4"]["coverage_lag_seeds"] == 6 and s["causes"]["J4"]["coverage_contrast_seeds"] == 0
+    assert s["causes"]["J4"]["per_seed"][0]["attempt"] == 1
+    assert not lag.summarise_diagnosis(_step1_runs(near_gl=(1.5, 0.5)))["causes"]["J6"]["coverage_supported"]
+    # as near, but GL's noise collapsed: fit
+    s = lag.summarise_diagnosis(_step1_runs(near_gl=(1.0, 1.0), noise_gl=0.01))
+    assert s["causes"]["J4"]["fit_supported"] and not s["causes"]["J4"]["coverage_supported"]
     # equally near data with the same hyperparameters: neither cause
-    s = lag.summarise_diagnosis(_step1_runs(near_gl=1.0))
+    s = lag.summarise_diagnosis(_step1_runs(near_gl=(1.0, 1.0)))
     assert not any(c["coverage_supported"] or c["fit_supported"] for c in s["causes"].values())
     # the contrast seeds show the same pattern: not supported
-    s = lag.summarise_diagnosis(_step1_runs(near_gl=1.5, lag_seeds_only=False))
+    s = lag.summarise_diagnosis(_step1_runs(near_gl=(1.5, 1.5), lag_seeds_only=False))
     assert not s["causes"]["J6"]["coverage_supported"]
     assert s["yardstick"]["n"] == 16 and s["yardstick"]["spearman_rho"] > 0.5
 

@@ -63,5 +63,7 @@ def test_std_scale_for_level_closed_form_and_its_invariant():
     assert std_scale_for_level(np.zeros((3, 1)), np.zeros((3, 1)), np.zeros((3, 1)))[0] == 0.0
     with pytest.raises(ValueError, match="var"):
         std_scale_for_level(np.zeros(3), -np.ones(3), np.zeros(3))
+    with pytest.raises(ValueError, match="var: zero variance with a non-zero error"):
+        std_scale_for_level(np.zeros(3), np.array([1.0, 0.0, 1.0]), np.array([0.0, 0.5, 0.0]))
     with pytest.raises(ValueError, match="level"):
         std_scale_for_level(np.zeros(3), np.ones(3), np.zeros(3), level=1.0)
