@@ -70,6 +70,22 @@ GL) reproduce step 2's fresh fits with the same GP seeds (``docs/lag_refit.json`
 the two GP seeds, ``front_effect`` = (GL front, UL left) / (UL, UL), ``left_effect`` = (UL front, GL left) / (UL,
 UL), ``both`` = (GL, GL) / (UL, UL). Reading (six lag seeds): a phase's data are a cause if its effect is above 1.1
 on at least 5 of 6; the larger median ``|log|`` is the larger share; both or neither are reported as such.
+
+Fourth step: what differs in the gated learner's "left" episodes? (:func:`episodes_job`; written and committed
+after step 3's verdict, "left" episodes, before this step ran.) Per seed 0-7, both learners' first three "left"
+episodes (those step 3 swapped), every recorded row, per joint:
+
+* ``resid_rms``: RMS of the measured torque minus the link-side rigid-body inverse dynamics of the true scene
+  (:func:`link_side_model`: the true arm, hand, bottle and 1.2 kg payload with the marbles lumped at rest; no
+  rotor inertia, gear friction or damping, since the sensor reads the link side) at the *measured* q, q̇ and
+  estimated q̈. What the GP must learn beyond rigid-body physics, plus what it cannot (marbles' contact forces,
+  the q̈ estimate's error, sensor noise): the data's inconsistency with a function of the state;
+* ``dev_rms``: RMS of the measured q minus the reference (how far the episode strays around the reference).
+
+Per seed, GL / UL of the median over the three episodes, at J4 and J6. Reading (six lag seeds, each joint
+apart): *inconsistent data* if the ``resid_rms`` ratio is above 1.1 on at least 5 of 6 and not on both contrast
+seeds; *less excitation* if the ``dev_rms`` ratio is below 0.9 on at least 5 of 6 (*more excitation* above 1.1),
+not on both contrast seeds; otherwise descriptive only. Nothing is changed on the strength of it.
 """
 
 from __future__ import annotations
@@ -88,7 +104,8 @@ from cascgp_experiments.transfer import TransferConfig
 
 __all__ = ["LAG_CONFIG", "LAG_SEEDS", "LAG_LEARNERS", "DIAGNOSED_TASK", "model_diagnostics", "diagnosis_job",
            "run_diagnosis", "summarise_diagnosis", "refit_job", "run_refit", "summarise_refit", "factorial_job",
-           "run_factorial", "summarise_factorial"]
+           "run_factorial", "summarise_factorial", "link_side_model", "episodes_job", "run_episodes",
+           "summarise_episodes"]
 
 #: The gate evaluation's settings, cut after "left" (same attempts up to there; no revisit).
 LAG_CONFIG = replace(GATE_EVAL_CONFIG, tasks=("front", "left"), revisit=False)
@@ -421,6 +438,119 @@ def refit_markdown(results: dict[str, Any]) -> str:
                      f"{t['gl_fresh_vs_loop']:.2f} | {t['ul_fresh_vs_loop']:.2f} | {f['loop']:.2f} | {f['fresh']:.2f} |")
     lines += [""] + [f"{k}: fresh within 0.9-1.1 on {v['fit_lag_seeds']} of {v['n_lag_seeds']} lag seeds, above 1.1 on "
                      f"{v['data_lag_seeds']}: {v['verdict']}" for k, v in s["reading"].items()]
+    return "\n".join(lines) + "\n"
+
+
+def link_side_model(payload_mass: float, n_marbles: int) -> Any:
+    """The true scene with the whole payload as one rigid body (:func:`jaco_env.oracle.rigid_scene_model`), its
+    arm joints' armature, damping and dry friction set to 0: ``mj_inverse`` then gives the link-side torque the
+    joint torque sensors read (``jaco_env.robot``), for the marbles at rest."""
+    from jaco_env.oracle import rigid_scene_model
+
+    m = rigid_scene_model(payload_mass, n_marbles)
+    m.dof_armature[:6] = 0.0
+    m.dof_damping[:6] = 0.0
+    m.dof_frictionloss[:6] = 0.0
+    return m
+
+
+def _link_side_torque(model: Any, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+    """``mj_inverse`` of ``model`` at every row (T, 6) of the arm's state (the rest of the scene at rest)."""
+    import mujoco
+
+    d = mujoco.MjData(model)
+    out = np.empty_like(q)
+    for i in range(q.shape[0]):
+        d.qpos[:6], d.qvel[:6], d.qacc[:6] = q[i], qd[i], qdd[i]
+        mujoco.mj_inverse(model, d)
+        out[i] = d.qfrc_inverse[:6]
+    return out
+
+
+def episodes_job(config: dict[str, Any]) -> dict[str, Any]:
+    """The fourth step (module docstring) for one seed: per learner, per "left" training episode, ``resid_rms``
+    and ``dev_rms`` per joint, and the episode's tracking RMSE."""
+    import jaco_env.tasks
+
+    cfg = TransferConfig.from_dict(config)
+    rbd, _, _ = _left_setup(cfg)
+    probe = cfg.make_env()
+    try:
+        _, info = probe.reset(seed=0, options={"task": DIAGNOSED_TASK, **cfg.reset_options()})
+    finally:
+        probe.close()
+    link = link_side_model(float(info["payload_mass"]), int(info["n_marbles"]))
+    task = jaco_env.tasks.get_task(DIAGNOSED_TASK)
+    last = _last_left(cfg)
+    n_front = sum(task_ != DIAGNOSED_TASK for task_, _, _ in cfg.plan()[:last])
+    env = cfg.make_env()
+    out: dict[str, Any] = {}
+    try:
+        for label in LAG_LEARNERS:
+            _, episodes, _ = _learner_episodes(cfg, label, env, rbd, last)
+            out[label] = []
+            for ep in episodes[n_front:]:
+                q_ref = task.reference(ep.t)[0]  # t: the observation's time since reset, as the controller's
+                resid = ep.tau - _link_side_torque(link, ep.q, ep.qd, ep.qdd)
+                out[label].append({"n": int(ep.n_samples), "resid_rms": rmse(resid, np.zeros_like(resid)).tolist(),
+                                   "dev_rms": rmse(ep.q, q_ref).tolist()})
+    finally:
+        env.close()
+    return out
+
+
+def run_episodes(out: Path, cfg: TransferConfig = LAG_CONFIG, seeds: tuple[int, ...] = LAG_SEEDS, *,
+                 workers: int | None = None, ray_address: str | None = None, show_progress: bool = True,
+                 references: tuple[dict[str, Any], ...] = ()) -> dict[str, Any]:
+    """Run every seed's :func:`episodes_job` (cached under ``out/cache``), write ``lag_episodes.json``/``.md``.
+    ``references`` is accepted for a uniform command line and not used."""
+    jobs = [{"config": replace(cfg, seed=int(s)).to_dict()} for s in seeds]
+    res, stats, wall = _run_cached(episodes_job, jobs, out, workers=workers, ray_address=ray_address,
+                                   show_progress=show_progress, desc="episode jobs", label=_label)
+    runs = {str(job["config"]["seed"]): r for job, r in zip(jobs, res)}
+    results = {"config": {**cfg.to_dict(), "seeds": list(seeds)}, "wall_seconds": wall, "jobs": stats,
+               "runs": runs, "summary": summarise_episodes(runs)}
+    return _write(out, "lag_episodes", results, episodes_markdown)
+
+
+def summarise_episodes(runs: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Per seed GL / UL of the median over the "left" episodes of ``resid_rms`` and ``dev_rms`` per joint, and the
+    reading's counts at J4 and J6 (module docstring)."""
+    rows = []
+    for seed, run in sorted(runs.items(), key=lambda kv: int(kv[0])):
+        row: dict[str, Any] = {"seed": int(seed)}
+        for key in ("resid_rms", "dev_rms"):
+            med = {lab: np.median([e[key] for e in run[lab]], axis=0) for lab in LAG_LEARNERS}
+            row[key] = (med["GL"] / med["UL"]).tolist()
+            row[f"{key}_ul"] = med["UL"].tolist()
+        rows.append(row)
+    reading: dict[str, Any] = {}
+    for j in (3, 5):
+        lag = [r for r in rows if r["seed"] in LAG_SEEDS_WITH_LAG]
+        con = [r for r in rows if r["seed"] not in LAG_SEEDS_WITH_LAG]
+        for name, key, test in (("inconsistent data", "resid_rms", lambda v: v > 1.1),
+                                ("less excitation", "dev_rms", lambda v: v < 0.9),
+                                ("more excitation", "dev_rms", lambda v: v > 1.1)):
+            n_lag = sum(test(r[key][j]) for r in lag)
+            n_con = sum(test(r[key][j]) for r in con)
+            reading[f"J{j + 1} {name}"] = {
+                "lag_seeds": n_lag, "contrast_seeds": n_con,
+                "median_ratio": float(np.median([r[key][j] for r in lag])),
+                "supported": bool(n_lag >= MIN_LAG_SEEDS and not (con and n_con == len(con)))}
+    return {"rows": rows, "reading": reading}
+
+
+def episodes_markdown(results: dict[str, Any]) -> str:
+    """The per-seed table (J4, J6) and the reading."""
+    s = results["summary"]
+    lines = ["| seed | resid J4 GL/UL | resid J6 GL/UL | UL resid J4, J6 (N m) | dev J4 GL/UL | dev J6 GL/UL |",
+             "|---|---|---|---|---|---|"]
+    for r in s["rows"]:
+        lines.append(f"| {r['seed']}{'' if r['seed'] in LAG_SEEDS_WITH_LAG else ' (contrast)'} | "
+                     f"{r['resid_rms'][3]:.2f} | {r['resid_rms'][5]:.2f} | {r['resid_rms_ul'][3]:.3f}, "
+                     f"{r['resid_rms_ul'][5]:.3f} | {r['dev_rms'][3]:.2f} | {r['dev_rms'][5]:.2f} |")
+    lines += [""] + [f"{k}: lag seeds {v['lag_seeds']} of 6, contrast {v['contrast_seeds']} of 2, median ratio "
+                     f"{v['median_ratio']:.2f}; supported: {v['supported']}" for k, v in s["reading"].items()]
     return "\n".join(lines) + "\n"
 
 

@@ -10,9 +10,11 @@ Usage::
     python -m scripts.lag_diagnosis --refit --out out/lag_refit \
         --reference docs/learner_divergence.json docs/learner_divergence_seeds4-7.json  # step 2: data or fit?
     python -m scripts.lag_diagnosis --factorial --out out/lag_factorial --reference docs/lag_refit.json  # step 3
+    python -m scripts.lag_diagnosis --episodes --out out/lag_episodes                                    # step 4
 
 Writes ``lag_diagnosis.json`` (every attempt with the per-joint diagnostics, the GL / UL rows, the causes'
-counts) and ``lag_diagnosis.md`` (``--refit``: ``lag_refit.*``; ``--factorial``: ``lag_factorial.*``) to ``--out``; finished jobs are cached under ``--out/cache``.
+counts) and ``lag_diagnosis.md`` (``--refit``: ``lag_refit.*``; ``--factorial``: ``lag_factorial.*``; ``--episodes``:
+``lag_episodes.*``) to ``--out``; finished jobs are cached under ``--out/cache``.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ from pathlib import Path
 
 from cascgp.io import read_json
 from cascgp_experiments.execution import add_execution_args, check_args, session
-from cascgp_experiments.lag_diagnosis import LAG_SEEDS, run_diagnosis, run_factorial, run_refit
+from cascgp_experiments.lag_diagnosis import LAG_SEEDS, run_diagnosis, run_episodes, run_factorial, run_refit
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -37,6 +39,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--factorial", action="store_true",
                    help="step 3: which phase's data? (front, left) episodes from either learner, fitted afresh; "
                         "--reference: step 2's lag_refit.json")
+    p.add_argument("--episodes", action="store_true",
+                   help="step 4: what differs in the learners' 'left' episodes (torque residual vs the link-side "
+                        "rigid-body model, deviation from the reference)")
     add_execution_args(p)
     a = p.parse_args(argv)
     check_args(p, a)
@@ -48,10 +53,12 @@ def main(argv: list[str] | None = None) -> int:
         if not r.is_file():
             p.error(f"--reference: no file {r}")
     refs = tuple(read_json(r) for r in a.reference)
-    if a.refit and a.factorial:
-        p.error("--refit and --factorial: one step at a time")
-    run, name = ((run_refit, "lag_refit") if a.refit else (run_factorial, "lag_factorial") if a.factorial
-                 else (run_diagnosis, "lag_diagnosis"))
+    steps = {"refit": (run_refit, "lag_refit"), "factorial": (run_factorial, "lag_factorial"),
+             "episodes": (run_episodes, "lag_episodes")}
+    chosen = [k for k in steps if getattr(a, k)]
+    if len(chosen) > 1:
+        p.error(f"--{' and --'.join(chosen)}: one step at a time")
+    run, name = steps[chosen[0]] if chosen else (run_diagnosis, "lag_diagnosis")
     with session(a.ray, a.workers):
         res = run(a.out, seeds=seeds, workers=a.workers, ray_address=a.ray, references=refs)
     print((a.out / f"{name}.md").read_text())
