@@ -136,8 +136,42 @@ def test_cli_errors(tmp_path) -> None:
     from pathlib import Path
 
     repo = Path(__file__).resolve().parents[1]
-    for args, msg in ((["--refit", "--factorial"], "one step at a time"), (["--seeds", "a,b"], "--seeds"),
+    for args, msg in ((["--refit", "--factorial"], "one step at a time"),
+                      (["--episodes", "--refit"], "one step at a time"), (["--seeds", "a,b"], "--seeds"),
                       (["--reference", str(tmp_path / "none.json")], "--reference")):
         r = subprocess.run([sys.executable, "-m", "scripts.lag_diagnosis", "--out", str(tmp_path), *args], cwd=repo,
                            capture_output=True, text=True)
         assert r.returncode == 2 and msg in r.stderr, r.stderr
+
+
+def test_link_side_model_is_the_true_scene_without_the_drive() -> None:
+    """The link-side torque the sensors read: the full model's inverse dynamics minus the residual rotor inertia
+    and gear damping of jaco_env.robot (dry friction removed from both for the comparison)."""
+    from jaco_env import robot
+    from jaco_env.oracle import rigid_scene_model
+
+    rng = np.random.default_rng(0)
+    q, qd, qdd = rng.uniform(-1, 1, (5, 6)), rng.uniform(-0.5, 0.5, (5, 6)), rng.uniform(-1, 1, (5, 6))
+    link = lag.link_side_model(1.2, 30)
+    full = rigid_scene_model(1.2, 30)
+    assert not link.dof_armature[:6].any() and not link.dof_frictionloss[:6].any() and full.dof_armature[:6].all()
+    full.dof_frictionloss[:6] = 0.0
+    diff = lag._link_side_torque(full, q, qd, qdd) - lag._link_side_torque(link, q, qd, qdd)
+    np.testing.assert_allclose(diff, robot.ARMATURE * qdd + robot.DAMPING * qd, atol=1e-8)
+
+
+def test_step4_ratios_and_reading() -> None:
+    def episodes(resid: float, dev: float) -> list[dict]:
+        return [{"n": 100, "resid_rms": [0.1 * resid * f] * 6, "dev_rms": [0.01 * dev * f] * 6} for f in (0.9, 1, 2)]
+
+    runs = {str(s): {"GL": episodes(1.5, 0.8) if s in lag.LAG_SEEDS_WITH_LAG else episodes(1.0, 1.0),
+                     "UL": episodes(1.0, 1.0)} for s in lag.LAG_SEEDS}
+    s = lag.summarise_episodes(runs)
+    np.testing.assert_allclose(s["rows"][0]["resid_rms"], 1.5)
+    np.testing.assert_allclose(s["rows"][0]["resid_rms_ul"], 0.1)
+    r = s["reading"]
+    assert r["J4 inconsistent data"]["supported"] and r["J6 less excitation"]["supported"]
+    assert not r["J6 more excitation"]["supported"] and r["J4 inconsistent data"]["contrast_seeds"] == 0
+    runs["3"]["GL"] = runs["4"]["GL"] = episodes(1.5, 0.8)  # the contrast seeds show it too: not supported
+    assert not lag.summarise_episodes(runs)["reading"]["J4 inconsistent data"]["supported"]
+    assert "lag seeds 6 of 6" in lag.episodes_markdown({"summary": s})
