@@ -69,7 +69,8 @@ from cascgp_experiments.gate_eval import (GATE_EVAL_CONFIG, GATE_EVAL_SEEDS, fin
 from cascgp_experiments.transfer import TransferConfig
 
 __all__ = ["NULL_FIT_SEED_OFFSET", "LEARNERS", "reference_uncertainty", "divergence_job", "divergence_jobs",
-           "run_divergence", "ratios", "summarise", "per_task", "tests_of_hypotheses"]
+           "run_divergence", "ratios", "summarise", "per_task", "tests_of_hypotheses", "joint_split",
+           "joint_split_markdown"]
 
 #: Added to UL''s GP seeds: seeds 100-119 never overlap the 0-19 that UL and GL use on seeds 0-3.
 NULL_FIT_SEED_OFFSET = 100
@@ -234,6 +235,34 @@ def per_task(rows: list[dict[str, Any]]) -> dict[str, dict[str, dict[str, float]
                 out.setdefault(task, {})[q] = {"n": int(v.size), "median": float(np.median(v)),
                                                "median_abs_log": float(np.median(np.abs(np.log(v))))}
     return out
+
+
+def joint_split(results: dict[str, Any], task: str, joint: int) -> dict[str, list[dict[str, float]]]:
+    """Per seed and attempt on ``task``, joint ``joint`` (0-based) of the tracking: ``gate`` = GL / (ungated on
+    GL's model) and ``model`` = (ungated on GL's model) / UL, the per-joint form of ``gate_on_gl_model`` and
+    ``gl_model_vs_ul`` (their product is GL / UL at that joint). From the records' ``joint_rmse``."""
+    out: dict[str, list[dict[str, float]]] = {}
+    for seed, run in results["runs"].items():
+        gl = [a for a in run["GL"] if a["task"] == task]
+        ul = [a for a in run["UL"] if a["task"] == task]
+        if not gl or len(gl) != len(ul):
+            raise ValueError(f"results: seed {seed} has no matching GL/UL attempts on task {task!r}")
+        rows = []
+        for g, u in zip(gl, ul):
+            paired = g["paired"][UNGATED]["joint_rmse"][joint]
+            rows.append({"attempt": int(g["task_attempt"]), "gate": g["joint_rmse"][joint] / paired,
+                         "model": paired / u["joint_rmse"][joint]})
+        out[seed] = rows
+    return out
+
+
+def joint_split_markdown(split: dict[str, list[dict[str, float]]]) -> str:
+    """One row per seed: ``gate / model`` at every attempt."""
+    n = max(len(r) for r in split.values())
+    lines = ["| seed | " + " | ".join(f"attempt {k}: gate, model" for k in range(n)) + " |", "|" + "---|" * (n + 1)]
+    for seed, rows in split.items():
+        lines.append(f"| {seed} | " + " | ".join(f"{r['gate']:.2f}, {r['model']:.2f}" for r in rows) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def tests_of_hypotheses(rows: list[dict[str, Any]]) -> dict[str, Any]:

@@ -177,3 +177,20 @@ def test_reproduction_refuses_a_reference_of_other_settings() -> None:
     ref = {"runs": {"0": {ld.GATED: res["runs"]["0"]["GL"][:-1], ld.UNGATED: res["runs"]["0"]["UL"]}}}
     with pytest.raises(ValueError, match="reference: seed 0 sp-inward-gated has 11 attempts"):
         ld.reproduction(res, ref)
+
+
+def test_joint_split_is_the_per_joint_decomposition() -> None:
+    def rec(task, k, gl, paired=None):
+        r = {"task": task, "task_attempt": k, "joint_rmse": [gl, 2 * gl]}
+        if paired is not None:
+            r["paired"] = {ld.UNGATED: {"joint_rmse": [paired, 2 * paired]}}
+        return r
+
+    results = {"runs": {"0": {"GL": [rec("front", 0, 1.0, 1.0), rec("left", 0, 0.3, 0.1), rec("left", 1, 0.2, 0.2)],
+                              "UL": [rec("front", 0, 1.0), rec("left", 0, 0.1), rec("left", 1, 0.1)]}}}
+    split = ld.joint_split(results, "left", 1)
+    assert [r["attempt"] for r in split["0"]] == [0, 1]
+    np.testing.assert_allclose([(r["gate"], r["model"]) for r in split["0"]], [(3.0, 1.0), (1.0, 2.0)])
+    assert "3.00, 1.00" in ld.joint_split_markdown(split)
+    with pytest.raises(ValueError, match="right"):
+        ld.joint_split(results, "right", 0)
