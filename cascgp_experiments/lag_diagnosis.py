@@ -124,6 +124,11 @@ FACTORIAL_SEEDS = (1000, 1001)
 COLLAPSED_NOISE_SD = 0.05  # N m: half the torque sensor's 0.1 N m (jaco_env.sensors.SensorNoise)
 
 
+def _seed_label(seed: int) -> str:
+    """A seed as the tables show it: the contrast seeds marked."""
+    return f"{seed}" if seed in LAG_SEEDS_WITH_LAG else f"{seed} (contrast)"
+
+
 def _arm_rms(per_joint: list[float]) -> float:
     """The J1-J6 RMS of per-joint RMS errors."""
     return float(np.sqrt(np.mean(np.square(per_joint))))
@@ -165,6 +170,17 @@ def model_diagnostics(model: Any, nominal: Any, oracle_ff: np.ndarray, q: np.nda
     return out
 
 
+def _payload(cfg: TransferConfig) -> tuple[float, int]:
+    """The "left" episodes' payload mass (kg) and number of marbles, read from a reset of a second env (its own
+    RNG; the learners' envs are not touched)."""
+    probe = cfg.make_env()
+    try:
+        _, info = probe.reset(seed=0, options={"task": DIAGNOSED_TASK, **cfg.reset_options()})
+    finally:
+        probe.close()
+    return float(info["payload_mass"]), int(info["n_marbles"])
+
+
 def _left_setup(cfg: TransferConfig) -> tuple[Any, np.ndarray, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """The nominal RBD model, the oracle's feedforward along the "left" reference and that reference (10 Hz)."""
     import jaco_env.tasks
@@ -173,12 +189,7 @@ def _left_setup(cfg: TransferConfig) -> tuple[Any, np.ndarray, tuple[np.ndarray,
     from jaco_env.oracle import OracleController
 
     rbd = load_nominal(NOMINAL_URDF)
-    probe = cfg.make_env()  # a second env only to read the episode's payload and marbles (own RNG)
-    try:
-        _, info = probe.reset(seed=0, options={"task": DIAGNOSED_TASK, **cfg.reset_options()})
-    finally:
-        probe.close()
-    oracle = OracleController(float(info["payload_mass"]), int(info["n_marbles"]))
+    oracle = OracleController(*_payload(cfg))
     task = jaco_env.tasks.get_task(DIAGNOSED_TASK)
     q, qd, qdd = task.reference(np.arange(0.0, task.duration, 1.0 / REFERENCE_RATE_HZ))
     return rbd, np.array([oracle.feedforward(*r) for r in zip(q, qd, qdd)]), (q, qd, qdd)
@@ -271,7 +282,13 @@ def _fresh_fit(rbd: Any, episodes: list[Any], cfg: TransferConfig, seed: int) ->
 
 
 def _last_left(cfg: TransferConfig) -> int:
+    """The plan index of the last "left" attempt."""
     return max(i for i, (task, _, _) in enumerate(cfg.plan()) if task == DIAGNOSED_TASK)
+
+
+def _n_front(cfg: TransferConfig, last: int) -> int:
+    """How many of the episodes before attempt ``last`` are not on "left" (the "front" ones)."""
+    return sum(task != DIAGNOSED_TASK for task, _, _ in cfg.plan()[:last])
 
 
 def refit_job(config: dict[str, Any], label: str) -> dict[str, Any]:
@@ -305,7 +322,7 @@ def factorial_job(config: dict[str, Any]) -> dict[str, Any]:
     cfg = TransferConfig.from_dict(config)
     rbd, oracle_ff, ref = _left_setup(cfg)
     last = _last_left(cfg)
-    n_front = sum(task != DIAGNOSED_TASK for task, _, _ in cfg.plan()[:last])
+    n_front = _n_front(cfg, last)
     evaluate = _left_evaluator(cfg, rbd, oracle_ff, ref, last)
     env = cfg.make_env()
     try:
@@ -358,8 +375,9 @@ def summarise_factorial(runs: dict[str, dict[str, Any]], references: tuple[dict[
     reading = {}
     for key in ("front_effect", "left_effect", "both"):
         v = np.array([r[key] for r in lag])
-        reading[key] = {"above_1.1": int((v > 1.1).sum()), "n": len(lag), "median": float(np.median(v)),
-                        "median_abs_log": float(np.median(np.abs(np.log(v)))), "cause": bool((v > 1.1).sum() >= MIN_LAG_SEEDS)}
+        above = int((v > 1.1).sum())
+        reading[key] = {"above_1.1": above, "n": len(lag), "median": float(np.median(v)),
+                        "median_abs_log": float(np.median(np.abs(np.log(v)))), "cause": above >= MIN_LAG_SEEDS}
     return {"rows": rows, "reading": reading}
 
 
@@ -369,11 +387,12 @@ def factorial_markdown(results: dict[str, Any]) -> str:
     lines = ["| seed | reproduced | UL/UL tracking (rad) | front effect (GL front) | left effect (GL left) | both |",
              "|---|---|---|---|---|---|"]
     for r in s["rows"]:
-        lines.append(f"| {r['seed']}{'' if r['seed'] in LAG_SEEDS_WITH_LAG else ' (contrast)'} | {r['reproduced']} | "
+        lines.append(f"| {_seed_label(r['seed'])} | {r['reproduced']} | "
                      f"{r['tracking']['UL/UL']:.4f} | {r['front_effect']:.2f} | {r['left_effect']:.2f} | "
                      f"{r['both']:.2f} |")
     lines += [""] + [f"{k}: above 1.1 on {v['above_1.1']} of {v['n']} lag seeds, median {v['median']:.2f}, median "
-                     f"|log| {v['median_abs_log']:.3f}; a cause by the rule: {v['cause']}" for k, v in s["reading"].items()]
+                     f"|log| {v['median_abs_log']:.3f}; a cause by the rule: {v['cause']}"
+                     for k, v in s["reading"].items()]
     return "\n".join(lines) + "\n"
 
 
@@ -433,9 +452,10 @@ def refit_markdown(results: dict[str, Any]) -> str:
              "ff GL/UL loop | fresh |", "|" + "---|" * 8]
     for r in s["rows"]:
         t, f = r["tracking"], r["ff"]
-        lines.append(f"| {r['seed']}{'' if r['seed'] in LAG_SEEDS_WITH_LAG else ' (contrast)'} | "
+        lines.append(f"| {_seed_label(r['seed'])} | "
                      f"{r['reproduced']['GL']}, {r['reproduced']['UL']} | {t['loop']:.2f} | {t['fresh']:.2f} | "
-                     f"{t['gl_fresh_vs_loop']:.2f} | {t['ul_fresh_vs_loop']:.2f} | {f['loop']:.2f} | {f['fresh']:.2f} |")
+                     f"{t['gl_fresh_vs_loop']:.2f} | {t['ul_fresh_vs_loop']:.2f} | {f['loop']:.2f} | "
+                     f"{f['fresh']:.2f} |")
     lines += [""] + [f"{k}: fresh within 0.9-1.1 on {v['fit_lag_seeds']} of {v['n_lag_seeds']} lag seeds, above 1.1 on "
                      f"{v['data_lag_seeds']}: {v['verdict']}" for k, v in s["reading"].items()]
     return "\n".join(lines) + "\n"
@@ -468,21 +488,19 @@ def _link_side_torque(model: Any, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray
 
 
 def episodes_job(config: dict[str, Any]) -> dict[str, Any]:
-    """The fourth step (module docstring) for one seed: per learner, per "left" training episode, ``resid_rms``
-    and ``dev_rms`` per joint, and the episode's tracking RMSE."""
+    """The fourth step (module docstring) for one seed: per learner, per "left" training episode, its rows ``n``
+    and ``resid_rms`` and ``dev_rms`` per joint."""
     import jaco_env.tasks
 
+    from cascgp.rbd import load_nominal
+    from cascgp_experiments.common import NOMINAL_URDF
+
     cfg = TransferConfig.from_dict(config)
-    rbd, _, _ = _left_setup(cfg)
-    probe = cfg.make_env()
-    try:
-        _, info = probe.reset(seed=0, options={"task": DIAGNOSED_TASK, **cfg.reset_options()})
-    finally:
-        probe.close()
-    link = link_side_model(float(info["payload_mass"]), int(info["n_marbles"]))
+    rbd = load_nominal(NOMINAL_URDF)
+    link = link_side_model(*_payload(cfg))
     task = jaco_env.tasks.get_task(DIAGNOSED_TASK)
     last = _last_left(cfg)
-    n_front = sum(task_ != DIAGNOSED_TASK for task_, _, _ in cfg.plan()[:last])
+    n_front = _n_front(cfg, last)
     env = cfg.make_env()
     out: dict[str, Any] = {}
     try:
@@ -491,8 +509,8 @@ def episodes_job(config: dict[str, Any]) -> dict[str, Any]:
             out[label] = []
             for ep in episodes[n_front:]:
                 q_ref = task.reference(ep.t)[0]  # t: the observation's time since reset, as the controller's
-                resid = ep.tau - _link_side_torque(link, ep.q, ep.qd, ep.qdd)
-                out[label].append({"n": int(ep.n_samples), "resid_rms": rmse(resid, np.zeros_like(resid)).tolist(),
+                link_tau = _link_side_torque(link, ep.q, ep.qd, ep.qdd)
+                out[label].append({"n": int(ep.n_samples), "resid_rms": rmse(ep.tau, link_tau).tolist(),
                                    "dev_rms": rmse(ep.q, q_ref).tolist()})
     finally:
         env.close()
@@ -546,7 +564,7 @@ def episodes_markdown(results: dict[str, Any]) -> str:
     lines = ["| seed | resid J4 GL/UL | resid J6 GL/UL | UL resid J4, J6 (N m) | dev J4 GL/UL | dev J6 GL/UL |",
              "|---|---|---|---|---|---|"]
     for r in s["rows"]:
-        lines.append(f"| {r['seed']}{'' if r['seed'] in LAG_SEEDS_WITH_LAG else ' (contrast)'} | "
+        lines.append(f"| {_seed_label(r['seed'])} | "
                      f"{r['resid_rms'][3]:.2f} | {r['resid_rms'][5]:.2f} | {r['resid_rms_ul'][3]:.3f}, "
                      f"{r['resid_rms_ul'][5]:.3f} | {r['dev_rms'][3]:.2f} | {r['dev_rms'][5]:.2f} |")
     lines += [""] + [f"{k}: lag seeds {v['lag_seeds']} of 6, contrast {v['contrast_seeds']} of 2, median ratio "
