@@ -279,9 +279,15 @@ class _Progress:
         self.lock = threading.Lock()
 
     def tick(self, msg: tuple) -> None:
-        i, attempt, n, note = msg
+        """One ``(job index, attempt, units, note)`` message; anything malformed or out of range is ignored
+        (progress never fails a run)."""
+        try:
+            i, attempt, n, note = msg
+            i, n = int(i), int(n)
+        except (TypeError, ValueError):
+            return
         with self.lock:
-            if i in self.done or attempt != self.attempt[i] or not 0 <= i < len(self.units):
+            if not 0 <= i < len(self.units) or i in self.done or attempt != self.attempt[i]:
                 return
             add = max(0, min(n, self.units[i] - self.reported[i]))
             self.reported[i] += add

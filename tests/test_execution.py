@@ -529,3 +529,19 @@ def dying_job(x: int) -> int:
 def test_dead_worker_process_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(RuntimeError, match=r"a worker process died .* dying_job\(.*\"x\":1"):
         run_jobs(dying_job, [{"x": x} for x in range(2)], workers=2, cache_dir=tmp_path, show_progress=False)
+
+
+def test_progress_ignores_malformed_and_out_of_range_messages() -> None:
+    import io
+
+    from tqdm import tqdm
+
+    from cascgp_experiments.execution import _Progress
+
+    with tqdm(total=5, file=io.StringIO()) as bar:
+        p = _Progress(bar, [2, 3])
+        for msg in ((2, 0, 1, ""), (-1, 0, 1, ""), (0, 1, 1, ""), ("x", 0, 1, ""), (0, 0), None):
+            p.tick(msg)  # out of range, negative, a stale attempt, not a number, too short, not a tuple
+        assert p.reported == [0, 0] and bar.n == 0
+        p.tick((1, 0, 5, "note"))  # capped at the job's units
+        assert p.reported == [0, 3] and bar.n == 3
