@@ -70,7 +70,7 @@ from cascgp_experiments.transfer import TransferConfig
 
 __all__ = ["NULL_FIT_SEED_OFFSET", "LEARNERS", "reference_uncertainty", "divergence_job", "divergence_jobs",
            "run_divergence", "ratios", "summarise", "per_task", "tests_of_hypotheses", "joint_split",
-           "joint_split_markdown"]
+           "joint_split_markdown", "wrist_reading"]
 
 #: Added to UL''s GP seeds: seeds 100-119 never overlap the 0-19 that UL and GL use on seeds 0-3.
 NULL_FIT_SEED_OFFSET = 100
@@ -263,6 +263,29 @@ def joint_split_markdown(split: dict[str, list[dict[str, float]]]) -> str:
     for seed, rows in split.items():
         lines.append(f"| {seed} | " + " | ".join(f"{r['gate']:.2f}, {r['model']:.2f}" for r in rows) + " |")
     return "\n".join(lines) + "\n"
+
+
+def wrist_reading(split: dict[str, list[dict[str, float]]], trigger: float = 1.5, calm: float = 1.2,
+                  lag: float = 1.3) -> dict[str, Any]:
+    """The pre-registered reading of the wrist hypothesis (``docs/lag_diagnosis.md``, "Replication of the wrist
+    pattern") on a :func:`joint_split`: per seed ``g0`` (the gate's effect at the task's first attempt), ``m0``
+    (the model's there) and ``m13`` (the median model effect over the later attempts). A seed is
+    *gate-triggered* if ``g0 > trigger``, *front-triggered* if not and ``m0 > lag``, else *calm* if
+    ``g0 <= calm``. P1: every gate-triggered seed has ``m13 > lag``; P2: every calm seed has ``m13 <= lag``.
+    ``replicated``: P1 and P2 hold and at least two seeds are gate-triggered (None: fewer than two)."""
+    seeds = {}
+    for seed, rows in split.items():
+        g0, m0 = rows[0]["gate"], rows[0]["model"]
+        m13 = float(np.median([r["model"] for r in rows[1:]]))
+        kind = ("gate-triggered" if g0 > trigger else "front-triggered" if m0 > lag
+                else "calm" if g0 <= calm else "between")
+        seeds[seed] = {"g0": g0, "m0": m0, "m13": m13, "kind": kind}
+    triggered = [v for v in seeds.values() if v["kind"] == "gate-triggered"]
+    calm_ = [v for v in seeds.values() if v["kind"] == "calm"]
+    p1 = all(v["m13"] > lag for v in triggered)
+    p2 = all(v["m13"] <= lag for v in calm_)
+    return {"seeds": seeds, "n_gate_triggered": len(triggered), "n_calm": len(calm_), "P1": p1, "P2": p2,
+            "replicated": None if len(triggered) < 2 else bool(p1 and p2)}
 
 
 def tests_of_hypotheses(rows: list[dict[str, Any]]) -> dict[str, Any]:

@@ -194,3 +194,19 @@ def test_joint_split_is_the_per_joint_decomposition() -> None:
     assert "3.00, 1.00" in ld.joint_split_markdown(split)
     with pytest.raises(ValueError, match="right"):
         ld.joint_split(results, "right", 0)
+
+
+def test_wrist_reading_classifies_seeds_and_applies_p1_p2() -> None:
+    def rows(g0, m0, later):
+        return [{"attempt": 0, "gate": g0, "model": m0}] + [{"attempt": k + 1, "gate": 1.0, "model": m}
+                                                            for k, m in enumerate(later)]
+
+    split = {"8": rows(2.0, 1.0, [2.0, 1.8, 1.5]), "9": rows(1.8, 0.9, [1.6, 1.4, 1.2]),
+             "10": rows(1.05, 0.9, [1.0, 1.1, 0.9]), "11": rows(1.0, 2.0, [2.0, 2.0, 2.0])}
+    r = ld.wrist_reading(split)
+    assert [r["seeds"][s]["kind"] for s in split] == ["gate-triggered", "gate-triggered", "calm", "front-triggered"]
+    assert r["seeds"]["9"]["m13"] == 1.4 and r["replicated"] is True
+    split["10"] = rows(1.05, 0.9, [1.5, 1.5, 1.5])  # a calm seed that lags anyway: P2 fails
+    assert ld.wrist_reading(split)["replicated"] is False
+    split["9"] = rows(1.3, 0.9, [1.0, 1.0, 1.0])  # only one gate-triggered seed: inconclusive
+    assert ld.wrist_reading(split)["replicated"] is None
