@@ -159,7 +159,9 @@ class FeedforwardController:
     warrant. A gate is insurance against the model being wrong by more than :math:`v_j` (e.g. on a new part of
     the workspace), paid for with that cost where the model is right. Measured (docs/learner_divergence.md): on
     any one model the Wiener gate costs about nothing in the median, but a learner that uses it collects other
-    data, and on one task of four its model stayed about 1.35 x worse after three refits (cause not identified).
+    data: on one task of four its model stayed about 1.35 x worse after three refits, because on that task's first
+    attempt the gate shrank the wrist correction, the wrist strayed from the reference, and the models fitted on
+    that episode were worse at the wrist (docs/lag_diagnosis.md; replicated on new seeds).
 
     The controller is called every control tick with the time, the measured state and
     the task's reference ``reference(t) -> (q_d, qd_d, qdd_d)``. Derivative-free models

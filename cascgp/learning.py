@@ -39,8 +39,7 @@ from cascgp.models import MODEL_NAMES, make_model
 
 __all__ = ["PLAIN_CONTROLLERS", "ONLINE_WINDOW", "Attempt", "Feedback", "RetrainConfig", "ControllerRun",
            "BeforeAttempt", "check_controller", "parse_controller", "make_controller", "attempt_plan",
-           "default_model_factory",
-           "run_controller", "run_controllers"]
+           "default_model_factory", "run_controller", "run_controllers"]
 
 #: Controllers that never learn.
 PLAIN_CONTROLLERS = ("pd", "rbd")

@@ -518,10 +518,9 @@ def episodes_job(config: dict[str, Any]) -> dict[str, Any]:
 
 
 def run_episodes(out: Path, cfg: TransferConfig = LAG_CONFIG, seeds: tuple[int, ...] = LAG_SEEDS, *,
-                 workers: int | None = None, ray_address: str | None = None, show_progress: bool = True,
-                 references: tuple[dict[str, Any], ...] = ()) -> dict[str, Any]:
-    """Run every seed's :func:`episodes_job` (cached under ``out/cache``), write ``lag_episodes.json``/``.md``.
-    ``references`` is accepted for a uniform command line and not used."""
+                 workers: int | None = None, ray_address: str | None = None, show_progress: bool = True
+                 ) -> dict[str, Any]:
+    """Run every seed's :func:`episodes_job` (cached under ``out/cache``), write ``lag_episodes.json``/``.md``."""
     jobs = [{"config": replace(cfg, seed=int(s)).to_dict()} for s in seeds]
     res, stats, wall = _run_cached(episodes_job, jobs, out, workers=workers, ray_address=ray_address,
                                    show_progress=show_progress, desc="episode jobs", label=_label)

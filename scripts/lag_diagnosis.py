@@ -52,15 +52,21 @@ def main(argv: list[str] | None = None) -> int:
     for r in a.reference:
         if not r.is_file():
             p.error(f"--reference: no file {r}")
-    refs = tuple(read_json(r) for r in a.reference)
     steps = {"refit": (run_refit, "lag_refit"), "factorial": (run_factorial, "lag_factorial"),
              "episodes": (run_episodes, "lag_episodes")}
     chosen = [k for k in steps if getattr(a, k)]
     if len(chosen) > 1:
         p.error(f"--{' and --'.join(chosen)}: one step at a time")
     run, name = steps[chosen[0]] if chosen else (run_diagnosis, "lag_diagnosis")
+    if a.reference and run is run_episodes:
+        p.error("--reference: step 4 (--episodes) has nothing to check against")
+    try:
+        refs = tuple(read_json(r) for r in a.reference)
+    except (OSError, ValueError) as e:
+        p.error(f"--reference: {e}")
+    kw = {"references": refs} if run is not run_episodes else {}
     with session(a.ray, a.workers):
-        res = run(a.out, seeds=seeds, workers=a.workers, ray_address=a.ray, references=refs)
+        res = run(a.out, seeds=seeds, workers=a.workers, ray_address=a.ray, **kw)
     print((a.out / f"{name}.md").read_text())
     print(f"wall {res['wall_seconds']:.0f} s; results: {a.out / f'{name}.json'}")
     return 0

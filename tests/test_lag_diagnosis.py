@@ -138,6 +138,7 @@ def test_cli_errors(tmp_path) -> None:
     repo = Path(__file__).resolve().parents[1]
     for args, msg in ((["--refit", "--factorial"], "one step at a time"),
                       (["--episodes", "--refit"], "one step at a time"), (["--seeds", "a,b"], "--seeds"),
+                      (["--episodes", "--reference", __file__], "nothing to check against"),
                       (["--reference", str(tmp_path / "none.json")], "--reference")):
         r = subprocess.run([sys.executable, "-m", "scripts.lag_diagnosis", "--out", str(tmp_path), *args], cwd=repo,
                            capture_output=True, text=True)
