@@ -71,6 +71,12 @@ def _as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
     return gain
 
 
+#: The gate rules of :class:`FeedforwardController` (see its docstring).
+GATE_RULES = ("wiener", "floor", "variance")
+#: The controller-name suffix of each rule (:attr:`FeedforwardController.name`, :func:`cascgp.learning.parse_controller`).
+GATE_SUFFIXES = {"wiener": "-gated", "floor": "-fgated", "variance": "-vgated"}
+
+
 def gate_weights(correction: np.ndarray, var: np.ndarray, rule: str = "wiener",
                  prior: np.ndarray | None = None) -> np.ndarray:
     r"""The gate's weights :math:`w \in [0, 1]` on a learned correction (:class:`FeedforwardController`, ``gate``).
@@ -78,11 +84,13 @@ def gate_weights(correction: np.ndarray, var: np.ndarray, rule: str = "wiener",
     Args:
         correction: :math:`d`, the model's mean torque minus the nominal torque, any shape.
         var: :math:`v`, the model's (propagated) latent variance, the same shape.
-        rule: ``"wiener"``: :math:`d^2 / (d^2 + v)` (1 where both are 0); ``"variance"``:
-            :math:`\operatorname{clip}(1 - v / p, 0, 1)` with ``prior`` :math:`p`, broadcast against ``var``.
+        rule: ``"wiener"``: :math:`d^2 / (d^2 + v)` (1 where both are 0); ``"floor"``: the same with the
+            correction's power floored at ``prior`` :math:`p` (the GP's signal variance),
+            :math:`P / (P + v)` with :math:`P = \max(d^2, p)` (1 where both are 0); ``"variance"``:
+            :math:`\operatorname{clip}(1 - v / p, 0, 1)`. ``prior`` is broadcast against ``var``.
 
     Returns:
-        The weights; a non-finite weight is 0 (the nominal torque).
+        The weights; 0 (the nominal torque) where a weight, a correction or a variance is not finite.
     """
     d = np.asarray(correction, dtype=float)
     v = np.asarray(var, dtype=float)
@@ -90,13 +98,18 @@ def gate_weights(correction: np.ndarray, var: np.ndarray, rule: str = "wiener",
         if rule == "wiener":
             d2 = d * d
             w = np.where(d2 + v > 0.0, d2 / (d2 + v), 1.0)
-        elif rule == "variance":
+        elif rule in ("floor", "variance"):
             if prior is None:
-                raise ValueError("gate_weights: rule 'variance' needs the prior variance")
-            w = np.clip(1.0 - v / np.asarray(prior, dtype=float), 0.0, 1.0)
+                raise ValueError(f"gate_weights: rule {rule!r} needs the prior variance")
+            p = np.asarray(prior, dtype=float)
+            if rule == "floor":
+                power = np.maximum(d * d, p)
+                w = np.where(power + v > 0.0, power / (power + v), 1.0)
+            else:
+                w = np.clip(1.0 - v / p, 0.0, 1.0)
         else:
-            raise ValueError(f"gate_weights: rule must be 'wiener' or 'variance', got {rule!r}")
-    return np.where(np.isfinite(w), w, 0.0)
+            raise ValueError(f"gate_weights: rule must be one of {GATE_RULES}, got {rule!r}")
+    return np.where(np.isfinite(w) & np.isfinite(d) & np.isfinite(v), w, 0.0)
 
 
 class FeedforwardController:
@@ -115,7 +128,8 @@ class FeedforwardController:
             it is also the nominal model the feedforward falls back toward.
         gate: trust the learned model only where it is confident (needs a cascgp model with
             ``predict_one_var`` and a nominal model: ``fallback``, or an SP model's own ``rbd``):
-            ``False``, ``"wiener"`` (or ``True``) or ``"variance"``; see below.
+            ``False``, ``"wiener"`` (or ``True``), ``"floor"`` (semi-parametric models only) or ``"variance"``;
+            see below.
         online: learn inside the episode: at :meth:`start` the model opens an online window of this many
             samples (:meth:`cascgp.models.CascadedGPModel.start_online`, hyperparameters held) and every
             ``online_every``-th measurement (:meth:`observe`) enters it. ``None``: offline only.
@@ -128,6 +142,7 @@ class FeedforwardController:
 
         \tau_{ff,j} = \tau_{RBD,j} + w_j\, d_j, \qquad
         w_j^{\text{wiener}} = \frac{d_j^2}{d_j^2 + v_j}, \qquad
+        w_j^{\text{floor}} = \frac{P_j}{P_j + v_j},\ P_j = \max(d_j^2, p_j), \qquad
         w_j^{\text{variance}} = \operatorname{clip}\Big(1 - \frac{v_j}{p_j},\ 0,\ 1\Big),
 
     with :math:`v_j` the model's latent variance propagated through the cascade
@@ -138,6 +153,17 @@ class FeedforwardController:
       :math:`v_j`, with :math:`d_j^2` plugged in as the correction's power: a correction well above its
       uncertainty is kept, one within its uncertainty is shrunk. Near the data (:math:`v \to 0`) it is the
       learned model.
+    * ``"floor"``: the Wiener gain with the correction's power floored at the GP's own signal variance
+      :math:`p_j` (its prior variance, learned by the marginal likelihood over the training data). The Wiener
+      rule plugs in :math:`d_j^2` alone, so a correction smaller than its standard deviation is removed almost
+      entirely (:math:`w_j d_j \approx d_j^3 / v_j`), however systematic it is. With the floor, a correction is
+      never treated as weaker than what the GP learned corrections are; where :math:`v_j \le p_j` (always for a
+      single GP; the propagated variance can exceed :math:`p_j` slightly) at least half of it is kept, and a
+      correction well above its uncertainty is kept as by the Wiener rule (:math:`w^{\text{floor}} \ge
+      w^{\text{wiener}}` everywhere). Why: on a new task the Wiener rule removed a small but systematic wrist
+      correction, and the learner's later models were worse for it (docs/lag_diagnosis.md; tested as a
+      replacement in docs/gate_rule.md). Semi-parametric models only: there the GP's prior is the prior of the
+      correction to the RBD; an NP model's GP prior is about the torque itself.
     * ``"variance"``: the fraction of the prior uncertainty the data have removed at this point. It shrinks
       any correction, however large, as soon as the query leaves the training data; measured on the task
       transfer it gave up most of what the model had learned (README, "uncertainty-aware feedforward"),
@@ -199,8 +225,12 @@ class FeedforwardController:
         self.fallback = fallback
         if gate is True:
             gate = "wiener"
-        if gate not in (False, None, "wiener", "variance"):
-            raise ValueError(f"gate: expected False, True, 'wiener' or 'variance', got {gate!r}")
+        if gate is not False and gate is not None and gate not in GATE_RULES:
+            raise ValueError(f"gate: expected False, True or one of {GATE_RULES}, got {gate!r}")
+        if gate == "floor" and getattr(model, "parametric", None) != "sp":
+            raise ValueError("gate 'floor': needs a semi-parametric cascgp model (its GP's prior is the prior of "
+                             f"the correction to the RBD), got {getattr(model, 'name', type(model).__name__)}; "
+                             "use 'wiener' or 'variance' for other models")
         self.gate: str | None = gate or None
         self.last_gate: np.ndarray | None = None
         if self.gate:
@@ -240,7 +270,7 @@ class FeedforwardController:
         if self.model is None:
             return "pd"
         name = str(getattr(self.model, "name", type(self.model).__name__))
-        gate = {"wiener": "-gated", "variance": "-vgated"}.get(self.gate, "")
+        gate = GATE_SUFFIXES.get(self.gate, "")
         return name + gate + ("-online" if self.online else "")
 
     def feedforward(self, t: float, reference: Reference) -> np.ndarray:

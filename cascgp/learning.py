@@ -8,8 +8,8 @@ gains and torque limits (:class:`Feedback`) and, optionally, a model factory and
 
 Controllers: ``"pd"`` (feedback only), ``"rbd"`` (nominal rigid-body feedforward) and any model name
 of :mod:`cascgp.models`, optionally suffixed ``-gated`` (the feedforward falls back toward the RBD where
-the model is unsure: :class:`cascgp.controller.FeedforwardController` ``gate="wiener"``; ``-vgated``:
-``gate="variance"``) and ``-online`` (new
+the model is unsure: :class:`cascgp.controller.FeedforwardController` ``gate="wiener"``; ``-fgated``:
+``gate="floor"``; ``-vgated``: ``gate="variance"``) and ``-online`` (new
 samples enter the model during each attempt, window :data:`ONLINE_WINDOW`, hyperparameters held until
 the next refit), e.g. ``"sp-inward-gated-online"``. Before a learning controller has any data, an SP
 model is its RBD mean (RBD feedforward) and an NP model is zero (PD). After every ``"train"`` attempt of a learning controller,
@@ -32,7 +32,7 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from cascgp.buffer import DataBuffer
-from cascgp.controller import FeedforwardController
+from cascgp.controller import GATE_SUFFIXES, FeedforwardController
 from cascgp.episodes import EpisodeResult, run_episode
 from cascgp.gp import GPFitConfig
 from cascgp.models import MODEL_NAMES, make_model
@@ -91,20 +91,22 @@ class ControllerRun:
 
 def parse_controller(name: str) -> tuple[str, str | None, bool]:
     """``"sp-inward-gated-online"`` -> ``("sp-inward", "wiener", True)``: the base controller or model name,
-    the gate (``-gated``: ``"wiener"``, ``-vgated``: ``"variance"``, else None; see
+    the gate (``-gated``: ``"wiener"``, ``-fgated``: ``"floor"``, ``-vgated``: ``"variance"``, else None; see
     :class:`cascgp.controller.FeedforwardController`), online. ``ValueError`` naming the controller for anything
     unknown (suffixes apply to models only; online needs derivative-based states)."""
     if not isinstance(name, str):
         raise ValueError(f"controller: expected a name, got {name!r}")
     base, online = (name[: -len("-online")], True) if name.endswith("-online") else (name, False)
     gate = None
-    for suffix, rule in (("-vgated", "variance"), ("-gated", "wiener")):
+    for rule, suffix in GATE_SUFFIXES.items():
         if base.endswith(suffix):
             base, gate = base[: -len(suffix)], rule
             break
     if base not in PLAIN_CONTROLLERS and base not in MODEL_NAMES or (base in PLAIN_CONTROLLERS and (gate or online)):
         raise ValueError(f"unknown controller {name!r}; expected 'pd', 'rbd' or one of {list(MODEL_NAMES)}, "
-                         "a model name optionally followed by '-gated' and/or '-online'")
+                         "a model name optionally followed by '-gated' (or '-fgated', '-vgated') and/or '-online'")
+    if gate == "floor" and not base.startswith("sp-"):
+        raise ValueError(f"unknown controller {name!r}: '-fgated' needs a semi-parametric model ('sp-...')")
     if online and base.endswith("-df"):
         raise ValueError(f"unknown controller {name!r}: '-online' needs a derivative-based model (not '-df')")
     return base, gate, online
@@ -185,7 +187,7 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
     for p in paired:
         if parse_controller(p)[0] != base or base in PLAIN_CONTROLLERS:
             raise ValueError(f"paired: {p!r} is not a variant of {name!r}'s model (expected {base!r} with "
-                             "other '-gated'/'-vgated'/'-online' suffixes)")
+                             "other '-gated'/'-fgated'/'-vgated'/'-online' suffixes)")
     buffer = DataBuffer(buffer_dir) if learns else None
     if buffer is not None and len(buffer):
         raise ValueError(f"buffer folder {buffer_dir} already holds data; use an empty --out folder")

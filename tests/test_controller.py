@@ -150,15 +150,18 @@ def test_output_is_always_finite_and_within_limits(q, qd, t, which):
     assert np.all(np.abs(tau) <= LIMITS)
 
 
-@settings(max_examples=50, deadline=None)
-@given(scale=st.floats(min_value=1.0, max_value=1e8), gate=st.sampled_from([False, "wiener", "variance"]),
+@settings(max_examples=60, deadline=None)
+@given(scale=st.floats(min_value=1.0, max_value=1e8), gate=st.sampled_from([False, "wiener", "floor", "variance"]),
        bad=st.sampled_from([None, np.nan, np.inf, -np.inf]), online=st.booleans())
-def test_far_out_of_range_states_with_a_fitted_gp_model(scale, gate, bad, online, fitted_planar_model, arm3_rbd):
+def test_far_out_of_range_states_with_a_fitted_gp_model(scale, gate, bad, online, fitted_planar_model,
+                                                        fitted_planar_sp_model, arm3_rbd):
     """A real fitted cascade (gated or not, learning online or not) queried far outside its training data, or
-    with non-finite measurements, stays finite and clipped; absurd online samples are refused, never raised."""
+    with non-finite measurements, stays finite and clipped; absurd online samples are refused, never raised.
+    The 'floor' rule runs on an SP cascade (it refuses NP models), the others on an NP one."""
     import copy
 
-    model = copy.deepcopy(fitted_planar_model) if online else fitted_planar_model
+    fitted = fitted_planar_sp_model if gate == "floor" else fitted_planar_model
+    model = copy.deepcopy(fitted) if online else fitted
     limits = np.full(model.dof, 5.0)
     ctrl = FeedforwardController(model, 10.0, 1.0, limits, fallback=arm3_rbd, gate=gate,
                                  online=4 if online else None, online_every=1)
@@ -189,13 +192,24 @@ def fitted_planar_model(arm3_train):
     return make_model("np-inward", data.dof, gp_config=GPFitConfig(n_restarts=2, max_iter=200)).fit(data)
 
 
-@pytest.mark.parametrize("rule", ["wiener", "variance"])
-def test_gated_feedforward_follows_its_rule(rule, fitted_planar_model, arm3_rbd, arm3_train):
+@pytest.fixture(scope="module")
+def fitted_planar_sp_model(arm3_train, arm3_rbd):
+    from cascgp.gp import GPFitConfig
+    from cascgp.models import make_model
+
+    data = arm3_train.take(np.arange(min(80, arm3_train.n_samples)))
+    return make_model("sp-inward", data.dof, rbd=arm3_rbd,
+                      gp_config=GPFitConfig(n_restarts=2, max_iter=200)).fit(data)
+
+
+@pytest.mark.parametrize("rule", ["wiener", "floor", "variance"])
+def test_gated_feedforward_follows_its_rule(rule, request, arm3_rbd, arm3_train):
     """tau = tau_RBD + w d with d = mu - tau_RBD: w ~ 1 at a training point (the model), and for the variance
-    rule w ~ 0 far away (the nominal torque); the weights equal the documented formulas."""
-    model = fitted_planar_model
+    rule w ~ 0 far away (the nominal torque), the floor rule keeps at least half; the weights equal the
+    documented formulas."""
+    model = request.getfixturevalue("fitted_planar_sp_model" if rule == "floor" else "fitted_planar_model")
     ctrl = FeedforwardController(model, 0.0, 0.0, np.full(3, 1e6), fallback=arm3_rbd, gate=rule)
-    assert ctrl.name.endswith({"wiener": "-gated", "variance": "-vgated"}[rule])
+    assert ctrl.name.endswith({"wiener": "-gated", "floor": "-fgated", "variance": "-vgated"}[rule])
     r = 10
     state = (arm3_train.q[r], arm3_train.qd[r], arm3_train.qdd[r])
     for query in (state, tuple(x + 50.0 for x in state)):
@@ -203,13 +217,17 @@ def test_gated_feedforward_follows_its_rule(rule, fitted_planar_model, arm3_rbd,
         mean, var = model.predict(*query, propagate=True)
         nominal = arm3_rbd.inverse_dynamics(*query)
         d = mean - nominal
-        w = d**2 / (d**2 + var) if rule == "wiener" else np.clip(1 - var / model.signal_var, 0, 1)
+        p = model.signal_var
+        w = {"wiener": d**2 / (d**2 + var), "floor": np.maximum(d**2, p) / (np.maximum(d**2, p) + var), "variance": np.clip(1 - var / p, 0, 1)}[rule]
         np.testing.assert_allclose(ctrl.last_gate, w, rtol=1e-6, atol=1e-9)
         np.testing.assert_allclose(tau, nominal + w * d, rtol=1e-9, atol=1e-6)
         if query is state:
             assert np.all(ctrl.last_gate > 0.9)
         elif rule == "variance":
             assert np.all(ctrl.last_gate < 0.05)
+        if rule == "floor":  # at least half wherever v <= p, however small the correction; never below Wiener
+            assert np.all(ctrl.last_gate[var <= p] >= 0.5) and np.all(ctrl.last_gate <= 1.0)
+            assert np.all(ctrl.last_gate >= d**2 / (d**2 + var) - 1e-12)
 
 
 def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
@@ -219,6 +237,8 @@ def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
         FeedforwardController(AffineRBD(), KP, KD, LIMITS, gate=True)
     with pytest.raises(ValueError, match="gate: expected"):
         FeedforwardController(AffineRBD(), KP, KD, LIMITS, gate="sometimes")
+    with pytest.raises(ValueError, match="gate 'floor': needs a semi-parametric"):
+        FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], fallback=AffineRBD(), gate="floor")
 
 
 def test_an_offline_controller_uses_the_fitted_model_even_after_an_online_episode(fitted_planar_model, arm3_train):

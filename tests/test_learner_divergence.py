@@ -25,11 +25,19 @@ def test_gate_weights_are_the_documented_rules() -> None:
     np.testing.assert_allclose(gate_weights(d, v), d**2 / (d**2 + v))
     prior = np.array([1.0, 2.0, 4.0])
     np.testing.assert_allclose(gate_weights(d, v, "variance", prior), np.clip(1 - v / prior, 0, 1))
+    power = np.maximum(d**2, prior)
+    np.testing.assert_allclose(gate_weights(d, v, "floor", prior), power / (power + v))
+    assert np.all(gate_weights(d, v, "floor", prior) >= gate_weights(d, v))  # never shrinks more than Wiener
+    # The floor rule keeps at least half a correction wherever v <= prior, whatever the correction's size.
+    assert np.all(gate_weights(1e-6 * d, prior * np.ones((5, 1)), "floor", prior) == 0.5)
+    assert gate_weights(np.zeros(2), np.zeros(2), "floor", np.zeros(2)).tolist() == [1.0, 1.0]
+    assert gate_weights(np.array([np.nan, np.inf]), np.ones(2), "floor", np.ones(2)).tolist() == [0.0, 0.0]
     # No correction and no uncertainty: the model (1); a non-finite weight: the nominal torque (0).
     assert gate_weights(np.zeros(2), np.zeros(2)).tolist() == [1.0, 1.0]
     assert gate_weights(np.array([np.inf, 1.0]), np.array([1.0, np.inf])).tolist() == [0.0, 0.0]
-    with pytest.raises(ValueError, match="prior"):
-        gate_weights(d, v, "variance")
+    for rule in ("variance", "floor"):
+        with pytest.raises(ValueError, match="prior"):
+            gate_weights(d, v, rule)
     with pytest.raises(ValueError, match="rule"):
         gate_weights(d, v, "median")
 
