@@ -110,9 +110,10 @@ def test_gated_learner_within_ten_percent_of_the_ungated_after_three_attempts_on
     Two learners that collect their own data drift apart: on four seeds of the full transfer, two *ungated*
     learners that differ only in the random starts of their fits are within 10 % on 10 of 16 tasks, as gated
     vs ungated is; but on task B ("left") the gated learner's lag replicates on new seeds, and it sits in the
-    gated learner's model, not in the gate acting at that attempt; its cause is not identified
-    (docs/learner_divergence.md). The paired test below checks the gate's own effect on one model, on both
-    tasks."""
+    gated learner's model, not in the gate acting at that attempt (docs/learner_divergence.md). Its located
+    cause: on the first attempt there the gate shrinks the wrist correction, the wrist strays, and the models
+    fitted on that episode are worse at the wrist (docs/lag_diagnosis.md). The paired test below checks the
+    gate's own effect on one model, on both tasks."""
     assert _rmse(runs["sp-inward-gated"], TASK_A, k=3) <= 1.10 * _rmse(runs["sp-inward"], TASK_A, k=3)
 
 
