@@ -64,36 +64,51 @@ def study_data(folder: str | Path | None, out: str | Path, *, preset: str = "qui
     return train, test
 
 
-def sensor_input_var(collection: dict, dof: int) -> np.ndarray:
-    """Variances of the noise of the GP's measured inputs, (dof, 3) = ``(q, qd, qdd)`` per joint, from physics:
-    the env's sensor model (``jaco_env.SensorNoise()``, or none for ``sensor_noise="none"``) for q and qd, and
-    for the filtered qdd the velocity noise times the Savitzky-Golay filter's gain at the recording rate
-    (:meth:`cascgp.data.SavGol.noise_gain`; 0 for ``qdd_source="true"``). ``collection``: a data file's
-    ``meta["collection"]`` (:class:`cascgp_experiments.collect.CollectConfig` as a dict)."""
+def _sensor_model(collection: dict, sensor_std: dict | None) -> Any:
+    """The :class:`jaco_env.SensorNoise` a collection was recorded with: none for ``sensor_noise="none"``, else the
+    standard deviations stored with the data (``meta["sensor_std"]``, written since they are stored), else the
+    env's defaults (files collected before; the defaults have not changed since the env was written)."""
     from jaco_env import SensorNoise
 
+    if collection.get("sensor_noise", "default") == "none":
+        return SensorNoise.none()
+    if sensor_std is None:
+        return SensorNoise()
+    if not isinstance(sensor_std, dict) or set(sensor_std) != {"q_std", "qd_std", "tau_std"}:
+        raise ValueError(f"sensor_std: expected the meta['sensor_std'] of a collected Jaco file (q_std, qd_std, "
+                         f"tau_std), got {sensor_std!r}")
+    return SensorNoise(**sensor_std)
+
+
+def sensor_input_var(collection: dict, dof: int, sensor_std: dict | None = None) -> np.ndarray:
+    """Variances of the noise of the GP's measured inputs, (dof, 3) = ``(q, qd, qdd)`` per joint, from physics:
+    the sensor model the data were recorded with (:func:`_sensor_model`: ``sensor_std``, a data file's
+    ``meta["sensor_std"]``, or the env's ``SensorNoise()`` for files without it, or none for
+    ``sensor_noise="none"``) for q and qd, and for the filtered qdd the velocity noise times the Savitzky-Golay
+    filter's gain at the recording rate (:meth:`cascgp.data.SavGol.noise_gain`; 0 for ``qdd_source="true"``).
+    ``collection``: a data file's ``meta["collection"]`` (:class:`cascgp_experiments.collect.CollectConfig` as a
+    dict)."""
     if not isinstance(collection, dict) or not {"rate_hz", "savgol_window", "savgol_polyorder"} <= set(collection):
         raise ValueError("collection: expected the meta['collection'] of a collected Jaco file (rate_hz, savgol_window,"
                          f" savgol_polyorder), got {collection!r}")
-    sn = SensorNoise.none() if collection.get("sensor_noise", "default") == "none" else SensorNoise()
+    sn = _sensor_model(collection, sensor_std)
     gain = SavGol(int(collection["savgol_window"]), int(collection["savgol_polyorder"])).noise_gain(
         1.0 / float(collection["rate_hz"]))
     qdd_var = 0.0 if collection.get("qdd_source", "savgol") == "true" else sn.qd_std**2 * gain
     return np.tile([sn.q_std**2, sn.qd_std**2, qdd_var], (int(dof), 1))
 
 
-def sensor_torque_var(collection: dict) -> float:
-    """The torque sensor's noise variance (N² m²) of a collection (``meta["collection"]``):
-    ``SensorNoise().tau_std²`` (0.01 for the env's default sensors). ``ValueError`` for a noiseless collection (``sensor_noise="none"``), whose
-    torques carry no sensor noise to bound the fit by."""
-    from jaco_env import SensorNoise
-
+def sensor_torque_var(collection: dict, sensor_std: dict | None = None) -> float:
+    """The torque sensor's noise variance (N² m²) of a collection (``meta["collection"]``, and ``meta["sensor_std"]``
+    where the file has it; :func:`sensor_input_var`): ``tau_std²``, 0.01 for the env's default sensors.
+    ``ValueError`` for a noiseless collection (``sensor_noise="none"``), whose torques carry no sensor noise to
+    bound the fit by."""
     if not isinstance(collection, dict):
         raise ValueError(f"collection: expected the meta['collection'] of a collected Jaco file, got {collection!r}")
     if collection.get("sensor_noise", "default") == "none":
         raise ValueError("collection: noiseless sensors (sensor_noise='none'): there is no torque-sensor noise to "
                          "take a noise floor from")
-    return float(SensorNoise().tau_std) ** 2
+    return float(_sensor_model(collection, sensor_std).tau_std) ** 2
 
 
 def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float, ...] = (10.0, 30.0),

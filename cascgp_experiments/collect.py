@@ -113,6 +113,15 @@ QDD_SOURCES = ("savgol", "true")
 _LATER_FIELDS = {"sensor_noise": "default", "qdd_source": "savgol"}
 
 
+def sensor_std(sensor_noise: str) -> dict[str, float]:
+    """The standard deviations of the sensors a collection with :attr:`CollectConfig.sensor_noise` records with
+    (stored in each file's ``meta["sensor_std"]``, so that the file is read right if the env's defaults change)."""
+    from jaco_env import SensorNoise
+
+    sn = SensorNoise.none() if sensor_noise == "none" else SensorNoise()
+    return {"q_std": float(sn.q_std), "qd_std": float(sn.qd_std), "tau_std": float(sn.tau_std)}
+
+
 def same_collection(stored: dict | None, cfg: CollectConfig) -> bool:
     """Whether a file's ``meta["collection"]`` was collected with ``cfg`` (files written before
     ``sensor_noise``/``qdd_source`` existed had their defaults)."""
@@ -307,7 +316,8 @@ def _record_all(cfg: CollectConfig, workers: int, ray_address: str | None, vecto
 def _assemble(cfg: CollectConfig, split: str, parts: list[DynamicsData]) -> DynamicsData:
     """One split's file from its motions' records (pooled q̈ error statistics in ``meta``)."""
     meta = {**parts[0].meta, "split": split, "seeds": [p.meta["seed"] for p in parts],
-            "collection": asdict(cfg), "qdd_error_per_motion": [p.meta["qdd_error"] for p in parts]}
+            "collection": asdict(cfg), "sensor_std": sensor_std(cfg.sensor_noise),
+            "qdd_error_per_motion": [p.meta["qdd_error"] for p in parts]}
     # Pooled over the motions (weighted by rows).
     ns = np.array([p.meta["qdd_error"]["n"] for p in parts], float)
     pooled_mse = sum(n * np.square(p.meta["qdd_error"]["est_rmse"]) for n, p in zip(ns, parts)) / ns.sum()

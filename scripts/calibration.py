@@ -69,13 +69,13 @@ def main(argv: list[str] | None = None) -> None:
     input_var = None
     if a.input_noise:
         try:
-            input_var = sensor_input_var(train.meta.get("collection"), train.dof)
+            input_var = sensor_input_var(train.meta.get("collection"), train.dof, train.meta.get("sensor_std"))
         except ValueError as e:
             ap.error(f"--input-noise: {e}")
     floor = None
     if a.noise_floor == "sensor":
         try:
-            floor = sensor_torque_var(train.meta.get("collection"))
+            floor = sensor_torque_var(train.meta.get("collection"), train.meta.get("sensor_std"))
         except ValueError as e:
             ap.error(f"--noise-floor: {e}")
     t0 = time.perf_counter()

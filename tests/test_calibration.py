@@ -35,6 +35,18 @@ def test_collect_config_rejects_unknown_options() -> None:
         make_env(100.0, 0.8, "off")
 
 
+@pytest.mark.parametrize("noise", ["default", "none"])
+def test_the_stored_sensor_std_is_that_of_the_collection_env(noise) -> None:
+    from cascgp_experiments.collect import make_env, sensor_std
+
+    env = make_env(100.0, 0.8, noise)
+    try:
+        sn = env.unwrapped.sensor_noise
+        assert sensor_std(noise) == {"q_std": sn.q_std, "qd_std": sn.qd_std, "tau_std": sn.tau_std}
+    finally:
+        env.close()
+
+
 def test_same_collection_accepts_files_from_before_the_options() -> None:
     old = {k: v for k, v in asdict(CollectConfig()).items() if k not in ("sensor_noise", "qdd_source")}
     assert same_collection(old, CollectConfig())
@@ -65,6 +77,9 @@ def test_noiseless_arm_is_the_same_motion_without_the_noise(arms) -> None:
         d = getattr(z_tr, key) - getattr(n_tr, key)
         assert 0.5 * std < d.std() < 1.5 * std and np.abs(d).max() < 6 * std
     np.testing.assert_array_equal(z_tr.t, n_tr.t)
+    # Each file stores the sensor standard deviations it was recorded with; they match the differences above.
+    assert n_tr.meta["sensor_std"] == {"q_std": 5e-4, "qd_std": 5e-3, "tau_std": 0.1}
+    assert z_tr.meta["sensor_std"] == {"q_std": 0.0, "qd_std": 0.0, "tau_std": 0.0}
 
 
 def test_true_qdd_arm_uses_the_simulator_accelerations(arms) -> None:
@@ -116,6 +131,13 @@ def test_sensor_input_var_from_the_sensor_model_and_the_filter() -> None:
     np.testing.assert_array_equal(sensor_input_var(old, 6), v)
     with pytest.raises(ValueError, match="collection"):
         sensor_input_var(None, 6)
+    # The stored standard deviations win over the env's defaults (a file read right if the defaults change).
+    stored = {"q_std": 1e-3, "qd_std": 2e-2, "tau_std": 0.3}
+    w = sensor_input_var(asdict(CollectConfig()), 6, stored)
+    np.testing.assert_allclose(w[0], [1e-6, 4e-4, 4e-4 / (60 * 0.01**2)], rtol=1e-12)
+    for bad in ({"q_std": 1e-3}, "0.1", {"q_std": -1.0, "qd_std": 0.0, "tau_std": 0.0}):
+        with pytest.raises((ValueError, TypeError), match="sensor_std|SensorNoise"):
+            sensor_input_var(asdict(CollectConfig()), 6, bad)
 
 
 def test_calibration_scores_the_input_noise_variance(arms) -> None:
@@ -168,6 +190,8 @@ def test_sensor_torque_var_is_the_sensor_spec() -> None:
     from cascgp_experiments.calibration import sensor_torque_var
 
     assert sensor_torque_var(asdict(CollectConfig())) == SensorNoise().tau_std ** 2 == pytest.approx(0.01)
+    assert sensor_torque_var(asdict(CollectConfig()), {"q_std": 0.0, "qd_std": 0.0, "tau_std": 0.2}) == \
+        pytest.approx(0.04)
     with pytest.raises(ValueError, match="noiseless"):
         sensor_torque_var(asdict(CollectConfig(sensor_noise="none")))
     with pytest.raises(ValueError, match="collection"):
