@@ -205,6 +205,35 @@ class RigidBodyModel:
             out[t] = rnea(model, data, q[t], qd[t], qdd[t])
         return out
 
+    def inverse_dynamics_derivatives(self, q: Any, qd: Any, qdd: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        r"""Partial derivatives of :meth:`inverse_dynamics`, by Pinocchio's analytic RNEA derivatives
+        (``pinocchio.computeRNEADerivatives``, armature included):
+
+        .. math::
+
+            \frac{\partial \tau}{\partial q}, \quad \frac{\partial \tau}{\partial \dot q}, \quad
+            \frac{\partial \tau}{\partial \ddot q} = M(q) + \operatorname{diag}(\text{armature}).
+
+        Args:
+            q, qd, qdd: as for :meth:`inverse_dynamics`, each (N,) or all (T, N).
+
+        Returns:
+            ``(dtau_dq, dtau_dqd, dtau_dqdd)``, each (N, N) or (T, N, N); row i is joint i's torque.
+        """
+        q = self._check("q", q)
+        qd = self._check("qd", qd)
+        qdd = self._check("qdd", qdd)
+        if not (q.shape == qd.shape == qdd.shape):
+            raise ValueError(f"q, qd, qdd must have the same shape, got {q.shape}, {qd.shape}, {qdd.shape}")
+        model, data = self.pin_model, self._data
+        if q.ndim == 1:
+            return tuple(np.array(d) for d in pin.computeRNEADerivatives(model, data, q, qd, qdd))  # type: ignore[return-value]
+        out = np.empty((3, q.shape[0], self.dof, self.dof))
+        for t in range(q.shape[0]):
+            for c, d in enumerate(pin.computeRNEADerivatives(model, data, q[t], qd[t], qdd[t])):
+                out[c, t] = d
+        return out[0], out[1], out[2]
+
     def gravity_torque(self, q: Any) -> np.ndarray:
         """Generalised gravity ``g(q)`` (= inverse dynamics at zero velocity and acceleration).
 

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
+from cascgp.data import DynamicsData
 from cascgp.features import states_from_arrays
 from cascgp.gp import GPFitConfig
 from cascgp.models import make_model
@@ -160,3 +163,30 @@ def test_savgol_noise_gain_is_the_variance_of_filtered_white_noise() -> None:
     assert abs(np.corrcoef(inner, qd[4:-4, 0])[0, 1]) < 0.03  # centre coefficient 0: uncorrelated
     with pytest.raises(ValueError, match="dt"):
         sg.noise_gain(0.0)
+
+
+def test_an_sp_cascade_uses_the_nominal_models_analytic_derivatives() -> None:
+    """With a Pinocchio nominal model the rigid-body part of the mean's Jacobian is analytic; it equals the central
+    differences used for a nominal model that offers only inverse_dynamics."""
+    from cascgp.rbd import load_nominal
+
+    rbd = load_nominal(Path(__file__).resolve().parents[1] / "assets" / "jaco2_nominal.urdf")
+
+    class TorqueOnly:  # the same dynamics, without inverse_dynamics_derivatives: the finite-difference path
+        dof = rbd.dof
+
+        def inverse_dynamics(self, q, qd, qdd):
+            return rbd.inverse_dynamics(q, qd, qdd)
+
+    rng = np.random.default_rng(3)
+    q, qd, qdd = rng.uniform(-1, 1, (3, 40, 6)) * np.array([3.0, 1.0, 5.0])[:, None, None]
+    tau = rbd.inverse_dynamics(q, qd, qdd) + 0.3 * np.sin(q) + 0.05 * rng.standard_normal((40, 6))
+    data = DynamicsData(q=q, qd=qd, qdd=qdd, tau=tau, t=np.arange(40) * 0.1)
+    cfg = GPFitConfig(n_restarts=1, max_iter=30)
+    analytic = make_model("sp-inward", 6, rbd, gp_config=cfg).fit(data)
+    numeric = make_model("sp-inward", 6, TorqueOnly(), gp_config=cfg).fit(data)
+    np.testing.assert_allclose(analytic.predict(q[:5], qd[:5], qdd[:5])[0], numeric.predict(q[:5], qd[:5], qdd[:5])[0],
+                               rtol=1e-12, atol=1e-10)  # the same fit
+    np.testing.assert_allclose(analytic.mean_jacobian(q[:5], qd[:5], qdd[:5]),
+                               numeric.mean_jacobian(q[:5], qd[:5], qdd[:5]), rtol=1e-6, atol=1e-5)
+

@@ -116,6 +116,29 @@ def test_pinocchio_rnea_includes_armature(exact_urdf):
     np.testing.assert_array_equal(RigidBodyModel.from_urdf(exact_urdf, armature=0.5).armature, 0.5)
 
 
+def test_inverse_dynamics_derivatives_equal_central_differences(exact_urdf):
+    """Pinocchio's analytic RNEA derivatives (armature included) against central differences of the torque."""
+    arm = RigidBodyModel.from_urdf(exact_urdf, armature=robot.ARMATURE)
+    q, qd, qdd = _states(4, seed=5)
+    D = arm.inverse_dynamics_derivatives(q, qd, qdd)
+    h = 1e-6
+    for c in range(3):
+        assert D[c].shape == (4, 6, 6)
+        for k in range(6):
+            hi, lo = [list((q, qd, qdd)) for _ in range(2)]
+            step = np.zeros_like(q)
+            step[:, k] = h
+            hi[c], lo[c] = hi[c] + step, lo[c] - step
+            fd = (arm.inverse_dynamics(*hi) - arm.inverse_dynamics(*lo)) / (2 * h)
+            np.testing.assert_allclose(D[c][:, :, k], fd, rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(D[2][0], arm.mass_matrix(q[0]), atol=1e-12)  # M(q) + diag(armature)
+    single = arm.inverse_dynamics_derivatives(q[1], qd[1], qdd[1])
+    for c in range(3):
+        np.testing.assert_array_equal(single[c], D[c][1])
+    with pytest.raises(ValueError, match="same shape"):
+        arm.inverse_dynamics_derivatives(q, qd[:2], qdd)
+
+
 def test_mass_matrix_consistent_with_rnea(exact, mj):
     m, d = mj
     q, qd, qdd = _states(5, seed=3)

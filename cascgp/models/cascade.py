@@ -412,8 +412,17 @@ class CascadedGPModel:
         return J
 
     def _rbd_jacobian(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, h: float = 1e-6) -> np.ndarray:
-        """(T, N, 3N) derivative of the rigid-body torque by central differences (step ``h``)."""
+        """(T, N, 3N) derivative of the rigid-body torque, column ``3 k + c`` by state ``c`` (q, qd, qdd) of
+        joint ``k``: analytic where the nominal model gives it (``inverse_dynamics_derivatives``, e.g.
+        :class:`cascgp.rbd.RigidBodyModel`'s from Pinocchio), else by central differences (step ``h``), which is
+        all a user's ``inverse_dynamics``-only model offers."""
         T, N = q.shape
+        derivatives = getattr(self.rbd, "inverse_dynamics_derivatives", None)
+        if derivatives is not None:
+            D = np.stack([np.asarray(d, dtype=np.float64).reshape(T, N, N) for d in derivatives(q, qd, qdd)], axis=-1)
+            if not np.isfinite(D).all():
+                raise ValueError("rbd: the rigid-body model returned non-finite torque derivatives")
+            return D.reshape(T, N, 3 * N)
         J = np.empty((T, N, 3 * N))
         states = (q, qd, qdd)
         for c in range(3):
