@@ -181,6 +181,12 @@ class RigidBodyModel:
             raise ValueError(f"{name} must be finite; first non-finite entry at index {tuple(int(i) for i in bad)}")
         return np.ascontiguousarray(arr)
 
+    def _check_states(self, q: Any, qd: Any, qdd: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        q, qd, qdd = self._check("q", q), self._check("qd", qd), self._check("qdd", qdd)
+        if not (q.shape == qd.shape == qdd.shape):
+            raise ValueError(f"q, qd, qdd must have the same shape, got {q.shape}, {qd.shape}, {qdd.shape}")
+        return q, qd, qdd
+
     def inverse_dynamics(self, q: Any, qd: Any, qdd: Any) -> np.ndarray:
         """Joint torques ``tau = M(q) qdd + C(q, qd) qd + g(q) + armature * qdd``.
 
@@ -191,11 +197,7 @@ class RigidBodyModel:
         Returns:
             tau: (N,) or (T, N) in N m, float64.
         """
-        q = self._check("q", q)
-        qd = self._check("qd", qd)
-        qdd = self._check("qdd", qdd)
-        if not (q.shape == qd.shape == qdd.shape):
-            raise ValueError(f"q, qd, qdd must have the same shape, got {q.shape}, {qd.shape}, {qdd.shape}")
+        q, qd, qdd = self._check_states(q, qd, qdd)
         model, data = self.pin_model, self._data
         if q.ndim == 1:
             return pin.rnea(model, data, q, qd, qdd).copy()
@@ -220,11 +222,7 @@ class RigidBodyModel:
         Returns:
             ``(dtau_dq, dtau_dqd, dtau_dqdd)``, each (N, N) or (T, N, N); row i is joint i's torque.
         """
-        q = self._check("q", q)
-        qd = self._check("qd", qd)
-        qdd = self._check("qdd", qdd)
-        if not (q.shape == qd.shape == qdd.shape):
-            raise ValueError(f"q, qd, qdd must have the same shape, got {q.shape}, {qd.shape}, {qdd.shape}")
+        q, qd, qdd = self._check_states(q, qd, qdd)
         model, data = self.pin_model, self._data
         if q.ndim == 1:
             return tuple(np.array(d) for d in pin.computeRNEADerivatives(model, data, q, qd, qdd))  # type: ignore[return-value]
