@@ -72,9 +72,25 @@ def _as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
 
 
 #: The gate rules of :class:`FeedforwardController` (see its docstring).
-GATE_RULES = ("wiener", "floor", "variance")
+GATE_RULES = ("wiener", "floor", "variance", "innovation")
 #: The controller-name suffix of each rule (:attr:`FeedforwardController.name`, :func:`cascgp.learning.parse_controller`).
-GATE_SUFFIXES = {"wiener": "-gated", "floor": "-fgated", "variance": "-vgated"}
+GATE_SUFFIXES = {"wiener": "-gated", "floor": "-fgated", "variance": "-vgated", "innovation": "-igated"}
+#: Half-life (s) of the innovation gate's error sums: a model's error counts half after this time. Fixed before the
+#: rule was run (docs/gate_rule.md): a task's reference crosses its part of the workspace in seconds, so errors
+#: older than about a second were made at other states; at the 10 Hz of the samples it averages about 10 of them.
+INNOVATION_HALF_LIFE_S = 1.0
+
+
+def innovation_weights(err_nominal: np.ndarray, err_model: np.ndarray) -> np.ndarray:
+    r"""The innovation gate's weights on the learned correction: :math:`w = S_0 / (S_0 + S_m)`, with :math:`S_0`
+    and :math:`S_m` the discounted sums of the squared errors of the nominal and the learned model on the
+    episode's measured samples (:class:`FeedforwardController`, ``gate="innovation"``); 1/2 where both are 0 (no
+    evidence yet), 0 where either is not finite."""
+    s0 = np.asarray(err_nominal, dtype=float)
+    sm = np.asarray(err_model, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        w = np.where(s0 + sm > 0.0, s0 / (s0 + sm), 0.5)
+    return np.where(np.isfinite(w) & np.isfinite(s0) & np.isfinite(sm), w, 0.0)
 
 
 def gate_weights(correction: np.ndarray, var: np.ndarray, rule: str = "wiener",
@@ -128,8 +144,8 @@ class FeedforwardController:
             it is also the nominal model the feedforward falls back toward.
         gate: trust the learned model only where it is confident (needs a cascgp model with
             ``predict_one_var`` and a nominal model: ``fallback``, or an SP model's own ``rbd``):
-            ``False``, ``"wiener"`` (or ``True``), ``"floor"`` (semi-parametric models only) or ``"variance"``;
-            see below.
+            ``False``, ``"wiener"`` (or ``True``), ``"floor"`` (semi-parametric models only), ``"variance"`` or
+            ``"innovation"`` (derivative-based models); see below.
         online: learn inside the episode: at :meth:`start` the model opens an online window of this many
             samples (:meth:`cascgp.models.CascadedGPModel.start_online`, hyperparameters held) and every
             ``online_every``-th measurement (:meth:`observe`) enters it. ``None``: offline only.
@@ -164,6 +180,23 @@ class FeedforwardController:
       correction, and the learner's later models were worse for it (docs/lag_diagnosis.md; tested as a
       replacement in docs/gate_rule.md). Semi-parametric models only: there the GP's prior is the prior of the
       correction to the RBD; an NP model's GP prior is about the torque itself.
+    * ``"innovation"``: the evidence of this episode's torque sensors instead of the GP's variance. At every
+      ``online_every``-th measurement (:meth:`observe`, the samples online learning would take: measured q and
+      q̇, q̈ by central differences, the measured torque :math:`\tau`) the squared errors of the nominal and of the
+      learned model enter discounted sums, and
+
+      .. math::
+
+          S_{0,j} \leftarrow \lambda S_{0,j} + (\tau_j - \tau_{RBD,j})^2, \quad
+          S_{m,j} \leftarrow \lambda S_{m,j} + (\tau_j - \mu_j)^2, \quad
+          \lambda = 2^{-\Delta t / t_{1/2}}, \qquad w_j = \frac{S_{0,j}}{S_{0,j} + S_{m,j}},
+
+      the MSE-optimal weight of two forecasts with uncorrelated errors (Bates and Granger, 1969), with the
+      half-life :data:`INNOVATION_HALF_LIFE_S`. Before the first sample of an episode :math:`w = 1/2`. It trusts a
+      model that has been predicting this episode's torques better than the nominal one, however unsure the GP
+      is, and falls back toward the RBD when the model errs more, however sure it is. The weight is per joint,
+      not per state: the errors of the last seconds stand for the part of the workspace the reference is in.
+      Any derivative-based model (SP or NP); the errors are taken before a sample enters an online window.
     * ``"variance"``: the fraction of the prior uncertainty the data have removed at this point. It shrinks
       any correction, however large, as soon as the query leaves the training data; measured on the task
       transfer it gave up most of what the model had learned (README, "uncertainty-aware feedforward"),
@@ -227,6 +260,9 @@ class FeedforwardController:
             gate = "wiener"
         if gate is not False and gate is not None and gate not in GATE_RULES:
             raise ValueError(f"gate: expected False, True or one of {GATE_RULES}, got {gate!r}")
+        if gate == "innovation" and getattr(model, "feature_kind", "db") != "db":
+            raise ValueError("gate 'innovation': needs a derivative-based model (its errors are taken at the measured "
+                             f"q, qd and q̈), got {getattr(model, 'name', type(model).__name__)}")
         if gate == "floor" and getattr(model, "parametric", None) != "sp":
             raise ValueError("gate 'floor': needs a semi-parametric cascgp model (its GP's prior is the prior of "
                              f"the correction to the RBD), got {getattr(model, 'name', type(model).__name__)}; "
@@ -255,6 +291,10 @@ class FeedforwardController:
         self.online = None if online is None else int(online)
         self.online_every = int(online_every)
         self._recent: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._err_nominal = np.zeros(self.dof)
+        self._err_model = np.zeros(self.dof)
+        self._t_innovation: float | None = None
+        self.n_innovation_samples = 0
         self._n_observed = 0
         self.n_online_samples = 0
         self.n_online_rejected = 0
@@ -319,10 +359,14 @@ class FeedforwardController:
     def _gated(self, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, q_hist: np.ndarray | None
                ) -> np.ndarray:
         """The gated feedforward (see the class docstring)."""
-        mean, var = self.model.predict_one_var(q_d, qd_d, qdd_d, q_hist=q_hist)
         nominal = np.asarray(self._nominal.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
-        d = mean - nominal
-        w = gate_weights(d, var, self.gate, self._prior)
+        if self.gate == "innovation":
+            d = np.asarray(self.model.predict_one(q_d, qd_d, qdd_d, q_hist=q_hist), dtype=float) - nominal
+            w = innovation_weights(self._err_nominal, self._err_model)
+        else:
+            mean, var = self.model.predict_one_var(q_d, qd_d, qdd_d, q_hist=q_hist)
+            d = mean - nominal
+            w = gate_weights(d, var, self.gate, self._prior)
         self.last_gate = w
         return nominal + w * d
 
@@ -376,21 +420,24 @@ class FeedforwardController:
         self.reset_counters()
         self._recent, self._n_observed = [], 0
         self.n_online_samples = self.n_online_rejected = 0
+        self._err_nominal, self._err_model = np.zeros(self.dof), np.zeros(self.dof)
+        self._t_innovation, self.n_innovation_samples = None, 0
         self.last_gate, self.last_model_error = None, None
         if self.online:
             self.model.start_online(self.online)
         elif hasattr(self.model, "stop_online"):
             self.model.stop_online()  # an offline controller uses the fitted model, not an earlier episode's window
-        if self.gate:
+        if self.gate and self.gate != "innovation":
             self.model.prepare_variance()  # before the first tick, not in it
 
     def observe(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, t: float) -> None:
-        """A new measurement (called by the runner after every step). With ``online``, every
-        ``online_every``-th call adds the sample of the *previous* tick to the model: its q and qd,
-        q̈ by central differences of the measured qd (as the recorded episodes), and the torque measured
-        over the period that started at that tick (reported now). A sample the model refuses (e.g.
-        non-finite) is counted in ``n_online_rejected``, never raised."""
-        if not self.online:
+        """A new measurement (called by the runner after every step). Every ``online_every``-th call makes a
+        sample of the *previous* tick: its q and qd, q̈ by central differences of the measured qd (as the
+        recorded episodes), and the torque measured over the period that started at that tick (reported now).
+        With the innovation gate the sample first updates the gate's error sums (``n_innovation_samples``; a
+        sample with a non-finite error is skipped); with ``online`` it then enters the model. A sample the
+        model refuses (e.g. non-finite) is counted in ``n_online_rejected``, never raised."""
+        if not self.online and self.gate != "innovation":
             return
         self._recent = (self._recent + [(float(t), np.array(q, float), np.array(qd, float),
                                          np.array(tau, float))])[-3:]
@@ -398,14 +445,42 @@ class FeedforwardController:
         if self._n_observed % self.online_every or len(self._recent) < 3:
             return
         (t0, _, qd0, _), (t1, q1, qd1, _), (t2, _, qd2, tau2) = self._recent
+        with np.errstate(all="ignore"):  # a non-finite difference is refused by add_sample below
+            qdd1 = (qd2 - qd0) / (t2 - t0)
+        if self.gate == "innovation":
+            self._innovate(t1, q1, qd1, qdd1, tau2)
+        if not self.online:
+            return
         try:
-            with np.errstate(all="ignore"):  # a non-finite difference is refused by add_sample below
-                qdd1 = (qd2 - qd0) / (t2 - t0)
             self.model.add_sample(q1, qd1, qdd1, tau2)
             self.n_online_samples += 1
         except Exception as exc:  # noqa: BLE001 - learning must never stop the control loop
             self.n_online_rejected += 1
             self.last_model_error = f"online: {type(exc).__name__}: {exc}"
+
+    @property
+    def innovation_errors(self) -> tuple[np.ndarray, np.ndarray]:
+        """The innovation gate's discounted error sums ``(S_0, S_m)`` of this episode, per joint (N m², copies)."""
+        return self._err_nominal.copy(), self._err_model.copy()
+
+    def _innovate(self, t: float, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, tau: np.ndarray) -> None:
+        """The innovation gate's update with one measured sample (see the class docstring)."""
+        try:
+            with np.errstate(all="ignore"):
+                e_model = (tau - np.asarray(self.model.predict_one(q, qd, qdd), dtype=float)) ** 2
+                e_nominal = (tau - np.asarray(self._nominal.inverse_dynamics(q, qd, qdd), dtype=float)) ** 2
+        except Exception as exc:  # noqa: BLE001 - the gate must never stop the control loop
+            self.last_model_error = f"innovation: {type(exc).__name__}: {exc}"
+            return
+        if not (e_model.shape == e_nominal.shape == (self.dof,) and np.all(np.isfinite(e_model))
+                and np.all(np.isfinite(e_nominal)) and np.isfinite(t)):
+            return
+        dt = 0.0 if self._t_innovation is None else max(t - self._t_innovation, 0.0)
+        decay = 0.5 ** (dt / INNOVATION_HALF_LIFE_S)
+        self._err_model = decay * self._err_model + e_model
+        self._err_nominal = decay * self._err_nominal + e_nominal
+        self._t_innovation = t
+        self.n_innovation_samples += 1
 
     def reset_counters(self) -> None:
         """Zero the fallback and bad-measurement counters (e.g. at the start of an episode)."""

@@ -9,7 +9,7 @@ gains and torque limits (:class:`Feedback`) and, optionally, a model factory and
 Controllers: ``"pd"`` (feedback only), ``"rbd"`` (nominal rigid-body feedforward) and any model name
 of :mod:`cascgp.models`, optionally suffixed ``-gated`` (the feedforward falls back toward the RBD where
 the model is unsure: :class:`cascgp.controller.FeedforwardController` ``gate="wiener"``; ``-fgated``:
-``gate="floor"``; ``-vgated``: ``gate="variance"``) and ``-online`` (new
+``gate="floor"``; ``-vgated``: ``gate="variance"``; ``-igated``: ``gate="innovation"``) and ``-online`` (new
 samples enter the model during each attempt, window :data:`ONLINE_WINDOW`, hyperparameters held until
 the next refit), e.g. ``"sp-inward-gated-online"``. Before a learning controller has any data, an SP
 model is its RBD mean (RBD feedforward) and an NP model is zero (PD). After every ``"train"`` attempt of a learning controller,
@@ -91,7 +91,8 @@ class ControllerRun:
 
 def parse_controller(name: str) -> tuple[str, str | None, bool]:
     """``"sp-inward-gated-online"`` -> ``("sp-inward", "wiener", True)``: the base controller or model name,
-    the gate (``-gated``: ``"wiener"``, ``-fgated``: ``"floor"``, ``-vgated``: ``"variance"``, else None; see
+    the gate (``-gated``: ``"wiener"``, ``-fgated``: ``"floor"``, ``-vgated``: ``"variance"``,
+    ``-igated``: ``"innovation"``, else None; see
     :class:`cascgp.controller.FeedforwardController`), online. ``ValueError`` naming the controller for anything
     unknown (suffixes apply to models only; online needs derivative-based states)."""
     if not isinstance(name, str):
@@ -104,9 +105,11 @@ def parse_controller(name: str) -> tuple[str, str | None, bool]:
             break
     if base not in PLAIN_CONTROLLERS and base not in MODEL_NAMES or (base in PLAIN_CONTROLLERS and (gate or online)):
         raise ValueError(f"unknown controller {name!r}; expected 'pd', 'rbd' or one of {list(MODEL_NAMES)}, "
-                         "a model name optionally followed by '-gated' (or '-fgated', '-vgated') and/or '-online'")
+                         "a model name optionally followed by '-gated' (or '-fgated', '-vgated', '-igated') and/or '-online'")
     if gate == "floor" and not base.startswith("sp-"):
         raise ValueError(f"unknown controller {name!r}: '-fgated' needs a semi-parametric model ('sp-...')")
+    if gate == "innovation" and base.endswith("-df"):
+        raise ValueError(f"unknown controller {name!r}: '-igated' needs a derivative-based model (not '-df')")
     if online and base.endswith("-df"):
         raise ValueError(f"unknown controller {name!r}: '-online' needs a derivative-based model (not '-df')")
     return base, gate, online
@@ -187,7 +190,7 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
     for p in paired:
         if parse_controller(p)[0] != base or base in PLAIN_CONTROLLERS:
             raise ValueError(f"paired: {p!r} is not a variant of {name!r}'s model (expected {base!r} with "
-                             "other '-gated'/'-fgated'/'-vgated'/'-online' suffixes)")
+                             "other '-gated'/'-fgated'/'-vgated'/'-igated'/'-online' suffixes)")
     buffer = DataBuffer(buffer_dir) if learns else None
     if buffer is not None and len(buffer):
         raise ValueError(f"buffer folder {buffer_dir} already holds data; use an empty --out folder")

@@ -1,4 +1,4 @@
-"""Does the ``"floor"`` gate rule remove the gated learner's lag on a new task? A pre-registered test on new
+r"""Does the ``"floor"`` gate rule remove the gated learner's lag on a new task? A pre-registered test on new
 seeds (issue 10, second criterion; ``docs/gate_rule.md``).
 
 Background (``docs/lag_diagnosis.md``, seeds 0-11): with the Wiener rule :math:`w = d^2 / (d^2 + v)` the gated
@@ -40,6 +40,16 @@ form, :math:`p / (p + v)`, was dropped after a smoke run on seed 99, see ``docs/
   The floor rule **replaces the Wiener rule as the default gate** if A, B, C and D all hold. Otherwise the
   default is unchanged and the result is reported as measured.
 
+**Second protocol: the innovation rule** (``protocol="innovation"``, :data:`INNOVATION_LEARNERS`; committed before
+its run, after the floor rule's result). The floor rule shrank the lag but missed A. Any gate driven by the GP's
+variance shrinks a correction the model has right whenever the model is unsure, and on a first attempt here the
+model is right but unsure. The ``"innovation"`` rule weighs the learned model against the nominal one by their
+errors on this episode's measured torques (Bates-Granger weights, half-life
+:data:`cascgp.controller.INNOVATION_HALF_LIFE_S` = 1 s, fixed from the reasoning in its docstring; no run with it
+before this protocol). **Seeds 20-27**; the same settings; jobs ``rbd``, ``UL``, ``UL'`` and ``GLi``
+(``sp-inward-igated``, with ``sp-inward`` paired on its model). The rules A, B and C above, with GLi for GLf; there
+is no control learner, so no D or E. The innovation rule becomes the default gate if A, B and C all hold.
+
 Medians, IQRs and worst cases; no means of ratios (single attempts are heavy-tailed).
 """
 
@@ -58,7 +68,8 @@ from cascgp_experiments.gate_eval import GATE_EVAL_CONFIG, find_attempt, ratio_s
 from cascgp_experiments.learner_divergence import NULL_FIT_SEED_OFFSET, UNGATED, joint_split
 from cascgp_experiments.transfer import TransferConfig, controller_job
 
-__all__ = ["GATE_RULE_CONFIG", "GATE_RULE_SEEDS", "LEARNERS", "gate_rule_jobs", "run_gate_rule", "ratios",
+__all__ = ["GATE_RULE_CONFIG", "GATE_RULE_SEEDS", "LEARNERS", "INNOVATION_LEARNERS", "INNOVATION_SEEDS", "PROTOCOLS",
+           "gate_rule_jobs", "run_gate_rule", "ratios",
            "wrist", "decide", "summary_markdown"]
 
 #: The protocol's settings and seeds (see the module docstring).
@@ -72,16 +83,32 @@ LEARNERS: dict[str, tuple[str, tuple[str, ...], int]] = {
     "GLw": ("sp-inward-gated", (UNGATED,), 0),
     "GLf": ("sp-inward-fgated", (UNGATED,), 0),
 }
-RULES = ("GLw", "GLf")
+#: The second protocol (``docs/gate_rule.md``, "The innovation rule"): the innovation gate as a learner, seeds 20-27.
+INNOVATION_LEARNERS: dict[str, tuple[str, tuple[str, ...], int]] = {
+    "rbd": LEARNERS["rbd"], "UL": LEARNERS["UL"], "UL'": LEARNERS["UL'"],
+    "GLi": ("sp-inward-igated", (UNGATED,), 0),
+}
+INNOVATION_SEEDS = tuple(range(20, 28))
+#: protocol name -> (learners, candidate label, control label or None, default seeds)
+PROTOCOLS: dict[str, tuple[dict[str, tuple[str, tuple[str, ...], int]], str, str | None, tuple[int, ...]]] = {
+    "floor": (LEARNERS, "GLf", "GLw", GATE_RULE_SEEDS),
+    "innovation": (INNOVATION_LEARNERS, "GLi", None, INNOVATION_SEEDS),
+}
 #: The wrist: 0-based joint index of J4.
 WRIST = 3
 
 
-def gate_rule_jobs(cfg: TransferConfig, seeds: tuple[int, ...]) -> list[dict[str, Any]]:
+def _gated_labels(run: dict[str, Any]) -> list[str]:
+    """The gated learners of one seed's runs (labels ``GL...``), in their order."""
+    return [label for label in run if label.startswith("GL")]
+
+
+def gate_rule_jobs(cfg: TransferConfig, seeds: tuple[int, ...],
+                   learners: dict[str, tuple[str, tuple[str, ...], int]] = LEARNERS) -> list[dict[str, Any]]:
     """One :func:`~cascgp_experiments.transfer.controller_job` per (seed, learner), seed-major."""
     jobs = []
     for s in seeds:
-        for label, (name, paired, offset) in LEARNERS.items():
+        for label, (name, paired, offset) in learners.items():
             config = replace(cfg, seed=int(s), fit_seed_offset=offset).to_dict()
             jobs.append({"config": config, "name": name, "buffer_dir": None, "paired": list(paired) or None,
                          "_label": label})
@@ -94,14 +121,17 @@ def _job(config: dict[str, Any], name: str, buffer_dir: str | None, paired: list
 
 
 def run_gate_rule(out: Path, cfg: TransferConfig = GATE_RULE_CONFIG, seeds: tuple[int, ...] = GATE_RULE_SEEDS, *,
-                  workers: int | None = None, ray_address: str | None = None, show_progress: bool = True
-                  ) -> dict[str, Any]:
-    """Run every job (cached under ``out/cache``: a stopped run resumes) and write ``gate_rule.json``,
-    ``gate_rule.md`` and ``gate_rule.png`` into ``out``; returns the results."""
+                  protocol: str = "floor", workers: int | None = None, ray_address: str | None = None,
+                  show_progress: bool = True) -> dict[str, Any]:
+    """Run every job of ``protocol`` (:data:`PROTOCOLS`; cached under ``out/cache``: a stopped run resumes) and write
+    ``gate_rule.json``, ``gate_rule.md`` and ``gate_rule.png`` into ``out``; returns the results."""
     from cascgp_experiments.execution import run_jobs
 
+    if protocol not in PROTOCOLS:
+        raise ValueError(f"protocol: expected one of {tuple(PROTOCOLS)}, got {protocol!r}")
+    learners, candidate, control, _ = PROTOCOLS[protocol]
     out = Path(out)
-    jobs = gate_rule_jobs(cfg, seeds)
+    jobs = gate_rule_jobs(cfg, seeds, learners)
     t0 = time.perf_counter()
     res = run_jobs(_job, jobs, workers=workers, ray_address=ray_address, cache_dir=out / "cache",
                    desc="attempts", units=[len(cfg.plan())] * len(jobs), unit="attempt",
@@ -111,13 +141,14 @@ def run_gate_rule(out: Path, cfg: TransferConfig = GATE_RULE_CONFIG, seeds: tupl
     for job, attempts in zip(jobs, res):
         runs.setdefault(str(job["config"]["seed"]), {})[job["_label"]] = attempts
     results: dict[str, Any] = {"config": {**cfg.to_dict(), "seeds": list(seeds)},
+                               "protocol": {"name": protocol, "candidate": candidate, "control": control},
                                "wall_seconds": time.perf_counter() - t0, "jobs": res.stats(), "runs": runs}
     results["ratios"] = ratios(results)
     results["wrist"] = wrist(results)
     results["summary"] = {q: ratio_stats([r["ratio"] for r in results["ratios"] if r["quantity"] == q],
                                          1.10 if q.startswith("last_") else 1.02 if "vs_rbd" in q else None)
                           for q in dict.fromkeys(r["quantity"] for r in results["ratios"])}
-    results["decision"] = decide(results["ratios"], results["wrist"], tuple(cfg.tasks))
+    results["decision"] = decide(results["ratios"], results["wrist"], tuple(cfg.tasks), candidate, control)
     write_json(out / "gate_rule.json", results)
     atomic_write_text(out / "gate_rule.md", summary_markdown(results))
     plot(results, out / "gate_rule.png")
@@ -129,6 +160,7 @@ def ratios(results: dict[str, Any]) -> list[dict[str, Any]]:
     cfg = results["config"]
     tasks, last = cfg["tasks"], cfg["attempts"] - 1
     new_task = tasks[1]
+    proto = results.get("protocol", {"candidate": "GLf", "control": "GLw"})  # files of the first protocol lack it
     rows = []
 
     def add(seed: str, quantity: str, num: float | None, den: float | None) -> None:
@@ -141,15 +173,18 @@ def ratios(results: dict[str, Any]) -> list[dict[str, Any]]:
         def rmse(label: str, task: str, k: int) -> float:
             return find_attempt(run[label], task, k)["tracking_rmse"]
 
+        gated = _gated_labels(run)
         for task in tasks:
             u = rmse("UL", task, last)
-            for label in RULES:
+            for label in gated:
                 add(seed, f"last_{task}_{label}", rmse(label, task, last), u)
             add(seed, f"last_{task}_null", rmse("UL'", task, last), u)
         r = rmse("rbd", new_task, 0)
-        for label in (*RULES, "UL"):
+        for label in (*gated, "UL"):
             add(seed, f"first_{new_task}_vs_rbd_{label}", rmse(label, new_task, 0), r)
-        add(seed, f"rules_last_{new_task}", rmse("GLf", new_task, last), rmse("GLw", new_task, last))
+        if proto["control"] is not None:
+            add(seed, f"rules_last_{new_task}", rmse(proto["candidate"], new_task, last),
+                rmse(proto["control"], new_task, last))
     return rows
 
 
@@ -158,7 +193,7 @@ def wrist(results: dict[str, Any]) -> dict[str, dict[str, dict[str, float]]]:
     ``m0`` and ``m13`` (that model / UL's, first attempt and median over the later ones)."""
     task = results["config"]["tasks"][1]
     out: dict[str, dict[str, dict[str, float]]] = {}
-    for label in RULES:
+    for label in _gated_labels(next(iter(results["runs"].values()))):
         view = {"runs": {s: {"GL": run[label], "UL": run["UL"]} for s, run in results["runs"].items()}}
         split = joint_split(view, task, WRIST)
         out[label] = {s: {"g0": rows[0]["gate"], "m0": rows[0]["model"],
@@ -167,9 +202,11 @@ def wrist(results: dict[str, Any]) -> dict[str, dict[str, dict[str, float]]]:
 
 
 def decide(rows: list[dict[str, Any]], wrist_: dict[str, dict[str, dict[str, float]]],
-           tasks: tuple[str, ...] = GATE_RULE_CONFIG.tasks) -> dict[str, Any]:
+           tasks: tuple[str, ...] = GATE_RULE_CONFIG.tasks, candidate: str = "GLf", control: str | None = "GLw"
+           ) -> dict[str, Any]:
     """The decision rules A-E of the module docstring (``tasks``: the first and the new task, front and left in
-    the protocol)."""
+    the protocol) for the ``candidate`` learner; D and E compare it with the ``control`` learner and are left out
+    without one (the innovation protocol: A, B and C decide)."""
     from scipy import stats
 
     def col(q: str) -> np.ndarray:
@@ -180,24 +217,26 @@ def decide(rows: list[dict[str, Any]], wrist_: dict[str, dict[str, dict[str, flo
         return float(np.median(v)) if v.size and np.all(np.isfinite(v)) else float("nan")
 
     first_task, new = tasks[0], tasks[1]
-    a = median(f"last_{new}_GLf")
-    b = median(f"last_{first_task}_GLf")
-    first = col(f"first_{new}_vs_rbd_GLf")
-    d = median(f"rules_last_{new}")
-    logs = np.log(col(f"rules_last_{new}"))
-    p = (float(stats.wilcoxon(logs, alternative="less").pvalue)
-         if logs.size >= 2 and np.all(np.isfinite(logs)) and np.any(logs != 0) else None)
-    out = {
-        "A_last_left_GLf_median": a, "A": bool(a <= 1.10),
-        "B_last_front_GLf_median": b, "B": bool(b <= 1.10),
-        "C_first_left_vs_rbd_GLf_worst": float(np.max(first)) if first.size else float("nan"),
+    a = median(f"last_{new}_{candidate}")
+    b = median(f"last_{first_task}_{candidate}")
+    first = col(f"first_{new}_vs_rbd_{candidate}")
+    out: dict[str, Any] = {
+        "candidate": candidate, "control": control,
+        "A_last_new_median": a, "A": bool(a <= 1.10),
+        "B_last_first_task_median": b, "B": bool(b <= 1.10),
+        "C_first_new_vs_rbd_worst": float(np.max(first)) if first.size else float("nan"),
         "C": bool(first.size > 0 and np.all(np.isfinite(first)) and np.all(first <= 1.02)),
-        "D_rules_last_left_median": d, "D": bool(d < 1.0),
-        "E_wilcoxon_p_less": p, "E_n_floor_better": int(np.sum(logs < 0)), "E_n": int(logs.size),
         "mechanism": {label: {k: float(np.median([v[k] for v in seeds.values()])) for k in ("g0", "m0", "m13")}
                       for label, seeds in wrist_.items()},
     }
-    out["adopt_floor_rule"] = bool(out["A"] and out["B"] and out["C"] and out["D"])
+    if control is not None:
+        d = median(f"rules_last_{new}")
+        logs = np.log(col(f"rules_last_{new}"))
+        p = (float(stats.wilcoxon(logs, alternative="less").pvalue)
+             if logs.size >= 2 and np.all(np.isfinite(logs)) and np.any(logs != 0) else None)
+        out.update({"D_rules_last_new_median": d, "D": bool(d < 1.0), "E_wilcoxon_p_less": p,
+                    "E_n_candidate_better": int(np.sum(logs < 0)), "E_n": int(logs.size)})
+    out["adopt"] = bool(out["A"] and out["B"] and out["C"] and out.get("D", True))
     return out
 
 
@@ -215,15 +254,18 @@ def summary_markdown(results: dict[str, Any]) -> str:
         meet = f"{st['n_meeting']} of {st['n']} (<= {st['limit']})" if "limit" in st else "-"
         lines.append(f"| {q} | {st['n']} | {st['median']:.3f} | {st['q1']:.3f}-{st['q3']:.3f} | {st['min']:.3f} "
                      f"| {st['max']:.3f} | {meet} |")
+    c, first_task, new = dec["candidate"], cfg["tasks"][0], cfg["tasks"][1]
     lines += ["", "Decision (rules fixed before the run):", "",
-              f"- A, median GLf / UL at the last 'left' attempt <= 1.10: {dec['A_last_left_GLf_median']:.3f} -> {dec['A']}",
-              f"- B, the same on 'front': {dec['B_last_front_GLf_median']:.3f} -> {dec['B']}",
-              f"- C, GLf's first 'left' attempt <= 1.02 x RBD on every seed (worst "
-              f"{dec['C_first_left_vs_rbd_GLf_worst']:.3f}) -> {dec['C']}",
-              f"- D, median GLf / GLw at the last 'left' attempt < 1: {dec['D_rules_last_left_median']:.3f} -> {dec['D']}",
-              f"- E (reported): floor rule better on {dec['E_n_floor_better']} of {dec['E_n']} seeds; one-sided "
-              f"Wilcoxon p = {dec['E_wilcoxon_p_less']}",
-              f"- **floor rule adopted as the default gate: {dec['adopt_floor_rule']}**", "",
+              f"- A, median {c} / UL at the last '{new}' attempt <= 1.10: {dec['A_last_new_median']:.3f} -> {dec['A']}",
+              f"- B, the same on '{first_task}': {dec['B_last_first_task_median']:.3f} -> {dec['B']}",
+              f"- C, {c}'s first '{new}' attempt <= 1.02 x RBD on every seed (worst "
+              f"{dec['C_first_new_vs_rbd_worst']:.3f}) -> {dec['C']}"]
+    if dec["control"] is not None:
+        lines += [f"- D, median {c} / {dec['control']} at the last '{new}' attempt < 1: "
+                  f"{dec['D_rules_last_new_median']:.3f} -> {dec['D']}",
+                  f"- E (reported): {c} better on {dec['E_n_candidate_better']} of {dec['E_n']} seeds; one-sided "
+                  f"Wilcoxon p = {dec['E_wilcoxon_p_less']}"]
+    lines += [f"- **{c}'s rule adopted as the default gate: {dec['adopt']}**", "",
               "J4 on 'left' (medians over seeds): " + "; ".join(
                   f"{label}: g0 {m['g0']:.2f}, m0 {m['m0']:.2f}, m13 {m['m13']:.2f}"
                   for label, m in dec["mechanism"].items()), "",
@@ -253,8 +295,8 @@ def plot(results: dict[str, Any], path: Path) -> None:
             ax.hlines(limit, i - 0.35, i + 0.35, color="r", linestyles="dashed")
     ax.set_yscale("log")
     ax.set_ylabel("ratio of tracking RMSEs")
-    ax.set_title("Gate rules as learners on new seeds: GLf (floor rule), GLw (Wiener rule), UL' (null), all / UL "
-                 "unless named", fontsize=9)
+    ax.set_title("Gate rules as learners on new seeds: GLf (floor rule), GLw (Wiener rule), GLi (innovation rule), "
+                 "UL' (null); all / UL unless named", fontsize=9)
     fig.tight_layout()
     save_figure(fig, path, dpi=120)
     plt.close(fig)

@@ -151,13 +151,15 @@ def test_output_is_always_finite_and_within_limits(q, qd, t, which):
 
 
 @settings(max_examples=60, deadline=None)
-@given(scale=st.floats(min_value=1.0, max_value=1e8), gate=st.sampled_from([False, "wiener", "floor", "variance"]),
+@given(scale=st.floats(min_value=1.0, max_value=1e8),
+       gate=st.sampled_from([False, "wiener", "floor", "variance", "innovation"]),
        bad=st.sampled_from([None, np.nan, np.inf, -np.inf]), online=st.booleans())
 def test_far_out_of_range_states_with_a_fitted_gp_model(scale, gate, bad, online, fitted_planar_model,
                                                         fitted_planar_sp_model, arm3_rbd):
     """A real fitted cascade (gated or not, learning online or not) queried far outside its training data, or
     with non-finite measurements, stays finite and clipped; absurd online samples are refused, never raised.
-    The 'floor' rule runs on an SP cascade (it refuses NP models), the others on an NP one."""
+    The 'floor' rule runs on an SP cascade (it refuses NP models), the others on an NP one; the innovation gate
+    also sees the absurd samples."""
     import copy
 
     fitted = fitted_planar_sp_model if gate == "floor" else fitted_planar_model
@@ -165,13 +167,16 @@ def test_far_out_of_range_states_with_a_fitted_gp_model(scale, gate, bad, online
     limits = np.full(model.dof, 5.0)
     ctrl = FeedforwardController(model, 10.0, 1.0, limits, fallback=arm3_rbd, gate=gate,
                                  online=4 if online else None, online_every=1)
-    if online:
+    if online or gate == "innovation":
         ctrl.start(None, {})
         value = scale if bad is None else bad
         for k in range(6):
             ctrl.observe(np.full(model.dof, value * (k % 2)), np.full(model.dof, -value), np.full(model.dof, value),
                          0.1 * k)
-        assert ctrl.n_online_samples + ctrl.n_online_rejected == 4
+        if online:
+            assert ctrl.n_online_samples + ctrl.n_online_rejected == 4
+        s0, sm = ctrl.innovation_errors
+        assert np.all(np.isfinite(s0)) and np.all(np.isfinite(sm))  # absurd samples are skipped, never kept
     if bad is not None:
         tau = ctrl(0.0, np.full(model.dof, bad), np.full(model.dof, bad), lambda t: (np.zeros(3),) * 3)
         assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= limits)
@@ -230,6 +235,74 @@ def test_gated_feedforward_follows_its_rule(rule, request, arm3_rbd, arm3_train)
             assert np.all(ctrl.last_gate >= d**2 / (d**2 + var) - 1e-12)
 
 
+def _feed(ctrl, states, torque, dt=0.1):
+    """Measurements at constant velocity (so the controller's central-difference q̈ is 0), each sample's measured
+    torque ``torque(q, qd)``; ``online_every=1``: a sample per call from the third on."""
+    qdd0 = np.zeros(ctrl.dof)
+    for k, (q, qd) in enumerate(states):
+        # the torque measured at call k belongs to the previous tick's state (see observe)
+        prev = states[k - 1] if k else states[0]
+        ctrl.observe(q, qd, torque(prev[0], prev[1], qdd0), dt * k)
+
+
+def test_innovation_gate_trusts_the_predictor_with_the_smaller_errors(fitted_planar_sp_model, arm3_rbd, arm3_train):
+    """w = S_0 / (S_0 + S_m): 1/2 before any sample; 0 when the measured torques are the nominal model's (the
+    learned model errs, the nominal does not); 1 when they are the learned model's; the sums discount with the
+    documented half-life."""
+    from cascgp.controller import INNOVATION_HALF_LIFE_S, innovation_weights
+
+    model = fitted_planar_sp_model
+    ctrl = FeedforwardController(model, 0.0, 0.0, np.full(3, 1e6), fallback=arm3_rbd, gate="innovation",
+                                 online_every=1)
+    assert ctrl.name.endswith("-igated")
+    ctrl.start(None, {})
+    state = (arm3_train.q[10], arm3_train.qd[10], arm3_train.qdd[10])
+    tau = ctrl(0.0, state[0], state[1], lambda t: state)
+    nominal, mean = arm3_rbd.inverse_dynamics(*state), model.predict_one(*state)
+    np.testing.assert_allclose(ctrl.last_gate, 0.5)
+    np.testing.assert_allclose(tau, nominal + 0.5 * (mean - nominal), rtol=1e-9, atol=1e-9)
+
+    states = [(arm3_train.q[k], np.full(3, 0.2)) for k in range(20, 30)]
+    _feed(ctrl, states, arm3_rbd.inverse_dynamics)
+    assert ctrl.n_innovation_samples == 8
+    s0, sm = ctrl.innovation_errors
+    assert np.all(s0 == 0) and np.all(sm > 0)
+    ctrl(0.0, state[0], state[1], lambda t: state)
+    np.testing.assert_array_equal(ctrl.last_gate, 0.0)
+
+    ctrl.start(None, {})  # a new episode forgets
+    assert ctrl.n_innovation_samples == 0 and not np.any(ctrl.innovation_errors[0])
+    _feed(ctrl, states, model.predict_one)
+    s0, sm = ctrl.innovation_errors
+    np.testing.assert_allclose(sm, 0.0, atol=1e-20)
+    ctrl(0.0, state[0], state[1], lambda t: state)
+    np.testing.assert_allclose(ctrl.last_gate, 1.0)
+
+    # Discounting: two samples 0.5 s apart; the first counts 2^(-0.5 / half-life).
+    ctrl.start(None, {})
+    _feed(ctrl, states[:4], lambda q, qd, qdd: arm3_rbd.inverse_dynamics(q, qd, qdd) + 1.0, dt=0.5)
+    s0, _ = ctrl.innovation_errors
+    np.testing.assert_allclose(s0, 1.0 + 2.0 ** (-0.5 / INNOVATION_HALF_LIFE_S), rtol=1e-12)
+    np.testing.assert_allclose(innovation_weights([0.0, 1.0, np.nan], [0.0, 3.0, 1.0]), [0.5, 0.25, 0.0])
+
+
+def test_innovation_errors_are_taken_before_the_sample_enters_the_online_window(fitted_planar_sp_model, arm3_rbd,
+                                                                                arm3_train):
+    import copy
+
+    model = copy.deepcopy(fitted_planar_sp_model)
+    ctrl = FeedforwardController(model, 0.0, 0.0, np.full(3, 1e6), fallback=arm3_rbd, gate="innovation",
+                                 online=10, online_every=1)
+    ctrl.start(None, {})
+    states = [(arm3_train.q[k], np.full(3, 0.2)) for k in range(40, 43)]
+    before = model.predict_one(states[1][0], states[1][1], np.zeros(3))
+    _feed(ctrl, states, lambda q, qd, qdd: arm3_rbd.inverse_dynamics(q, qd, qdd) + 2.0)
+    assert ctrl.n_innovation_samples == ctrl.n_online_samples == 1
+    measured = arm3_rbd.inverse_dynamics(states[1][0], states[1][1], np.zeros(3)) + 2.0
+    np.testing.assert_allclose(ctrl.innovation_errors[1], (measured - before) ** 2, rtol=1e-9)
+    assert not np.allclose(model.predict_one(states[1][0], states[1][1], np.zeros(3)), before)  # it did learn
+
+
 def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
     with pytest.raises(ValueError, match="gate: needs a nominal"):
         FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], gate=True)
@@ -237,6 +310,14 @@ def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
         FeedforwardController(AffineRBD(), KP, KD, LIMITS, gate=True)
     with pytest.raises(ValueError, match="gate: expected"):
         FeedforwardController(AffineRBD(), KP, KD, LIMITS, gate="sometimes")
+    from cascgp.gp import GPFitConfig
+    from cascgp.models import make_model
+    from tests.conftest import make_arm, sinusoid_data
+
+    df = make_model("np-inward-df", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=10)).fit(
+        sinusoid_data(make_arm(3), 6.0, 10.0, seed=4))
+    with pytest.raises(ValueError, match="gate 'innovation': needs a derivative-based"):
+        FeedforwardController(df, KP[:3], KD[:3], LIMITS[:3], fallback=AffineRBD(), gate="innovation")
     with pytest.raises(ValueError, match="gate 'floor': needs a semi-parametric"):
         FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], fallback=AffineRBD(), gate="floor")
 

@@ -140,8 +140,9 @@ def test_controller_variants_parse_and_refuse_nonsense():
     assert parse_controller("sp-inward-gated-online") == ("sp-inward", "wiener", True)
     assert parse_controller("np-outward-df-vgated") == ("np-outward-df", "variance", False)
     assert parse_controller("sp-inward-fgated-online") == ("sp-inward", "floor", True)
+    assert parse_controller("np-inward-igated") == ("np-inward", "innovation", False)
     assert parse_controller("sp-standard") == ("sp-standard", None, False)
     for bad in ("rbd-gated", "pd-online", "sp-inward-online-gated", "np-inward-df-online", "np-inward-fgated",
-                "rbd-fgated"):
+                "rbd-fgated", "np-inward-df-igated"):
         with pytest.raises(ValueError, match="unknown controller"):
             parse_controller(bad)
