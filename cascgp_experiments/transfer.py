@@ -44,7 +44,7 @@ FULL_CONTROLLERS = ("pd", "rbd", "sp-standard", "sp-inward", "sp-outward", "np-i
                     "sp-inward-gated-online")
 FULL_TASKS = ("front", "left", "right", "far")
 #: The README demo: PD, RBD and the best of the uncertainty-aware controllers (issue 10; README table).
-QUICK_CONTROLLERS = ("pd", "rbd", "sp-inward-gated-online")
+QUICK_CONTROLLERS = ("pd", "rbd", "sp-inward-igated-online")
 QUICK_TASKS = ("front", "left")
 
 

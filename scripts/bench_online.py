@@ -6,8 +6,11 @@ Fits the 6-joint SP inward cascade (default GP fit) on ``n`` rows of simulated J
 ``jaco_train.npz`` at 10 Hz; without ``--data`` the quick collection preset is recorded), then times on
 queries from the held-out motions: ``predict_one`` (the paper's feedforward), ``predict_one_var`` (mean and
 propagated variance, what the gated controller calls), ``add_sample`` (one online sample into every joint),
-and both single-query paths again with a full online window. Medians and 90th percentiles over ``--reps``
-calls, one thread. Prints a table and writes ``bench_online.json``.
+and both single-query paths again with a full online window; and whole controller ticks
+(:class:`cascgp.FeedforwardController`, PD plus feedforward): ungated, and with the default innovation gate (RBD
+plus ``predict_one`` per tick) and its update per measured sample (``observe``: one more ``predict_one`` and RBD
+call). Medians and 90th percentiles over ``--reps`` calls, one thread. Prints a table and writes
+``bench_online.json``.
 """
 
 from __future__ import annotations
@@ -62,6 +65,17 @@ def main(argv: list[str] | None = None) -> None:
     q = [(test.q[i], test.qd[i], test.qdd[i]) for i in range(0, test.n_samples, 7)]
     rows = {"predict_one (offline)": _times(model.predict_one, q, a.reps),
             "predict_one_var (offline)": _times(model.predict_one_var, q, a.reps)}
+    import jaco_env
+    from cascgp.controller import FeedforwardController
+
+    ticks = [(0.0, x[0], x[1], lambda t, x=x: x) for x in q]
+    for label, gate in (("controller tick, ungated", False), ("controller tick, innovation gate", "innovation")):
+        ctrl = FeedforwardController(model, jaco_env.DEFAULT_KP, jaco_env.DEFAULT_KD, jaco_env.robot.TORQUE_LIMITS,
+                                     fallback=rbd, gate=gate, online_every=1)
+        ctrl.start(None, {})
+        rows[label + " (offline)"] = _times(ctrl, ticks, a.reps)
+    measured = [(test.q[i], test.qd[i], test.tau[i], 0.025 * k) for k, i in enumerate(range(0, test.n_samples, 3))]
+    rows["innovation update per sample (observe)"] = _times(ctrl.observe, measured, a.reps)
     model.start_online(a.window)
     samples = [(test.q[i], test.qd[i], test.qdd[i], test.tau[i]) for i in range(0, test.n_samples, 10)]
     rows["add_sample (window filling and full)"] = _times(model.add_sample, samples, max(3 * a.window, 300))

@@ -318,6 +318,11 @@ def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
         sinusoid_data(make_arm(3), 6.0, 10.0, seed=4))
     with pytest.raises(ValueError, match="gate 'innovation': needs a derivative-based"):
         FeedforwardController(df, KP[:3], KD[:3], LIMITS[:3], fallback=AffineRBD(), gate="innovation")
+    # gate=True is the default rule: innovation for a derivative-based model, Wiener for a derivative-free one.
+    arm = make_arm(3)
+    assert FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], fallback=arm, gate=True).gate == \
+        "innovation"
+    assert FeedforwardController(df, KP[:3], KD[:3], LIMITS[:3], fallback=arm, gate=True).gate == "wiener"
     with pytest.raises(ValueError, match="gate 'floor': needs a semi-parametric"):
         FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], fallback=AffineRBD(), gate="floor")
 

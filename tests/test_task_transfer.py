@@ -2,10 +2,10 @@
 
 Two tasks in different parts of the workspace, payload unknown to every controller:
 - PD only and the nominal RBD feedforward attempt each task once;
-- the SP inward cascade (the paper's), the gated one and the gated one learning online each attempt
-  task A four times (retrained after each attempt on all data so far), then task B four times, then
-  revisit A once. All learners see the same seeds. After each attempt of the ungated cascade, the gated
-  controller also runs on its model (paired: the gate's own effect, everything else equal).
+- the SP inward cascade (the paper's), the gated one (the default gate, the innovation rule) and the gated one
+  learning online each attempt task A four times (retrained after each attempt on all data so far), then task
+  B four times, then revisit A once. All learners see the same seeds. After each attempt of the ungated
+  cascade, the gated controller also runs on its model (paired: the gate's own effect, everything else equal).
 """
 
 from __future__ import annotations
@@ -20,8 +20,9 @@ TASK_A, TASK_B = "front", "left"
 #: Revisit tolerance: the first attempt back on task A may be at most this much worse (relative)
 #: than the last attempt there before, although the buffer now also holds task B and is thinned to the cap.
 REVISIT_TOLERANCE = 0.15
-LEARNERS = ("sp-inward", "sp-inward-gated", "sp-inward-gated-online")
-GATED = "sp-inward-gated"
+#: The gate is the default rule, the innovation gate (docs/gate_rule.md).
+GATED = "sp-inward-igated"
+LEARNERS = ("sp-inward", GATED, GATED + "-online")
 
 
 @pytest.fixture(scope="module")
@@ -95,32 +96,31 @@ def test_unknown_controller_name_is_a_clear_error():
 def test_gated_first_attempt_is_never_worse_than_rbd(runs, task):
     """On the first attempt of a task (task B: the model has seen only task A) the gated controller tracks
     at most 2 % worse than the nominal RBD feedforward."""
-    assert _rmse(runs["sp-inward-gated"], task, k=0) <= 1.02 * _rmse(runs["rbd"], task)
+    assert _rmse(runs[GATED], task, k=0) <= 1.02 * _rmse(runs["rbd"], task)
 
 
 @pytest.mark.parametrize("task", [TASK_A, TASK_B])
 def test_gated_still_learns(runs, task):
     """After three retrainings on a task the gated controller tracks far better than RBD (it learns)."""
-    assert _rmse(runs["sp-inward-gated"], task, k=3) < 0.5 * _rmse(runs["rbd"], task)
+    assert _rmse(runs[GATED], task, k=3) < 0.5 * _rmse(runs["rbd"], task)
 
 
 def test_gated_learner_within_ten_percent_of_the_ungated_after_three_attempts_on_the_first_task(runs):
     """Issue 10's criterion, the gated learner within 10 % of the ungated one after three retrainings, asserted
-    where this run meets it (task A: 0.122 vs 0.135 rad). On task B this run misses it (0.064 vs 0.048, 1.35 x).
-    Two learners that collect their own data drift apart: on four seeds of the full transfer, two *ungated*
-    learners that differ only in the random starts of their fits are within 10 % on 10 of 16 tasks, as gated
-    vs ungated is; but on task B ("left") the gated learner's lag replicates on new seeds, and it sits in the
-    gated learner's model, not in the gate acting at that attempt (docs/learner_divergence.md). Its located
-    cause: on the first attempt there the gate shrinks the wrist correction, the wrist strays, and the models
-    fitted on that episode are worse at the wrist (docs/lag_diagnosis.md). The paired test below checks the
-    gate's own effect on one model, on both tasks."""
-    assert _rmse(runs["sp-inward-gated"], TASK_A, k=3) <= 1.10 * _rmse(runs["sp-inward"], TASK_A, k=3)
+    where this run meets it (task A: 0.142 vs 0.135 rad, 1.05). On task B this run misses it narrowly (0.0530 vs
+    0.0476, 1.11; the Wiener rule missed it here by 1.35). Two learners that collect their own data drift apart:
+    of two *ungated* learners that differ only in the random starts of their fits, one is more than 10 % slower
+    on about a third of (seed, task) pairs (docs/learner_divergence.md), so one seed cannot decide it. On new seeds 20-27
+    the innovation learner meets it in the median on task B (1.05; docs/gate_rule.md), where the Wiener learner
+    lagged (1.36 on seeds 12-19: the gate shrank the wrist correction on the first attempt, docs/lag_diagnosis.md).
+    The paired test below checks the gate's own effect on one model, on both tasks."""
+    assert _rmse(runs[GATED], TASK_A, k=3) <= 1.10 * _rmse(runs["sp-inward"], TASK_A, k=3)
 
 
 @pytest.mark.parametrize("task", [TASK_A, TASK_B])
 def test_the_gate_on_the_same_model_costs_at_most_ten_percent_after_three_attempts(runs, task):
     """Issue 10's criterion on the gate's own effect: after three retrainings on a task, the gated controller on
-    the ungated learner's model is within 10 % of that learner (measured in this run: 1.03 on task A, 1.01 on
+    the ungated learner's model is within 10 % of that learner (measured in this run: 1.08 on task A, 1.06 on
     task B). Two learners that collect their own data drift apart as much without a gate as with one
     (docs/learner_divergence.md); this paired form is free of that drift."""
     ungated = [a for a in runs["sp-inward"] if a["task"] == task and a["task_attempt"] == 3][0]
@@ -129,9 +129,9 @@ def test_the_gate_on_the_same_model_costs_at_most_ten_percent_after_three_attemp
 
 def test_online_learning_lowers_the_first_attempt_on_a_new_task(runs):
     """Task B's first attempt: learning inside the episode beats offline-only (same gate, same seeds)."""
-    online = [a for a in runs["sp-inward-gated-online"] if a["task"] == TASK_B and a["task_attempt"] == 0][0]
+    online = [a for a in runs[GATED + "-online"] if a["task"] == TASK_B and a["task_attempt"] == 0][0]
     assert online["online_samples"] > 100
-    assert _rmse(runs["sp-inward-gated-online"], TASK_B, k=0) < _rmse(runs["sp-inward-gated"], TASK_B, k=0)
+    assert _rmse(runs[GATED + "-online"], TASK_B, k=0) < _rmse(runs[GATED], TASK_B, k=0)
 
 
 def test_controller_variants_parse_and_refuse_nonsense():
@@ -146,3 +146,4 @@ def test_controller_variants_parse_and_refuse_nonsense():
                 "rbd-fgated", "np-inward-df-igated"):
         with pytest.raises(ValueError, match="unknown controller"):
             parse_controller(bad)
+
