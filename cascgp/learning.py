@@ -7,11 +7,12 @@ gains and torque limits (:class:`Feedback`) and, optionally, a model factory and
 (for the Jaco 2 pouring env, :mod:`cascgp_experiments.transfer` does).
 
 Controllers: ``"pd"`` (feedback only), ``"rbd"`` (nominal rigid-body feedforward) and any model name
-of :mod:`cascgp.models`, optionally suffixed ``-gated`` (the feedforward falls back toward the RBD where
-the model is unsure: :class:`cascgp.controller.FeedforwardController` ``gate="wiener"``; ``-fgated``:
-``gate="floor"``; ``-vgated``: ``gate="variance"``; ``-igated``: ``gate="innovation"``) and ``-online`` (new
-samples enter the model during each attempt, window :data:`ONLINE_WINDOW`, hyperparameters held until
-the next refit), e.g. ``"sp-inward-gated-online"``. Before a learning controller has any data, an SP
+of :mod:`cascgp.models`, optionally suffixed with a gate (the feedforward falls back toward the RBD:
+:class:`cascgp.controller.FeedforwardController` ``gate=...``): ``-igated`` (``"innovation"``, the default gate:
+where the model has predicted this episode's measured torques worse than the RBD), ``-gated`` (``"wiener"``),
+``-fgated`` (``"floor"``) or ``-vgated`` (``"variance"``; the last three where the model is unsure), and
+``-online`` (new samples enter the model during each attempt, window :data:`ONLINE_WINDOW`, hyperparameters held
+until the next refit), e.g. ``"sp-inward-igated-online"``. Before a learning controller has any data, an SP
 model is its RBD mean (RBD feedforward) and an NP model is zero (PD). After every ``"train"`` attempt of a learning controller,
 the measured episode joins a :class:`cascgp.buffer.DataBuffer` and a new model is fitted on
 everything seen so far (subsampled to ``rate_hz``, at most ``cap`` rows), warm-started from the

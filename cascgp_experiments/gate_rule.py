@@ -120,16 +120,18 @@ def _job(config: dict[str, Any], name: str, buffer_dir: str | None, paired: list
     return controller_job(config, name, buffer_dir, paired=paired)
 
 
-def run_gate_rule(out: Path, cfg: TransferConfig = GATE_RULE_CONFIG, seeds: tuple[int, ...] = GATE_RULE_SEEDS, *,
+def run_gate_rule(out: Path, cfg: TransferConfig = GATE_RULE_CONFIG, seeds: tuple[int, ...] | None = None, *,
                   protocol: str = "floor", workers: int | None = None, ray_address: str | None = None,
                   show_progress: bool = True) -> dict[str, Any]:
-    """Run every job of ``protocol`` (:data:`PROTOCOLS`; cached under ``out/cache``: a stopped run resumes) and write
-    ``gate_rule.json``, ``gate_rule.md`` and ``gate_rule.png`` into ``out``; returns the results."""
+    """Run every job of ``protocol`` (:data:`PROTOCOLS`; ``seeds``: its own unless given; cached under
+    ``out/cache``: a stopped run resumes) and write ``gate_rule.json``, ``gate_rule.md`` and ``gate_rule.png`` into
+    ``out``; returns the results (``learners``: which controller each label ran)."""
     from cascgp_experiments.execution import run_jobs
 
     if protocol not in PROTOCOLS:
         raise ValueError(f"protocol: expected one of {tuple(PROTOCOLS)}, got {protocol!r}")
-    learners, candidate, control, _ = PROTOCOLS[protocol]
+    learners, candidate, control, protocol_seeds = PROTOCOLS[protocol]
+    seeds = protocol_seeds if seeds is None else tuple(seeds)
     out = Path(out)
     jobs = gate_rule_jobs(cfg, seeds, learners)
     t0 = time.perf_counter()
@@ -142,6 +144,8 @@ def run_gate_rule(out: Path, cfg: TransferConfig = GATE_RULE_CONFIG, seeds: tupl
         runs.setdefault(str(job["config"]["seed"]), {})[job["_label"]] = attempts
     results: dict[str, Any] = {"config": {**cfg.to_dict(), "seeds": list(seeds)},
                                "protocol": {"name": protocol, "candidate": candidate, "control": control},
+                               "learners": {label: {"controller": name, "paired": list(paired), "fit_seed_offset": off}
+                                            for label, (name, paired, off) in learners.items()},
                                "wall_seconds": time.perf_counter() - t0, "jobs": res.stats(), "runs": runs}
     results["ratios"] = ratios(results)
     results["wrist"] = wrist(results)
@@ -295,8 +299,10 @@ def plot(results: dict[str, Any], path: Path) -> None:
             ax.hlines(limit, i - 0.35, i + 0.35, color="r", linestyles="dashed")
     ax.set_yscale("log")
     ax.set_ylabel("ratio of tracking RMSEs")
-    ax.set_title("Gate rules as learners on new seeds: GLf (floor rule), GLw (Wiener rule), GLi (innovation rule), "
-                 "UL' (null); all / UL unless named", fontsize=9)
+    names = {"GLf": "floor rule", "GLw": "Wiener rule", "GLi": "innovation rule"}
+    gated = [f"{label} ({names.get(label, label)})" for label in results["wrist"]]
+    ax.set_title(f"Gate rules as learners on seeds {results['config']['seeds']}: " + ", ".join(gated)
+                 + ", UL' (null); all / UL unless named", fontsize=9)
     fig.tight_layout()
     save_figure(fig, path, dpi=120)
     plt.close(fig)

@@ -1,5 +1,5 @@
-"""The floor gate rule against the Wiener rule, as learners on new seeds (issue 10; protocol in
-:mod:`cascgp_experiments.gate_rule` and ``docs/gate_rule.md``).
+"""Gate rules as learners on new seeds: the floor rule against the Wiener rule, and the innovation rule (issue 10;
+protocols in :mod:`cascgp_experiments.gate_rule` and ``docs/gate_rule.md``).
 
 Usage::
 
@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> int:
     p.set_defaults(seeds=None, tasks=",".join(GATE_RULE_CONFIG.tasks))
     add_execution_args(p)
     a = p.parse_args(argv)
-    if a.seeds is None:
+    if a.seeds is None:  # the protocol's own seeds
         a.seeds = ",".join(map(str, PROTOCOLS[a.rule][3]))
     check_args(p, a)
     cfg, seeds = protocol_from_args(p, a, min_attempts=2, two_tasks_why="the first task's data meet the new task")

@@ -175,8 +175,10 @@ def test_far_out_of_range_states_with_a_fitted_gp_model(scale, gate, bad, online
                          0.1 * k)
         if online:
             assert ctrl.n_online_samples + ctrl.n_online_rejected == 4
-        s0, sm = ctrl.innovation_errors
-        assert np.all(np.isfinite(s0)) and np.all(np.isfinite(sm))  # absurd samples are skipped, never kept
+        if gate == "innovation":  # four samples; those with non-finite errors are skipped, never kept
+            assert ctrl.n_innovation_samples == (4 if bad is None else 0)
+            s0, sm = ctrl.innovation_errors
+            assert not np.any(np.isnan(s0)) and not np.any(np.isnan(sm))
     if bad is not None:
         tau = ctrl(0.0, np.full(model.dof, bad), np.full(model.dof, bad), lambda t: (np.zeros(3),) * 3)
         assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= limits)
@@ -284,6 +286,27 @@ def test_innovation_gate_trusts_the_predictor_with_the_smaller_errors(fitted_pla
     s0, _ = ctrl.innovation_errors
     np.testing.assert_allclose(s0, 1.0 + 2.0 ** (-0.5 / INNOVATION_HALF_LIFE_S), rtol=1e-12)
     np.testing.assert_allclose(innovation_weights([0.0, 1.0, np.nan], [0.0, 3.0, 1.0]), [0.5, 0.25, 0.0])
+    # Huge sums keep their limit: an infinite nominal error trusts the model fully; equal huge sums give 1/2.
+    np.testing.assert_allclose(innovation_weights([np.inf, 1e308, np.inf, 1.0], [1.0, 1e308, np.inf, np.inf]),
+                               [1.0, 0.5, 0.0, 0.0])
+
+
+def test_innovation_gate_needs_only_a_mean_prediction(arm3_rbd):
+    """The innovation gate uses the model's mean and the nominal torque, no variance: a derivative-based model
+    with predict_one alone is enough."""
+
+    class MeanOnly:
+        dof, feature_kind, name = 3, "db", "mean-only"
+
+        def predict_one(self, q, qd=None, qdd=None, q_hist=None):
+            return arm3_rbd.inverse_dynamics(q, qd, qdd) + 1.0
+
+    ctrl = FeedforwardController(MeanOnly(), 0.0, 0.0, np.full(3, 1e6), fallback=arm3_rbd, gate=True)
+    assert ctrl.gate == "innovation"
+    ctrl.start(None, {})
+    state = (np.full(3, 0.1), np.zeros(3), np.zeros(3))
+    np.testing.assert_allclose(ctrl(0.0, state[0], state[1], lambda t: state),
+                               arm3_rbd.inverse_dynamics(*state) + 0.5)  # w = 1/2 before any sample
 
 
 def test_innovation_errors_are_taken_before_the_sample_enters_the_online_window(fitted_planar_sp_model, arm3_rbd,
