@@ -90,9 +90,10 @@ def innovation_weights(err_nominal: np.ndarray, err_model: np.ndarray) -> np.nda
     s0 = np.asarray(err_nominal, dtype=float)
     sm = np.asarray(err_model, dtype=float)
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        # divided by the larger sum, so that huge (even infinite) sums give the right limit, not inf / inf
-        w = np.where(s0 >= sm, 1.0 / (1.0 + sm / s0), (s0 / sm) / (1.0 + s0 / sm))
-        w = np.where((s0 == 0.0) & (sm == 0.0), 0.5, w)
+        w = np.where(s0 + sm > 0.0, s0 / (s0 + sm), 0.5)
+        # where the sum overflows: divided by the larger sum, so that huge (even infinite) sums keep their limit
+        scaled = np.where(s0 >= sm, 1.0 / (1.0 + sm / s0), (s0 / sm) / (1.0 + s0 / sm))
+        w = np.where(np.isfinite(s0 + sm), w, scaled)
     return np.where(np.isfinite(w) & ~np.isnan(s0) & ~np.isnan(sm), w, 0.0)
 
 
