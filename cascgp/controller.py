@@ -146,8 +146,9 @@ class FeedforwardController:
             (defaults to ``model`` itself if that is a rigid-body model, else an SP model's own ``rbd``,
             else zero); with ``gate``
             it is also the nominal model the feedforward falls back toward.
-        gate: trust the learned model only where it is confident (needs a cascgp model with
-            ``predict_one_var`` and a nominal model: ``fallback``, or an SP model's own ``rbd``):
+        gate: fall back from the learned model toward the nominal one where the model is not to be trusted
+            (needs a nominal model: ``fallback``, or an SP model's own ``rbd``; and a cascgp model with
+            ``predict_one_var`` for the variance rules, ``predict_one`` for the innovation rule):
             ``False``, ``True`` (the default rule: ``"innovation"`` for derivative-based models, ``"wiener"``
             for derivative-free ones), ``"innovation"``, ``"wiener"``, ``"floor"`` (semi-parametric models
             only) or ``"variance"``; see below.
@@ -186,7 +187,8 @@ class FeedforwardController:
       correction, and the learner's later models were worse for it (docs/lag_diagnosis.md; tested as a
       replacement in docs/gate_rule.md). Semi-parametric models only: there the GP's prior is the prior of the
       correction to the RBD; an NP model's GP prior is about the torque itself.
-    * ``"innovation"`` (``True``'s rule for derivative-based models): the evidence of this episode's torque sensors instead of the GP's variance. At every
+    * ``"innovation"`` (``True``'s rule for derivative-based models): the evidence of this episode's torque
+      sensors instead of the GP's variance. At every
       ``online_every``-th measurement (:meth:`observe`, the samples online learning would take: measured q and
       q̇, q̈ by central differences, the measured torque :math:`\tau`) the squared errors of the nominal and of the
       learned model enter discounted sums, and
@@ -206,8 +208,8 @@ class FeedforwardController:
       pulled toward 1/2: with a nominal error :math:`b` and a shared noise variance :math:`\sigma^2`, a right model
       gets :math:`(b^2 + \sigma^2) / (b^2 + 2 \sigma^2)`. The regression form
       :math:`\sum \lambda\, e_0 d / \sum \lambda\, d^2` (clipped to [0, 1]) would cancel the shared noise; it
-      has not been tested. The weight is per joint,
-      not per state: the errors of the last seconds stand for the part of the workspace the reference is in.
+      has not been tested. The weight is per joint, not per state: the errors of the last seconds stand for the
+      part of the workspace the reference is in.
       Any derivative-based model (SP or NP); the errors are taken before a sample enters an online window.
       Measured as a learner on new seeds (docs/gate_rule.md, pre-registered): after three attempts on a new task
       it ends at 1.05 x the ungated learner in the median (the Wiener rule 1.36 x on other new seeds), and its
