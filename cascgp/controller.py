@@ -314,6 +314,8 @@ class FeedforwardController:
         self._recent: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
         self._err_nominal = np.zeros(self.dof)
         self._err_model = np.zeros(self.dof)
+        # the weights change only when a sample arrives (every online_every-th tick), not every tick
+        self._innovation_w = innovation_weights(self._err_nominal, self._err_model)
         self._t_innovation: float | None = None
         self.n_innovation_samples = 0
         self._n_observed = 0
@@ -383,7 +385,7 @@ class FeedforwardController:
         nominal = np.asarray(self._nominal.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
         if self.gate == "innovation":
             d = np.asarray(self.model.predict_one(q_d, qd_d, qdd_d, q_hist=q_hist), dtype=float) - nominal
-            w = innovation_weights(self._err_nominal, self._err_model)
+            w = self._innovation_w.copy()  # last_gate is the caller's
         else:
             mean, var = self.model.predict_one_var(q_d, qd_d, qdd_d, q_hist=q_hist)
             d = mean - nominal
@@ -442,6 +444,7 @@ class FeedforwardController:
         self._recent, self._n_observed = [], 0
         self.n_online_samples = self.n_online_rejected = 0
         self._err_nominal, self._err_model = np.zeros(self.dof), np.zeros(self.dof)
+        self._innovation_w = innovation_weights(self._err_nominal, self._err_model)
         self._t_innovation, self.n_innovation_samples = None, 0
         self.last_gate, self.last_model_error = None, None
         if self.online:
@@ -500,6 +503,7 @@ class FeedforwardController:
         decay = 0.5 ** (dt / INNOVATION_HALF_LIFE_S)
         self._err_model = decay * self._err_model + e_model
         self._err_nominal = decay * self._err_nominal + e_nominal
+        self._innovation_w = innovation_weights(self._err_nominal, self._err_model)
         self._t_innovation = t
         self.n_innovation_samples += 1
 

@@ -65,15 +65,16 @@ def study_data(folder: str | Path | None, out: str | Path, *, preset: str = "qui
 
 
 def _sensor_model(collection: dict, sensor_std: dict | None) -> Any:
-    """The :class:`jaco_env.SensorNoise` a collection was recorded with: none for ``sensor_noise="none"``, else the
-    standard deviations stored with the data (``meta["sensor_std"]``, written since they are stored), else the
-    env's defaults (files collected before; the defaults have not changed since the env was written)."""
+    """The :class:`jaco_env.SensorNoise` a collection was recorded with: the standard deviations stored with the
+    data (``meta["sensor_std"]``), else, for files collected before they were stored, the one its
+    ``sensor_noise`` setting gives today (:func:`cascgp_experiments.collect.sensor_model`; the env's defaults have
+    not changed since the env was written)."""
     from jaco_env import SensorNoise
 
-    if collection.get("sensor_noise", "default") == "none":
-        return SensorNoise.none()
+    from cascgp_experiments.collect import sensor_model
+
     if sensor_std is None:
-        return SensorNoise()
+        return sensor_model(collection.get("sensor_noise", "default"))
     if not isinstance(sensor_std, dict) or set(sensor_std) != {"q_std", "qd_std", "tau_std"}:
         raise ValueError(f"sensor_std: expected the meta['sensor_std'] of a collected Jaco file (q_std, qd_std, "
                          f"tau_std), got {sensor_std!r}")

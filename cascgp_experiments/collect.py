@@ -113,12 +113,17 @@ QDD_SOURCES = ("savgol", "true")
 _LATER_FIELDS = {"sensor_noise": "default", "qdd_source": "savgol"}
 
 
-def sensor_std(sensor_noise: str) -> dict[str, float]:
-    """The standard deviations of the sensors a collection with :attr:`CollectConfig.sensor_noise` records with
-    (stored in each file's ``meta["sensor_std"]``, so that the file is read right if the env's defaults change)."""
+def sensor_model(sensor_noise: str):
+    """The ``jaco_env.SensorNoise`` a collection with :attr:`CollectConfig.sensor_noise` records with."""
     from jaco_env import SensorNoise
 
-    sn = SensorNoise.none() if sensor_noise == "none" else SensorNoise()
+    return SensorNoise.none() if sensor_noise == "none" else SensorNoise()
+
+
+def sensor_std(sensor_noise: str) -> dict[str, float]:
+    """The standard deviations of :func:`sensor_model` (stored in each file's ``meta["sensor_std"]``, so that the
+    file is read right if the env's defaults change)."""
+    sn = sensor_model(sensor_noise)
     return {"q_std": float(sn.q_std), "qd_std": float(sn.qd_std), "tau_std": float(sn.tau_std)}
 
 

@@ -32,9 +32,10 @@ The protocol was fixed (and committed) before any of its runs:
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -80,10 +81,29 @@ def protocol_from_args(p: Any, a: Any, *, min_attempts: int, two_tasks_why: str
     return cfg, seeds
 
 
-def scatter_ratios(ax: Any, rows: list[dict[str, Any]], medians: dict[str, float | None], colors: Any = None
-                   ) -> list[str]:
+@contextmanager
+def ratio_figure(path: Path, title: str, figsize: tuple[float, float] = (9.0, 4.5)) -> Iterator[Any]:
+    """The axes of a ratio plot (headless); when the block ends it gets ``title`` and is saved to ``path``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=figsize)
+    try:
+        yield ax
+        ax.set_title(title, fontsize=9)
+        fig.tight_layout()
+        save_figure(fig, path, dpi=120)
+    finally:
+        plt.close(fig)
+
+
+def scatter_ratios(ax: Any, rows: list[dict[str, Any]], medians: dict[str, float | None], colors: Any = None,
+                   limits: dict[str, float | None] | None = None) -> list[str]:
     """Every ratio of ``rows`` for each quantity of ``medians`` (one dot per seed and task, ``colors(row)`` or blue),
-    the quantity's median as a black bar (none when None), the quantities as x labels; returns them."""
+    the quantity's median as a black bar (none when None), its criterion in ``limits`` as a red dashed bar, the
+    quantities as x labels; returns them."""
     quantities = list(medians)
     for i, quantity in enumerate(quantities):
         sel = [r for r in rows if r["quantity"] == quantity]
@@ -91,6 +111,8 @@ def scatter_ratios(ax: Any, rows: list[dict[str, Any]], medians: dict[str, float
         ax.scatter(x, [r["ratio"] for r in sel], c=[colors(r) if colors else "C0" for r in sel], s=18)
         if medians[quantity] is not None:
             ax.hlines(medians[quantity], i - 0.3, i + 0.3, color="k")
+        if limits and limits.get(quantity) is not None:
+            ax.hlines(limits[quantity], i - 0.35, i + 0.35, color="r", linestyles="dashed")
     ax.axhline(1.0, color="0.7", lw=1, zorder=0)
     ax.set_xticks(range(len(quantities)), [q.replace("_", "\n") for q in quantities], fontsize=7)
     return quantities
@@ -232,21 +254,9 @@ def summary_markdown(results: dict[str, Any]) -> str:
 
 def plot(results: dict[str, Any], path: Path) -> None:
     """Every ratio per quantity (one dot per seed and task), with the criteria as lines."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    medians = {q: g["all"].get("median") for q, g in results["summary"].items()}
-    quantities = scatter_ratios(ax, results["ratios"], medians,
-                                lambda r: "C1" if r["seed"] in SEEDS_SEEN_WHEN_CHOSEN else "C0")
-    for i, quantity in enumerate(quantities):
-        if quantity in CRITERIA:
-            ax.hlines(CRITERIA[quantity], i - 0.35, i + 0.35, color="r", linestyles="dashed")
-    ax.set_ylabel("ratio of tracking RMSEs")
-    ax.set_title("Gated feedforward, paired across seeds (orange: seed the rule was chosen on; "
-                 "black: median; red: criterion)", fontsize=9)
-    fig.tight_layout()
-    save_figure(fig, path, dpi=120)
-    plt.close(fig)
+    with ratio_figure(path, "Gated feedforward, paired across seeds (orange: seed the rule was chosen on; "
+                            "black: median; red: criterion)") as ax:
+        medians = {q: g["all"].get("median") for q, g in results["summary"].items()}
+        scatter_ratios(ax, results["ratios"], medians, lambda r: "C1" if r["seed"] in SEEDS_SEEN_WHEN_CHOSEN else "C0",
+                       limits=CRITERIA)
+        ax.set_ylabel("ratio of tracking RMSEs")

@@ -63,8 +63,7 @@ from typing import Any
 import numpy as np
 
 from cascgp.io import atomic_write_text, write_json
-from cascgp_experiments.common import save_figure
-from cascgp_experiments.gate_eval import GATE_EVAL_CONFIG, find_attempt, ratio_stats, scatter_ratios  # noqa: F401 (ratio_stats re-used by callers)
+from cascgp_experiments.gate_eval import GATE_EVAL_CONFIG, find_attempt, ratio_figure, ratio_stats, scatter_ratios
 from cascgp_experiments.learner_divergence import NULL_FIT_SEED_OFFSET, UNGATED, joint_split
 from cascgp_experiments.transfer import TransferConfig, controller_job
 
@@ -286,23 +285,13 @@ def summary_markdown(results: dict[str, Any]) -> str:
 
 def plot(results: dict[str, Any], path: Path) -> None:
     """Every ratio per quantity (one dot per seed), medians in black, the criteria in red."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(10, 4.5))
-    quantities = scatter_ratios(ax, results["ratios"], {q: st.get("median") for q, st in results["summary"].items()})
-    for i, q in enumerate(quantities):
-        limit = results["summary"][q].get("limit")
-        if limit is not None:
-            ax.hlines(limit, i - 0.35, i + 0.35, color="r", linestyles="dashed")
-    ax.set_yscale("log")
-    ax.set_ylabel("ratio of tracking RMSEs")
     names = {"GLf": "floor rule", "GLw": "Wiener rule", "GLi": "innovation rule"}
     gated = [f"{label} ({names.get(label, label)})" for label in results["wrist"]]
-    ax.set_title(f"Gate rules as learners on seeds {results['config']['seeds']}: " + ", ".join(gated)
-                 + ", UL' (null); all / UL unless named", fontsize=9)
-    fig.tight_layout()
-    save_figure(fig, path, dpi=120)
-    plt.close(fig)
+    title = (f"Gate rules as learners on seeds {results['config']['seeds']}: " + ", ".join(gated)
+             + ", UL' (null); all / UL unless named")
+    summary = results["summary"]
+    with ratio_figure(path, title, figsize=(10, 4.5)) as ax:
+        scatter_ratios(ax, results["ratios"], {q: st.get("median") for q, st in summary.items()},
+                       limits={q: st.get("limit") for q, st in summary.items()})
+        ax.set_yscale("log")
+        ax.set_ylabel("ratio of tracking RMSEs")

@@ -63,8 +63,7 @@ import numpy as np
 
 from cascgp.controller import gate_weights
 from cascgp.io import atomic_write_text, write_json
-from cascgp_experiments.common import save_figure
-from cascgp_experiments.gate_eval import (GATE_EVAL_CONFIG, GATE_EVAL_SEEDS, find_attempt, ratio_stats,
+from cascgp_experiments.gate_eval import (GATE_EVAL_CONFIG, GATE_EVAL_SEEDS, find_attempt, ratio_figure, ratio_stats,
                                           scatter_ratios)
 from cascgp_experiments.transfer import TransferConfig
 
@@ -375,19 +374,10 @@ def summary_markdown(results: dict[str, Any]) -> str:
 
 def plot(results: dict[str, Any], path: Path) -> None:
     """Every ratio per quantity (one dot per seed and task), medians in black, the 10 % band in red."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(9, 4.5))
-    scatter_ratios(ax, results["ratios"], {q: st.get("median") for q, st in results["summary"].items()})
-    for y in (1 / 1.1, 1.1):
-        ax.axhline(y, color="r", ls="--", lw=0.8)
-    ax.set_yscale("log")
-    ax.set_ylabel("ratio")
-    ax.set_title("Gated vs ungated learners: null (fit seed only), decomposition, uncertainty along the reference",
-                 fontsize=9)
-    fig.tight_layout()
-    save_figure(fig, path, dpi=120)
-    plt.close(fig)
+    with ratio_figure(path, "Gated vs ungated learners: null (fit seed only), decomposition, uncertainty along the "
+                            "reference") as ax:
+        scatter_ratios(ax, results["ratios"], {q: st.get("median") for q, st in results["summary"].items()})
+        for y in (1 / 1.1, 1.1):
+            ax.axhline(y, color="r", ls="--", lw=0.8)
+        ax.set_yscale("log")
+        ax.set_ylabel("ratio")
