@@ -32,6 +32,9 @@ from __future__ import annotations
 import importlib
 from typing import Any
 
+#: Version of the ``cascgp-jaco`` distribution (``cascgp``, ``jaco_env`` and the experiments share it).
+__version__ = "0.2.0"
+
 _EXPORTS = {
     "DynamicsData": "cascgp.data",
     "SavGol": "cascgp.data",

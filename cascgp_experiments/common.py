@@ -1,5 +1,5 @@
 """Shared pieces of the experiments: model names and labels, grids, the paper's Table I numbers and
-the table computation, repository paths, JSON and figure writing, thread limits.
+the table computation, the shipped nominal URDF and the SARCOS default, JSON and figure writing, thread limits.
 
 Nothing here imports ``jaco_env``, torch or a GP module (only numpy and :mod:`cascgp.io`):
 :mod:`cascgp_experiments.plots` imports only this module, :mod:`cascgp_experiments.claims` and
@@ -8,6 +8,7 @@ matplotlib, so that figures and tables are regenerated from the JSON alone.
 
 from __future__ import annotations
 
+import importlib.util
 import os
 from pathlib import Path
 from typing import Any, Iterable
@@ -16,9 +17,34 @@ import numpy as np
 
 from cascgp.io import atomic_write, json_safe, read_json, write_json  # noqa: F401  (re-exported for the study)
 
-REPO = Path(__file__).resolve().parents[1]
-DEFAULT_SARCOS = (REPO / ".." / "shared" / "data" / "sarcos" / "ias_sarcos_data.mat").resolve()
-NOMINAL_URDF = REPO / "assets" / "jaco2_nominal.urdf"
+def _jaco_env_dir() -> Path:
+    """The installed ``jaco_env`` package's folder, found without importing it (it would import MuJoCo)."""
+    spec = importlib.util.find_spec("jaco_env")
+    if spec is None or not spec.submodule_search_locations:
+        raise ModuleNotFoundError("jaco_env is not installed (pip install cascgp-jaco)")
+    return Path(next(iter(spec.submodule_search_locations))).resolve()
+
+
+#: The Jaco 2 nominal URDF shipped as package data of ``jaco_env`` (the same path as ``jaco_env.NOMINAL_URDF``).
+NOMINAL_URDF = _jaco_env_dir() / "assets" / "jaco2_nominal.urdf"
+
+#: Environment variable naming the IAS SARCOS ``.mat`` file used when a command is given no ``--sarcos``.
+SARCOS_ENV = "CASCGP_SARCOS"
+
+
+def default_sarcos() -> Path | None:
+    """The SARCOS file to use when the user names none: ``$CASCGP_SARCOS`` if set, else, in a source checkout that
+    has the project's ``shared/`` folder beside it, ``../shared/data/sarcos/ias_sarcos_data.mat``; ``None`` when
+    neither exists (an installed package never guesses a path: pass ``--sarcos``)."""
+    env = os.environ.get(SARCOS_ENV)
+    if env:
+        return Path(env)
+    checkout = Path(__file__).resolve().parents[1]
+    if (checkout / "pyproject.toml").is_file():
+        cand = (checkout / ".." / "shared" / "data" / "sarcos" / "ias_sarcos_data.mat").resolve()
+        if cand.is_file():
+            return cand
+    return None
 
 #: Name of the parametric baseline in result files (not a cascgp model: RNEA of the nominal URDF).
 RBD = "rbd"

@@ -1,4 +1,4 @@
-"""The nominal URDF of the simulated Jaco 2 arm (``assets/jaco2_nominal.urdf`` + ``.json`` sidecar).
+"""The nominal URDF of the simulated Jaco 2 arm (``jaco_env/assets/jaco2_nominal.urdf`` + ``.json`` sidecar, shipped as package data).
 
 This module owns what is Jaco-specific about the nominal model: which MuJoCo model is exported (the
 *bare* simulated robot, ``jaco_env.robot.build_arm_mjcf(armature=None, frictionloss=None,
@@ -30,7 +30,7 @@ import mujoco
 
 from cascgp.urdf_export import check_urdf_path, convert, format_float, make_sidecar, write_urdf
 
-DEFAULT_OUT = Path("assets/jaco2_nominal.urdf")
+DEFAULT_OUT = Path(__file__).resolve().parents[1] / "jaco_env" / "assets" / "jaco2_nominal.urdf"
 #: Command written into the files' provenance.
 GENERATOR = "python -m scripts.generate_urdf"
 

@@ -2,7 +2,7 @@
 
 :func:`breakdown` runs one noise-free sum-of-sinusoids motion (``JacoPayload-v0``, velocity mode,
 100 Hz, the data-efficiency study's protocol), computes the residual ``tau - tau_RBD(q, qd, qdd)`` of
-the nominal model (``assets/jaco2_nominal.urdf``) with qdd from the study's Savitzky-Golay filter, and
+the nominal model (``jaco_env/assets/jaco2_nominal.urdf``) with qdd from the study's Savitzky-Golay filter, and
 again with the true accelerations (the env's privileged ``info["qacc"]``). The measured torque is
 link-side, so it holds no rotor inertia or joint friction: what remains with the true qdd is the
 payload and the calibration error; the difference between the two is the acceleration estimate's

@@ -29,6 +29,15 @@ from __future__ import annotations
 
 import os
 import sys
+from pathlib import Path
+
+#: Version of the ``cascgp-jaco`` distribution (the same as ``cascgp.__version__``).
+__version__ = "0.2.0"
+
+#: The Jaco 2's nominal rigid-body model shipped with the package: a URDF with a calibration error and no payload
+#: or friction, and its JSON sidecar (armature, limits) beside it; ``cascgp.load_nominal(jaco_env.NOMINAL_URDF)``
+#: reads both. Written by ``python -m scripts.generate_urdf`` (:mod:`cascgp_experiments.nominal_urdf`).
+NOMINAL_URDF = Path(__file__).resolve().parent / "assets" / "jaco2_nominal.urdf"
 
 if sys.platform.startswith("linux") and "MUJOCO_GL" not in os.environ and not (
     os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
@@ -52,7 +61,7 @@ from jaco_env.sensors import (  # noqa: E402
     split_obs,
 )
 
-__all__ = ["robot", "SensorNoise", "DEFAULT_KP", "DEFAULT_KD", "split_obs", "OBS_Q", "OBS_QD", "OBS_TAU",
+__all__ = ["__version__", "NOMINAL_URDF", "robot", "SensorNoise", "DEFAULT_KP", "DEFAULT_KD", "split_obs", "OBS_Q", "OBS_QD", "OBS_TAU",
            "OBS_TIME", "OBS_JAR", "MEASUREMENT_DIM", "POUR_OBS_DIM"]
 
 #: 60 s at the default 40 Hz control rate.

@@ -2,9 +2,9 @@
 
 Usage::
 
-    python -m scripts.generate_urdf --out assets/jaco2_nominal.urdf --error 0.1 --seed 0
+    python -m scripts.generate_urdf --error 0.1 --seed 0
 
-writes ``assets/jaco2_nominal.urdf`` and ``assets/jaco2_nominal.json``. What is exported and why:
+writes ``jaco_env/assets/jaco2_nominal.urdf`` and ``.json`` (package data of ``jaco_env``). What is exported and why:
 :mod:`cascgp_experiments.nominal_urdf`; the conversion, the calibration error rule and the sidecar
 format: :mod:`cascgp.urdf_export`.
 """

@@ -9,7 +9,7 @@ For every task of ``jaco_env.tasks.DEFAULT_TASKS`` runs one seed-fixed ``JacoPou
 * ``oracle``: :class:`jaco_env.oracle.OracleController` (MuJoCo inverse dynamics of the true
   rigid scene, marbles lumped) + PD,
 * ``nominal``: :class:`cascgp.controller.FeedforwardController` with the nominal rigid-body
-  model ``assets/jaco2_nominal.urdf`` (10% calibration error, no payload, no friction) + PD,
+  model ``jaco_env/assets/jaco2_nominal.urdf`` (10% calibration error, no payload, no friction) + PD,
 * ``pd``: the same PD feedback without feedforward,
 
 all with ``jaco_env.DEFAULT_KP/KD``, run by the one episode runner ``cascgp.episodes.run_episode``
@@ -33,7 +33,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 CONTROLLERS = ("oracle", "nominal", "pd")
-NOMINAL_URDF = Path(__file__).resolve().parents[1] / "assets" / "jaco2_nominal.urdf"
+from cascgp_experiments.common import NOMINAL_URDF  # noqa: E402  (numpy and cascgp.io only)
 
 
 def make_controller(controller: str):

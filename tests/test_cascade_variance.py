@@ -170,7 +170,7 @@ def test_an_sp_cascade_uses_the_nominal_models_analytic_derivatives() -> None:
     differences used for a nominal model that offers only inverse_dynamics."""
     from cascgp.rbd import load_nominal
 
-    rbd = load_nominal(Path(__file__).resolve().parents[1] / "assets" / "jaco2_nominal.urdf")
+    rbd = load_nominal(Path(__file__).resolve().parents[1] / "jaco_env" / "assets" / "jaco2_nominal.urdf")
 
     class TorqueOnly:  # the same dynamics, without inverse_dynamics_derivatives: the finite-difference path
         dof = rbd.dof

@@ -281,9 +281,9 @@ def test_sp_with_urdf_rbd_reloads_from_source(tmp_path):
 
     from cascgp.rbd import load_nominal
 
-    urdf = Path(__file__).resolve().parents[1] / "assets" / "jaco2_nominal.urdf"
+    urdf = Path(__file__).resolve().parents[1] / "jaco_env" / "assets" / "jaco2_nominal.urdf"
     if not urdf.exists():
-        pytest.skip("assets/jaco2_nominal.urdf not generated")
+        pytest.skip("jaco_env/assets/jaco2_nominal.urdf not generated")
     rbd = load_nominal(urdf)
     rng = np.random.default_rng(0)
     T = 30

@@ -26,7 +26,7 @@ from cascgp_experiments import nominal_urdf as gen
 from jaco_env import robot
 
 REPO = Path(__file__).resolve().parents[1]
-ASSET = REPO / "assets" / "jaco2_nominal.urdf"
+ASSET = REPO / "jaco_env" / "assets" / "jaco2_nominal.urdf"
 TOL = 1e-8
 
 

@@ -138,7 +138,7 @@ def test_sp_predict_one_refuses_huge_velocities_like_predict() -> None:
 def test_sp_model_file_loads_from_another_folder_without_the_urdf(tmp_path: Path, monkeypatch) -> None:
     from cascgp.rbd import load_nominal
 
-    src = REPO / "assets" / "jaco2_nominal.urdf"
+    src = REPO / "jaco_env" / "assets" / "jaco2_nominal.urdf"
     work = tmp_path / "work"
     work.mkdir()
     shutil.copy(src, work / "arm.urdf")
@@ -166,7 +166,7 @@ def test_sp_model_file_loads_from_another_folder_without_the_urdf(tmp_path: Path
 def test_damaged_embedded_urdf_is_reported(tmp_path: Path) -> None:
     from cascgp.rbd import load_nominal
 
-    rbd = load_nominal(REPO / "assets" / "jaco2_nominal.urdf")
+    rbd = load_nominal(REPO / "jaco_env" / "assets" / "jaco2_nominal.urdf")
     rng = np.random.default_rng(1)
     q, qd, qdd = (rng.uniform(-1, 1, (30, 6)) for _ in range(3))
     data = DynamicsData(q=q, qd=qd, qdd=qdd, tau=rbd.inverse_dynamics(q, qd, qdd) + 0.05, t=np.arange(30) * 0.1)

@@ -1,0 +1,90 @@
+"""The paper's data-efficiency study, reproduced in simulation (and on SARCOS), in one command.
+
+Usage::
+
+    cascgp study --out out/study --sarcos PATH/ias_sarcos_data.mat   # full (under an hour, 2 cores)
+    cascgp study --out out/quick --quick                             # a few minutes (no SARCOS file: Jaco only)
+    cascgp study --out out/study --ray local                         # the same jobs on a local Ray instance
+
+The steps, presets and outputs: :mod:`cascgp_experiments.study`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from cascgp_experiments.common import SARCOS_ENV, VARIANTS, default_sarcos, limit_threads
+from cascgp_experiments.execution import add_execution_args, check_args
+from cascgp_experiments.study import PRESETS, run_study
+
+
+def main(argv: list[str] | None = None, prog: str | None = None) -> None:
+    """``cascgp study``: parse ``argv`` (``sys.argv[1:]`` when ``None``) and run the study."""
+    ap = argparse.ArgumentParser(prog=prog, description="Data-efficiency study of the 12 cascaded-GP variants "
+                                                        "(paper sec. IV)")
+    ap.add_argument("--out", required=True, help="output folder (data, cache, results.json, figures, tables)")
+    g = ap.add_mutually_exclusive_group()
+    g.add_argument("--quick", action="store_true", help="reduced grid/data end to end (a few minutes)")
+    g.add_argument("--smoke", action="store_true", help="tiny end-to-end run (for the default tests)")
+    ap.add_argument("--sarcos", default=None,
+                    help=f"IAS SARCOS .mat file (default: ${SARCOS_ENV}, or a source checkout's ../shared copy; "
+                         "without one the SARCOS part is skipped)")
+    ap.add_argument("--no-sarcos", action="store_true", help="skip the SARCOS part")
+    ap.add_argument("--no-iterations", action="store_true", help="skip the iteration-count fits")
+    ap.add_argument("--models", default=None, help="comma-separated subset of the 12 variants")
+    add_execution_args(ap)
+    ap.add_argument("--restarts", type=int, default=None,
+                    help="GP starts per fit (default 10, one warm-started along the grid)")
+    ap.add_argument("--subsets", type=int, default=None, help="training subsets used (default 10)")
+    ap.add_argument("--grid", default=None, help="comma-separated seconds of data (default: the preset's)")
+    ap.add_argument("--max-seconds", type=float, default=None,
+                    help="drop grid points above this many seconds (Jaco and SARCOS), e.g. 10 for Table I's "
+                         "intervals only: the 14-50 s points cost most of the fitting time")
+    ap.add_argument("--seed", type=int, default=0)
+    a = ap.parse_args(argv)
+
+    preset = "quick" if a.quick else "smoke" if a.smoke else "full"
+    st = PRESETS[preset]
+    kw: dict[str, Any] = {"seed": a.seed}
+    if a.restarts is not None:
+        kw["n_restarts"] = a.restarts
+    if a.subsets is not None:
+        kw["n_subsets"] = a.subsets
+    if a.grid is not None:
+        kw["grid"] = tuple(float(x) for x in a.grid.split(","))
+    st = replace(st, **kw)
+    if a.max_seconds is not None:
+        if not a.max_seconds >= min(st.grid):
+            ap.error(f"--max-seconds: expected at least the smallest grid point {min(st.grid)}, got {a.max_seconds}")
+        st = replace(st, grid=tuple(g for g in st.grid if g <= a.max_seconds),
+                     sarcos_grid=tuple(g for g in st.sarcos_grid if g <= a.max_seconds))
+    models = None
+    if a.models:
+        models = [m.strip() for m in a.models.split(",") if m.strip()]
+        bad = [m for m in models if m not in VARIANTS]
+        if bad:
+            ap.error(f"--models: unknown {bad}; expected names from {list(VARIANTS)}")
+    sarcos = None
+    if not a.no_sarcos:
+        found = default_sarcos()
+        sarcos = a.sarcos or (str(found) if found is not None and found.exists() else None)
+        if a.sarcos and not Path(a.sarcos).exists():
+            ap.error(f"--sarcos: file not found: {a.sarcos}")
+        if sarcos is None:
+            print(f"no SARCOS file (--sarcos or ${SARCOS_ENV}): the SARCOS part is skipped", file=sys.stderr)
+    check_args(ap, a)
+    limit_threads(1)
+    res = run_study(a.out, st, models=models, workers=a.workers, ray_address=a.ray, sarcos=sarcos,
+                    do_iterations=not a.no_iterations,
+                    command=" ".join([prog or "cascgp study"] + (argv if argv is not None else sys.argv[1:])))
+    t = res["meta"]["timings"]
+    print("timings (s): " + ", ".join(f"{k}={v:.1f}" for k, v in t.items()))
+    print(f"results: {Path(a.out) / 'results.json'}; table: {Path(a.out) / 'table1.md'}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,111 @@
+"""Task-transfer pouring episodes: data accumulates across tasks and the model is retrained between attempts.
+
+For every controller, a sequence of pouring tasks in different parts of the workspace
+is attempted several times each, then the first task is revisited once. After every
+attempt of a learning controller, the measured episode joins a persistent data buffer
+(:class:`cascgp.buffer.DataBuffer`) and the model is retrained on everything seen so
+far (subsampled to ``--rate`` Hz, at most ``--cap`` samples, warm-started from the
+previous hyperparameters). The payload (bottle + marbles + extra mass) is the same
+unknown mass throughout, as when a robot keeps holding the same bottle.
+
+Controllers: ``pd`` (feedback only), ``rbd`` (nominal rigid-body feedforward) and any
+of the twelve model names of :mod:`cascgp.models`. Before a learning controller has
+any data, an SP model is its RBD mean (RBD feedforward) and an NP model is zero (PD).
+
+Usage::
+
+    cascgp transfer --out out/transfer            # full run
+    cascgp transfer --out out/demo --quick        # README demo (a few minutes)
+
+    cascgp transfer --out out/transfer --workers 2     # two controllers at a time
+    cascgp transfer --out out/transfer --ray local     # the same jobs on a local Ray instance
+    cascgp transfer --out out/demo --quick --video out/demo/video   # + side-by-side MP4 clips
+
+Writes ``results.json`` (every attempt's metrics), ``summary.md`` (the summary table),
+``transfer.png`` (tracking RMSE and marbles in the jar per attempt) to ``--out``, the
+data buffers under ``--out/buffers`` and the job cache (one file per finished controller) under
+``--out/cache/transfer``: the same command started again after a kill resumes. The loop:
+:mod:`cascgp.learning`; the Jaco experiment: :mod:`cascgp_experiments.transfer`; the parallel
+jobs: :mod:`cascgp_experiments.execution`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+from cascgp_experiments.execution import add_execution_args, check_args, session
+from cascgp_experiments.transfer import (FULL_CONTROLLERS, FULL_TASKS, QUICK_CONTROLLERS, QUICK_TASKS,
+                                         TransferConfig, VideoOptions, claim_output, run_transfer, video_attempts,
+                                         write_outputs)
+
+
+def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, bool, argparse.Namespace]:
+    p = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
+    p.add_argument("--out", type=Path, required=True, help="output folder (created; should be new or empty)")
+    p.add_argument("--quick", action="store_true",
+                   help=f"short demo: controllers {QUICK_CONTROLLERS}, tasks {QUICK_TASKS}, 3 attempts each")
+    p.add_argument("--controllers", type=str, default=None, help="comma-separated controller names")
+    p.add_argument("--tasks", type=str, default=None, help="comma-separated task names (JacoPour-v0 defaults)")
+    p.add_argument("--attempts", type=int, default=3, help="attempts per task")
+    p.add_argument("--no-revisit", action="store_true", help="do not revisit the first task at the end")
+    p.add_argument("--payload", type=float, default=1.2, help="unknown payload mass in the hand (kg)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--rate", type=float, default=10.0, help="training data rate (Hz)")
+    p.add_argument("--cap", type=int, default=500, help="maximum training-set size")
+    p.add_argument("--restarts", type=int, default=3, help="GP optimiser restarts per retraining")
+    p.add_argument("--overwrite", action="store_true",
+                   help="delete the data buffers and job cache of an earlier run in --out (without it, the same "
+                        "command resumes a stopped run)")
+    p.add_argument("--video", type=Path, default=None,
+                   help="write MP4 clips (pip install 'cascgp-jaco[video]'): the first and last attempt of every task and the "
+                        "revisit, RBD and the learned controller side by side, with RMSE and marbles on the frame")
+    p.add_argument("--video-controller", type=str, default=None,
+                   help="the learned controller shown next to RBD (default: the last controller that learns)")
+    add_execution_args(p)
+    a = p.parse_args(argv)
+    cfg = TransferConfig(
+        controllers=tuple(a.controllers.split(",")) if a.controllers else
+        (QUICK_CONTROLLERS if a.quick else FULL_CONTROLLERS),
+        tasks=tuple(a.tasks.split(",")) if a.tasks else (QUICK_TASKS if a.quick else FULL_TASKS),
+        attempts=a.attempts,
+        revisit=not a.no_revisit, payload_mass=a.payload, seed=a.seed, rate_hz=a.rate, cap=a.cap,
+        restarts=a.restarts)
+    if cfg.attempts < 1:
+        p.error("--attempts must be at least 1")
+    check_args(p, a)
+    if a.video is not None:
+        learned = a.video_controller or next((c for c in reversed(cfg.controllers) if c not in ("pd", "rbd")), None)
+        if learned is None or learned not in cfg.controllers or "rbd" not in cfg.controllers:
+            p.error("--video needs 'rbd' and a learning controller among --controllers")
+        a.video_options = VideoOptions(str(a.video.resolve()), ("rbd", learned), video_attempts(cfg.plan()))
+    else:
+        a.video_options = None
+    return cfg, a.out, a.overwrite, a
+
+
+def main(argv: list[str] | None = None, prog: str | None = None) -> None:
+    """``cascgp transfer``: parse ``argv`` (``sys.argv[1:]`` when ``None``) and run."""
+    cfg, out, overwrite, a = parse_args(argv, prog)
+    try:
+        state = claim_output(cfg, out, overwrite)
+    except ValueError as exc:
+        sys.exit(f"error: {exc}")
+    if state == "resume":
+        print(f"resuming the run in {out} (finished controllers come from its job cache)", file=sys.stderr)
+    t0 = time.perf_counter()
+    jobs: dict = {}
+    with session(a.ray, a.workers):
+        runs = run_transfer(cfg, out, workers=a.workers, ray_address=a.ray, stats=jobs, video=a.video_options)
+    write_outputs(runs, cfg, out, time.perf_counter() - t0, jobs=jobs)
+    print((out / "summary.md").read_text())
+    if a.video_options is not None:
+        print(f"videos:  {a.video}/*.mp4")
+    print(f"results: {out / 'results.json'}\nplot:    {out / 'transfer.png'}\n"
+          f"wall time {time.perf_counter() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
