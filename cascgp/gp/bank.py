@@ -40,7 +40,7 @@ from cascgp.gp.checks import as_list, check_matrix, check_scale, check_vector, j
 from cascgp.gp.config import GPFitConfig, noise_var
 from cascgp.gp.kernels import get_kernel, scaled_sqdist
 from cascgp.gp.lbfgs import LBFGSOptions, minimize_batched
-from cascgp.gp.likelihood import DTYPE, blas_threads, nll_and_grad, plan_chunk
+from cascgp.gp.likelihood import DTYPE, fit_threads, nll_and_grad, plan_chunk
 from cascgp.gp.posterior import Factors, GPPosterior, compute_factors
 from cascgp.gp.restarts import initial_thetas, make_pruner, warm_theta
 from cascgp.gp.state import BankData, bank_from_state, bank_state
@@ -195,8 +195,11 @@ class GPBank:
 
         Returns:
             ``self``.
+
+        The fit runs with ``config.threads`` torch and BLAS threads (one by default) and restores the caller's
+        thread settings afterwards (:func:`cascgp.gp.likelihood.fit_threads`).
         """
-        with blas_threads(1):
+        with fit_threads(self.config.threads):
             return self._fit(X, y, init)
 
     @staticmethod

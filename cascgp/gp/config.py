@@ -55,6 +55,13 @@ class GPFitConfig:
             (``None``: no bound); keeps :math:`\operatorname{cond}(K) \le 1 + n\,\mathrm{snr\_max}`.
         max_batch_bytes: memory limit of a fit (bytes); the evaluation is chunked to stay within it, and a fit that
             cannot (:func:`estimate_fit_bytes` with one start at a time) is refused with a ``ValueError``.
+        threads: threads of torch's intra-op pool *and* of the BLAS/LAPACK library while :meth:`GPBank.fit` runs;
+            both are restored afterwards (:func:`cascgp.gp.likelihood.fit_threads`). The rule: **one thread**
+            (default). A fit's work is many small, cache-sized pieces (one ``(n, n)`` kernel block and one
+            Cholesky factor per GP and start, :math:`n \lesssim 2000`), on which a second thread gains little and
+            idle-spinning OpenMP/OpenBLAS workers cost much when the cores are shared; parallelism across fits
+            belongs to processes (``--workers``). ``None`` leaves the caller's settings untouched; an integer
+            ``k >= 1`` uses ``k`` threads. It changes no hyperparameter beyond the round-off of reduction order.
     """
 
     kernel: str = "matern52"
@@ -81,6 +88,7 @@ class GPFitConfig:
     screen_max_iter: int = 200
     screen_rel_tol: float = 1e-6
     noise_floor_target: float | tuple[float, ...] | None = None
+    threads: int | None = 1
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> GPFitConfig:
@@ -123,6 +131,9 @@ class GPFitConfig:
         if self.screen_n is not None and (not isinstance(self.screen_n, int) or self.screen_n < 2):
             raise ValueError(f"screen_n: expected None or an integer >= 2, got {self.screen_n!r}")
         self.noise_floor_target = check_target_floor(self.noise_floor_target, "noise_floor_target")
+        if self.threads is not None and (not isinstance(self.threads, (int, np.integer)) or
+                                         isinstance(self.threads, bool) or self.threads < 1):
+            raise ValueError(f"threads: expected None or an integer >= 1, got {self.threads!r}")
 
     def floors(self, y_std: np.ndarray) -> np.ndarray | None:
         r"""Per-GP noise-variance floor in normalised units, ``(B,)``, or ``None`` without ``noise_floor_target``.

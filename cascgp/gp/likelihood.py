@@ -75,7 +75,7 @@ from scipy.linalg.lapack import dpotrf as _dpotrf, dpotri as _dpotri, dpotrs as 
 from cascgp.gp.config import GPFitConfig
 from cascgp.gp.kernels import get_kernel
 
-__all__ = ["nll_and_grad", "estimate_fit_bytes", "plan_chunk", "blas_threads", "PROFILE", "DTYPE", "LOG2PI"]
+__all__ = ["nll_and_grad", "estimate_fit_bytes", "plan_chunk", "blas_threads", "fit_threads", "PROFILE", "DTYPE", "LOG2PI"]
 
 #: Every GP computation is float64.
 DTYPE = torch.float64
@@ -102,6 +102,29 @@ def blas_threads(k: int) -> Iterator[None]:
         _CONTROLLER = ThreadpoolController()
     with _CONTROLLER.limit(limits=k, user_api="blas"):
         yield
+
+
+@contextlib.contextmanager
+def fit_threads(k: int | None) -> Iterator[None]:
+    """Run a fit with ``k`` threads in torch's intra-op pool and in BLAS/LAPACK, restoring both afterwards.
+
+    ``k = None`` changes nothing. The rule for the default (``GPFitConfig.threads = 1``) is in
+    :class:`cascgp.gp.GPFitConfig`. Measured on a shared 2-core machine (SARCOS, n = 300, 7 outputs): a plain
+    script with torch's default threads took 151-212 s against 13.5 s on one thread, because torch's OpenMP
+    workers spin-wait for cores that another process holds (``python -m scripts.bench_fit_threads`` measures it side
+    by side). torch's setting is process-wide: other Python threads of the process see it
+    while the fit runs.
+    """
+    if k is None:
+        yield
+        return
+    prev = torch.get_num_threads()
+    torch.set_num_threads(int(k))
+    try:
+        with blas_threads(int(k)):
+            yield
+    finally:
+        torch.set_num_threads(prev)
 
 
 
