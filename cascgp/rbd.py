@@ -19,7 +19,10 @@ joint angles as ``(N,)`` vectors.
 
 ``load_nominal(urdf_path)`` reads the JSON sidecar written next to the URDF by
 :mod:`cascgp.urdf_export` (armature, torque and velocity limits, gravity,
-calibration error and seed). The sidecar format is defined here, once:
+calibration error and seed) when there is one; without it (a URDF of your own
+robot) the armature is zero, the limits come from the URDF's ``<limit>`` tags
+and gravity is Pinocchio's default, with a ``UserWarning`` saying so. The
+sidecar format is defined here, once:
 :func:`sidecar_path` (the path rule), :data:`SIDECAR_FORMAT_VERSION` (written) and
 :data:`SUPPORTED_SIDECAR_VERSIONS` (read), :data:`SIDECAR_REQUIRED_FIELDS`.
 
@@ -30,6 +33,7 @@ from __future__ import annotations
 
 import json
 import os
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -263,28 +267,65 @@ class RigidBodyModel:
         return f"RigidBodyModel(dof={self.dof}, joints={list(self.joint_names)}, source={self.source!r})"
 
 
+def _urdf_limits(values: np.ndarray) -> np.ndarray | None:
+    """The URDF's per-joint limits, or ``None`` unless every joint has a finite positive one."""
+    v = np.asarray(values, dtype=float)
+    return v.copy() if v.size and np.all(np.isfinite(v)) and np.all(v > 0) else None
+
+
+def _without_sidecar(urdf_path: Path, js: Path, dof: int | None) -> RigidBodyModel:
+    """:func:`load_nominal` for a URDF without a sidecar (see its docstring)."""
+    rbd = RigidBodyModel.from_urdf(urdf_path, dof=dof)
+    model = rbd.pin_model
+    torque = _urdf_limits(model.effortLimit)
+    velocity = _urdf_limits(model.velocityLimit)
+    gravity = rbd.gravity
+    assumed = {"sidecar": None, "armature": "zero (not in the URDF)",
+               "torque_limits": "URDF <limit effort>" if torque is not None else "unknown",
+               "velocity_limits": "URDF <limit velocity>" if velocity is not None else "unknown",
+               "gravity": gravity.tolist()}
+    warnings.warn(
+        f"URDF {str(urdf_path)!r} has no sidecar JSON ({str(js)!r}): assuming zero armature (rotor inertia), "
+        f"torque limits {'from the URDF' if torque is not None else 'unknown (a joint has no positive effort)'}, "
+        f"velocity limits {'from the URDF' if velocity is not None else 'unknown (a joint has no positive velocity)'}, "
+        f"gravity {tuple(gravity.tolist())} m/s^2", UserWarning, stacklevel=3)
+    return RigidBodyModel(model, armature=np.zeros(rbd.dof), torque_limits=torque, velocity_limits=velocity,
+                          meta=assumed, source=str(urdf_path), urdf_text=rbd.urdf_text)
+
+
 def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> RigidBodyModel:
-    """Load a nominal model: the URDF plus its JSON sidecar (same name, ``.json``).
+    """Load a nominal model: the URDF plus, when present, its JSON sidecar (same name, ``.json``).
 
     The sidecar (written by :func:`cascgp.urdf_export.write_urdf`) holds ``armature``,
     ``torque_limits``, ``velocity_limits``, ``gravity``, ``calibration_error``,
     ``seed``, ``joint_names``, ``dof`` and provenance; the whole dict is kept as
     ``model.meta``.
 
+    Without a sidecar (e.g. the URDF of your own robot) the model is the URDF alone and a
+    ``UserWarning`` names the URDF and what was assumed:
+
+    * armature zero (URDF cannot express rotor inertia);
+    * ``torque_limits`` / ``velocity_limits`` from the URDF's ``<limit effort=... velocity=...>``
+      (Pinocchio's ``effortLimit`` / ``velocityLimit``) when every joint has a finite positive value,
+      otherwise ``None`` (unknown: a limit of 0 or a missing tag is not taken as "no torque");
+    * gravity Pinocchio's default :math:`(0, 0, -9.81)` m/s² (world z up);
+    * ``model.meta`` records these assumptions (``meta["sidecar"]`` is ``None``).
+
     Args:
         urdf_path: the URDF file.
         dof: if given, the expected number of joints.
 
     Raises:
-        FileNotFoundError: the URDF or its sidecar is missing.
-        ValueError: the sidecar is not valid JSON, lacks a field, or disagrees with the URDF.
+        FileNotFoundError: the URDF is missing.
+        ValueError: the URDF does not parse or has another number of joints than ``dof``; the sidecar
+            is not valid JSON, lacks a field, or disagrees with the URDF.
     """
     urdf_path = Path(urdf_path)
     if not urdf_path.is_file():
         raise FileNotFoundError(f"URDF file not found: {str(urdf_path)!r}")
     js = sidecar_path(urdf_path)
-    if not js.is_file():
-        raise FileNotFoundError(f"sidecar JSON of {str(urdf_path)!r} not found: expected {str(js)!r}")
+    if not js.exists():
+        return _without_sidecar(urdf_path, js, dof)
     try:
         meta = json.loads(js.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:

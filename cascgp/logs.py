@@ -1,0 +1,330 @@
+r"""Logged robot data as CSV: the one place where the log format is defined, read and checked.
+
+A log is a text file with one header row and one row per sample, comma-separated (``csv`` dialect "excel",
+surrounding blanks ignored). Rows are numbered as lines of the file: the header is **row 1**, the first sample
+row 2; error messages use these numbers. Blank lines are skipped (they keep their row numbers).
+
+=====================  ========  ================================================================================
+column                 needed    meaning
+=====================  ========  ================================================================================
+``t``                  yes       time (s), strictly increasing within a segment
+``q1`` .. ``qN``       yes       joint positions (rad or m), joint 1 = the joint nearest the base
+``tau1`` .. ``tauN``   yes [1]_  joint torques (N m) or forces (N)
+``qd1`` .. ``qdN``     no        joint velocities; computed from ``q`` when the group is absent
+``qdd1`` .. ``qddN``   no        joint accelerations; computed from ``qd`` when the group is absent
+``segment``            no        integer id of a time-contiguous recording (non-decreasing; default all 0)
+=====================  ========  ================================================================================
+
+.. [1] optional for ``cascgp predict`` (``read_log(..., require_tau=False)``).
+
+N is read from the header: every group present holds exactly the columns ``1..N`` (``q`` defines N), columns
+may come in any order, names are case-sensitive. Any other column is an error (a misspelt ``qd_1`` would
+otherwise be dropped silently); remove unneeded columns first. Every cell is a finite decimal number.
+
+Missing derivatives
+-------------------
+Within each segment, :math:`\dot q` is the derivative of :math:`q` and :math:`\ddot q` the derivative of
+:math:`\dot q` (the given or the computed one), both by the same filter, by default :data:`DEFAULT_SMOOTHING`
+(Savitzky-Golay, window 7, polynomial order 2, :class:`cascgp.data.SavGol`): the derivative of a local quadratic
+fitted by least squares to 7 samples, centred (no lag), assuming the segment's median sample period; segments
+shorter than the window, and ``smoothing=None``, use central differences (:func:`numpy.gradient` on the times).
+The filter used is recorded in ``data.meta["derivative_filter"]`` and each group's origin in
+``data.meta["qd_source"]`` / ``["qdd_source"]`` (``"column"`` or ``"computed"``).
+
+Errors are :class:`LogFormatError` (a ``ValueError``) naming the file, the row and the column. Predictions are
+written by :func:`write_predictions` (columns ``t``, ``tau1..tauN`` predicted means, ``var1..varN`` their
+variances in N² m²).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import re
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cascgp.data import DynamicsData, SavGol
+from cascgp.io import atomic_write
+
+__all__ = ["LogFormatError", "DEFAULT_SMOOTHING", "read_log", "write_log", "write_predictions", "differentiate",
+           "filter_name"]
+
+#: The derivative filter applied to logs without velocity or acceleration columns.
+DEFAULT_SMOOTHING = SavGol(window=7, polyorder=2)
+_GROUPS = ("q", "qd", "qdd", "tau")
+_COLUMN = re.compile(r"^(q|qd|qdd|tau)([1-9][0-9]*)$")
+
+
+class LogFormatError(ValueError):
+    """A log file that does not follow the format of :mod:`cascgp.logs`; the message names file, row, column."""
+
+
+def filter_name(smoothing: SavGol | None) -> str:
+    """Human-readable name of a derivative filter, as recorded in ``meta["derivative_filter"]``."""
+    if smoothing is None:
+        return "central differences (numpy.gradient)"
+    return f"Savitzky-Golay (window={smoothing.window}, polyorder={smoothing.polyorder})"
+
+
+def differentiate(t: np.ndarray, x: np.ndarray, segment: np.ndarray, smoothing: SavGol | None) -> np.ndarray:
+    r"""Time derivative of ``x`` (T, N) within each segment (the filter of the module docstring).
+
+    With ``smoothing`` a segment of at least ``smoothing.window`` rows uses
+    :func:`scipy.signal.savgol_filter` (``deriv=1``, ``delta`` = the segment's median period, ``mode="interp"``),
+    as :meth:`cascgp.data.DynamicsData.from_measurements` does for accelerations; otherwise
+    :func:`numpy.gradient` on the sample times. A one-row segment gets 0.
+    """
+    out = np.zeros_like(x, dtype=np.float64)
+    cuts = np.flatnonzero(np.diff(segment) != 0) + 1
+    for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(t)]):
+        if hi - lo < 2:
+            continue
+        ts = t[lo:hi]
+        if smoothing is not None and hi - lo >= smoothing.window:
+            from scipy.signal import savgol_filter
+
+            h = float(np.median(np.diff(ts)))
+            out[lo:hi] = savgol_filter(x[lo:hi], smoothing.window, smoothing.polyorder, deriv=1, delta=h, axis=0,
+                                       mode="interp")
+        else:
+            out[lo:hi] = np.gradient(x[lo:hi], ts, axis=0, edge_order=1)
+    return out
+
+
+# --------------------------------------------------------------------------- reading
+def _header(path: Path, names: list[str], row: int, require_tau: bool
+            ) -> tuple[int, dict[str, list[int] | None], int | None]:
+    """N, the column indices of every group (``None`` for an absent group) and the index of ``segment``."""
+    where = f"{path}: row {row} (header)"
+    seen: dict[str, int] = {}
+    groups: dict[str, dict[int, int]] = {g: {} for g in _GROUPS}
+    seg_col = None
+    for c, name in enumerate(names):
+        if name in seen:
+            raise LogFormatError(f"{where}, column {name!r}: appears twice (columns {seen[name] + 1} and {c + 1})")
+        seen[name] = c
+        m = _COLUMN.match(name)
+        if m:
+            groups[m[1]][int(m[2])] = c
+        elif name == "segment":
+            seg_col = c
+        elif name != "t":
+            raise LogFormatError(
+                f"{where}, column {name!r} (column {c + 1}): unknown column; expected t, q1..qN, tau1..tauN and "
+                "optionally qd1..qdN, qdd1..qddN, segment (see cascgp.logs)")
+    if "t" not in seen:
+        raise LogFormatError(f"{where}, column 't': missing required column (time in s)")
+    if not groups["q"]:
+        raise LogFormatError(f"{where}, column 'q1': missing required column(s) q1..qN (joint positions)")
+    n = max(groups["q"])
+    for g in _GROUPS:
+        if not groups[g]:
+            if g == "tau" and require_tau:
+                raise LogFormatError(f"{where}, column 'tau1': missing required column(s) tau1..tau{n} "
+                                     "(joint torques)")
+            continue
+        have = set(groups[g])
+        gaps = [f"{g}{j}" for j in range(1, n + 1) if j not in have]
+        extra = [f"{g}{j}" for j in sorted(have) if j > n]
+        if gaps or extra:
+            bad = (gaps or extra)[0]
+            raise LogFormatError(
+                f"{where}, column {bad!r}: joint count mismatch: the q columns give N = {n} joints, so {g} needs "
+                f"exactly {g}1..{g}{n}; "
+                + (f"missing {', '.join(gaps)}" if gaps else f"unexpected {', '.join(extra)}"))
+    cols = {g: ([groups[g][j] for j in range(1, n + 1)] if groups[g] else None) for g in _GROUPS}
+    return n, cols, seg_col
+
+
+def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[int]]:
+    """All sample rows as a float array plus their row numbers; ``LogFormatError`` for ragged or bad cells."""
+    values: list[list[float]] = []
+    rownos: list[int] = []
+    k = len(names)
+    for cells in reader:
+        r = reader.line_num
+        if not cells or all(not c.strip() for c in cells):
+            continue
+        if len(cells) != k:
+            col = names[len(cells)] if len(cells) < k else names[-1]
+            what = (f"column {col!r}: missing (the row has {len(cells)} cells, the header {k})" if len(cells) < k else
+                    f"column {col!r}: {len(cells) - k} extra cell(s) after it (the row has {len(cells)} cells, "
+                    f"the header {k})")
+            raise LogFormatError(f"{path}: row {r}, {what}")
+        try:
+            row = [float(c) for c in cells]
+        except ValueError:
+            row = []
+        if len(row) != k or not all(map(math.isfinite, row)):
+            for c, cell in enumerate(cells):
+                try:
+                    ok = math.isfinite(float(cell))
+                except ValueError:
+                    ok = False
+                if not ok:
+                    raise LogFormatError(f"{path}: row {r}, column {names[c]!r}: expected a finite number, "
+                                         f"got {cell.strip()!r}")
+        values.append(row)
+        rownos.append(r)
+    if not values:
+        raise LogFormatError(f"{path}: row {reader.line_num + 1}: no data rows after the header (at least one "
+                             "sample is needed)")
+    return np.array(values, dtype=np.float64), rownos
+
+
+def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> DynamicsData:
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise LogFormatError(f"{path}: not a UTF-8 text file ({exc}); expected a CSV log") from None
+    reader = csv.reader(io.StringIO(text), skipinitialspace=True)
+    header = next(reader, None)
+    while header is not None and not any(c.strip() for c in header):  # leading blank lines
+        header = next(reader, None)
+    if header is None:
+        raise LogFormatError(f"{path}: row 1: empty file; expected a header row with columns t, q1..qN, "
+                             "tau1..tauN (see cascgp.logs)")
+    names = [c.strip() for c in header]
+    n, cols, seg_col = _header(path, names, reader.line_num, require_tau)
+    a, rownos = _rows(path, names, reader)
+    t = a[:, names.index("t")]
+    seg = np.zeros(len(t), dtype=np.int64)
+    if seg_col is not None:
+        raw = a[:, seg_col]
+        bad = np.flatnonzero(raw != np.round(raw))
+        if bad.size:
+            raise LogFormatError(f"{path}: row {rownos[bad[0]]}, column 'segment': expected an integer id, "
+                                 f"got {float(raw[bad[0]])!r}")
+        seg = raw.astype(np.int64)
+        dec = np.flatnonzero(np.diff(seg) < 0)
+        if dec.size:
+            r = dec[0] + 1
+            raise LogFormatError(f"{path}: row {rownos[r]}, column 'segment': ids must be non-decreasing; "
+                                 f"{seg[r]} follows {seg[r - 1]} (row {rownos[r - 1]})")
+    back = np.flatnonzero((np.diff(seg) == 0) & (np.diff(t) <= 0))
+    if back.size:
+        r = back[0] + 1
+        raise LogFormatError(f"{path}: row {rownos[r]}, column 't': time must be strictly increasing within a "
+                             f"segment; t = {float(t[r])!r} does not come after t = {float(t[r - 1])!r} "
+                             f"(row {rownos[r - 1]})")
+    arr = {g: (None if cols[g] is None else a[:, cols[g]]) for g in _GROUPS}
+    meta: dict = {"source": str(path), "format": "cascgp log CSV", "qd_source": "column", "qdd_source": "column",
+                  "has_tau": arr["tau"] is not None, "derivative_filter": None}
+    if arr["qd"] is None or arr["qdd"] is None:
+        _check_uniform(path, t, seg, smoothing)
+        meta["derivative_filter"] = filter_name(smoothing)
+        short = smoothing is not None and np.min(np.diff(np.r_[0, np.flatnonzero(np.diff(seg)) + 1, len(t)])) \
+            < smoothing.window
+        if short:
+            meta["derivative_filter"] += f"; central differences on segments shorter than {smoothing.window} rows"
+    if arr["qd"] is None:
+        arr["qd"] = differentiate(t, arr["q"], seg, smoothing)
+        meta["qd_source"] = "computed"
+    if arr["qdd"] is None:
+        arr["qdd"] = differentiate(t, arr["qd"], seg, smoothing)
+        meta["qdd_source"] = "computed"
+    if arr["tau"] is None:
+        arr["tau"] = np.zeros_like(arr["q"])  # placeholder: meta["has_tau"] is False
+    try:
+        return DynamicsData(q=arr["q"], qd=arr["qd"], qdd=arr["qdd"], tau=arr["tau"], t=t, segment=seg, meta=meta)
+    except (ValueError, TypeError) as exc:  # not expected after the checks above; still name the file
+        raise LogFormatError(f"{path}: {exc}") from exc
+
+
+def _check_uniform(path: Path, t: np.ndarray, seg: np.ndarray, smoothing: SavGol | None) -> None:
+    """Warn when the Savitzky-Golay filter's uniform-sampling assumption is off by more than 5 %."""
+    if smoothing is None:
+        return
+    d = np.diff(t)[np.diff(seg) == 0]
+    if d.size and np.max(np.abs(d - np.median(d))) > 0.05 * np.median(d):
+        warnings.warn(f"{path}: sample periods vary by more than 5 % of their median ({np.median(d):.4g} s); the "
+                      f"{filter_name(smoothing)} derivative assumes uniform sampling", stacklevel=3)
+
+
+def read_log(path: str | os.PathLike, *, smoothing: SavGol | int | None = DEFAULT_SMOOTHING,
+             require_tau: bool = True) -> DynamicsData:
+    """Read a log: a CSV file in the format of the module docstring, or a ``.npz`` file of
+    :meth:`cascgp.data.DynamicsData.save`.
+
+    Args:
+        path: ``.csv`` (any other suffix but ``.npz`` is read as CSV) or ``.npz``.
+        smoothing: derivative filter for missing ``qd`` / ``qdd`` columns: a :class:`~cascgp.data.SavGol`, an odd
+            ``int`` window (polynomial order 2) or ``None`` (central differences).
+        require_tau: if ``False``, the ``tau`` columns may be absent: ``tau`` is then zero and
+            ``meta["has_tau"]`` is ``False`` (for prediction only).
+
+    Returns:
+        The validated :class:`~cascgp.data.DynamicsData`; ``meta`` records ``source``, ``has_tau``,
+        ``qd_source``, ``qdd_source`` and ``derivative_filter`` (``None`` when nothing was computed).
+
+    Raises:
+        FileNotFoundError: no such file.
+        LogFormatError: anything else (message names the file, the row and the column).
+    """
+    path = Path(path)
+    if isinstance(smoothing, (int, np.integer)) and not isinstance(smoothing, bool):
+        smoothing = SavGol(int(smoothing))
+    if smoothing is not None and not isinstance(smoothing, SavGol):
+        raise TypeError(f"smoothing: expected None, an odd int window or SavGol, got {smoothing!r}")
+    if not path.exists():
+        raise FileNotFoundError(f"log file not found: {path}")
+    if not path.is_file():
+        raise LogFormatError(f"{path}: not a file (expected a CSV or .npz log)")
+    if path.suffix.lower() != ".npz":
+        return _read_csv(path, smoothing, require_tau)
+    try:
+        data = DynamicsData.load(path)
+    except ValueError as exc:
+        raise LogFormatError(str(exc)) from exc
+    meta = {**data.meta, "source": str(path), "format": "cascgp.DynamicsData .npz"}
+    meta.setdefault("has_tau", True)
+    meta.setdefault("derivative_filter", None)
+    return DynamicsData(q=data.q, qd=data.qd, qdd=data.qdd, tau=data.tau, t=data.t, segment=data.segment, meta=meta)
+
+
+# --------------------------------------------------------------------------- writing
+def _csv_bytes(columns: dict[str, np.ndarray]) -> bytes:
+    names = list(columns)
+    a = np.column_stack([np.asarray(columns[k], dtype=np.float64) for k in names])
+    buf = io.StringIO()
+    np.savetxt(buf, a, delimiter=",", fmt="%.17g", header=",".join(names), comments="")
+    return buf.getvalue().encode("utf-8")
+
+
+def write_log(path: str | os.PathLike, data: DynamicsData) -> Path:
+    """Write ``data`` atomically (:func:`cascgp.io.atomic_write`): ``.npz`` as :meth:`DynamicsData.save`,
+    anything else as a CSV log with every column (``t``, ``segment`` when there is more than one segment,
+    ``q``, ``qd``, ``qdd``, ``tau``), values printed to round-trip exactly (17 significant digits)."""
+    if not isinstance(data, DynamicsData):
+        raise TypeError(f"data: expected DynamicsData, got {type(data).__name__}")
+    path = Path(path)
+    if path.suffix.lower() == ".npz":
+        return data.save(path)
+    cols: dict[str, np.ndarray] = {"t": data.t}
+    if len(data.segments) > 1:
+        cols["segment"] = data.segment
+    for g in _GROUPS:
+        for j in range(data.dof):
+            cols[f"{g}{j + 1}"] = getattr(data, g)[:, j]
+    body = _csv_bytes(cols)
+    return atomic_write(path, lambda f: f.write(body))
+
+
+def write_predictions(path: str | os.PathLike, t: np.ndarray, mean: np.ndarray, var: np.ndarray) -> Path:
+    """Write predictions atomically as CSV: ``t``, ``tau1..tauN`` (predicted mean torques, N m) and
+    ``var1..varN`` (their variances, N² m²), one row per query."""
+    t = np.asarray(t, dtype=np.float64)
+    mean, var = np.asarray(mean, dtype=np.float64), np.asarray(var, dtype=np.float64)
+    if mean.ndim != 2 or var.shape != mean.shape or t.shape != (mean.shape[0],):
+        raise ValueError(f"predictions: expected t (T,), mean and var (T, N); got t {t.shape}, mean {mean.shape}, "
+                         f"var {var.shape}")
+    cols = {"t": t, **{f"tau{j + 1}": mean[:, j] for j in range(mean.shape[1])},
+            **{f"var{j + 1}": var[:, j] for j in range(mean.shape[1])}}
+    body = _csv_bytes(cols)
+    return atomic_write(path, lambda f: f.write(body))

@@ -1,0 +1,284 @@
+"""``cascgp fit``, ``cascgp evaluate`` and ``cascgp predict``: the models of :mod:`cascgp.models` on logged data.
+
+Usage::
+
+    cascgp fit --data train.csv --urdf robot.urdf --model sp-inward --out model.npz
+    cascgp evaluate --model model.npz --data test.csv --json scores.json
+    cascgp predict --model model.npz --data states.csv --out predictions.csv
+
+Logs are CSV files in the format of :mod:`cascgp.logs` (``t``, ``q1..qN``, ``tau1..tauN``; ``qd``/``qdd``
+optional and computed when absent; ``tau`` optional for ``predict``) or ``.npz`` files of
+:meth:`cascgp.data.DynamicsData.save`. Semi-parametric models (``sp-*``) need the robot's URDF
+(:func:`cascgp.rbd.load_nominal`; its sidecar JSON is optional) and embed it in the model file, so ``evaluate``
+and ``predict`` need no URDF. Non-parametric models (``np-*``) use none, and ``fit`` refuses ``--urdf`` for
+them rather than ignore it.
+
+A bad file or argument ends the command with exit status 2 and one line ``cascgp <command>: error: ...`` on
+stderr (no traceback). Progress and notes go to stderr, results to stdout. This module only imports
+:mod:`cascgp`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import sys
+import time
+import warnings
+from dataclasses import fields
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+_NRMSE_HELP = ("nRMSE of joint i = RMSE_i / (max_i - min_i): the root-mean-square error of the predicted torques "
+               "divided by the range of the measured test torques of that joint (0 = perfect; predicting the "
+               "test mean scores about std/range, typically 0.2-0.3)")
+
+
+class _Fail(Exception):
+    """An error reported as ``<prog>: error: <message>`` with exit status 2."""
+
+
+def _note(prog: str, msg: str) -> None:
+    print(f"{prog}: {msg}", file=sys.stderr, flush=True)
+
+
+def _run(prog: str, body: Callable[[], int | None]) -> int:
+    """Run ``body``; expected failures (bad files, bad values) become one line on stderr and status 2."""
+    try:
+        with warnings.catch_warnings():  # warnings (e.g. "no sidecar JSON") as one note line each, when raised
+            warnings.simplefilter("default")
+            warnings.showwarning = lambda message, *args, **kwargs: _note(prog, f"note: {message}")
+            status = body()
+    except (_Fail, ValueError, OSError) as exc:
+        msg = " ".join(str(exc).split())  # one line
+        print(f"{prog}: error: {msg}", file=sys.stderr)
+        return 2
+    return int(status or 0)
+
+
+def _parser(prog: str, description: str) -> argparse.ArgumentParser:
+    return argparse.ArgumentParser(prog=prog, description=description, epilog="examples:\n" + __doc__.split("\n\n")[2],
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+
+
+def _read(path: Path, require_tau: bool = True) -> Any:
+    from cascgp.logs import read_log
+
+    return read_log(path, require_tau=require_tau)
+
+
+def _describe(prog: str, data: Any, path: Path) -> None:
+    m = data.meta
+    _note(prog, f"read {data.n_samples} rows, {data.dof} joints, {len(data.segments)} segment(s) from {path}")
+    computed = [g for g in ("qd", "qdd") if m.get(f"{g}_source") == "computed"]
+    if computed:
+        _note(prog, f"computed {' and '.join(computed)} (no such columns) with {m.get('derivative_filter')}")
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _load(path: Path) -> Any:
+    from cascgp.models import load_model
+
+    return load_model(path)
+
+
+def _check_dof(model: Any, data: Any, path: Path) -> None:
+    if data.dof != model.dof:
+        raise _Fail(f"{path}: the log has {data.dof} joints, the model {model.name!r} has {model.dof}")
+
+
+# --------------------------------------------------------------------------- fit
+def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    """``cascgp fit``: fit a model to a log and save it; returns the exit status."""
+    from cascgp.models import MODEL_NAMES
+
+    prog = prog or "cascgp fit"
+    p = _parser(prog, "Fit one of the twelve cascaded-GP models to logged data and save it (.npz).")
+    p.add_argument("--data", type=Path, required=True, help="training log (.csv in the cascgp.logs format, or .npz)")
+    p.add_argument("--model", required=True, choices=MODEL_NAMES, metavar="NAME",
+                   help="model name: " + ", ".join(MODEL_NAMES))
+    p.add_argument("--urdf", type=Path, default=None,
+                   help="the robot's URDF (sp-* models only; a sidecar JSON next to it is optional)")
+    p.add_argument("--out", type=Path, required=True, help="model file to write (.npz; replaced atomically)")
+    p.add_argument("--restarts", type=int, default=None,
+                   help="optimiser starts per joint's GP (default: the library's GPFitConfig.n_restarts)")
+    p.add_argument("--max-samples", type=int, default=1000,
+                   help="keep at most this many training rows, evenly spaced over the log (default 1000; exact "
+                        "GPs cost O(n^3)); -df models build their position history from the rows kept, so thin "
+                        "them no coarser than df_delta = 0.1 s")
+    p.add_argument("--rate-hz", type=float, default=None,
+                   help="first subsample each segment to about this rate (Hz), after derivatives are computed")
+    p.add_argument("--threads", type=int, default=None,
+                   help="torch/BLAS threads during the fit (default: the library's, one thread)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's random starts (default 0)")
+    a = p.parse_args(argv)
+    for name in ("restarts", "max_samples", "threads"):
+        if getattr(a, name) is not None and getattr(a, name) < 1:
+            p.error(f"--{name.replace('_', '-')}: expected an integer >= 1, got {getattr(a, name)}")
+    if a.rate_hz is not None and not (np.isfinite(a.rate_hz) and a.rate_hz > 0):
+        p.error(f"--rate-hz: expected a positive rate, got {a.rate_hz}")
+    if a.model.startswith("sp-") and a.urdf is None:
+        p.error(f"--urdf: the semi-parametric model {a.model!r} needs the robot's URDF (its rigid-body mean)")
+    if a.model.startswith("np-") and a.urdf is not None:
+        p.error(f"--urdf: the non-parametric model {a.model!r} uses no rigid-body model; drop --urdf or choose "
+                f"{'sp' + a.model[2:]!r}")
+    return _run(prog, lambda: _fit(a, prog))
+
+
+def _fit(a: argparse.Namespace, prog: str) -> int:
+    from cascgp.gp import GPFitConfig
+    from cascgp.models import make_model
+    from cascgp.rbd import load_nominal
+
+    data = _read(a.data)
+    _describe(prog, data, a.data)
+    rbd = None
+    if a.urdf is not None:
+        rbd = load_nominal(a.urdf)
+        if rbd.dof != data.dof:
+            raise _Fail(f"{a.urdf}: the URDF has {rbd.dof} joints ({', '.join(rbd.joint_names)}), the log "
+                        f"{a.data} has {data.dof}")
+        _note(prog, f"rigid-body model: {a.urdf} ({rbd.dof} joints: {', '.join(rbd.joint_names)})")
+    if a.rate_hz is not None:
+        n0 = data.n_samples
+        data = data.subsample(a.rate_hz)
+        _note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
+    if data.n_samples > a.max_samples:
+        n0 = data.n_samples
+        data = data.take(np.unique(np.round(np.linspace(0, n0 - 1, a.max_samples)).astype(int)))
+        _note(prog, f"thinned evenly to {data.n_samples} of {n0} rows (--max-samples)")
+    kw: dict[str, Any] = {"seed": a.seed}
+    if a.restarts is not None:
+        kw["n_restarts"] = a.restarts
+    has_threads = "threads" in {f.name for f in fields(GPFitConfig)}
+    if a.threads is not None and has_threads:
+        kw["threads"] = a.threads
+    cfg = GPFitConfig(**kw)
+    model = make_model(a.model, data.dof, rbd, gp_config=cfg)
+    _note(prog, f"fitting {a.model}: {data.dof} GPs on {data.n_samples} rows, {cfg.n_restarts} start(s) each ...")
+    t0 = time.perf_counter()
+    prev = None
+    if a.threads is not None and not has_threads:  # a library without GPFitConfig.threads: set torch's pool
+        import torch
+
+        prev = torch.get_num_threads()
+        torch.set_num_threads(a.threads)
+    try:
+        model.fit(data)
+    finally:
+        if prev is not None:
+            import torch
+
+            torch.set_num_threads(prev)
+    _note(prog, f"fitted in {time.perf_counter() - t0:.1f} s")
+    model.save(a.out)
+    print(f"saved {a.model} ({data.dof} joints, n_train={model.n_train}) to {a.out}")
+    return 0
+
+
+# --------------------------------------------------------------------------- evaluate
+def evaluate_main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    """``cascgp evaluate``: per-joint nRMSE of a saved model (and of its rigid-body model) on a log."""
+    prog = prog or "cascgp evaluate"
+    p = _parser(prog, "Per-joint nRMSE of a saved model on a log with measured torques, and of the model's "
+                      "nominal rigid-body model (sp-* models). " + _NRMSE_HELP + ".")
+    p.add_argument("--model", type=Path, required=True, help="model file written by 'cascgp fit'")
+    p.add_argument("--data", type=Path, required=True, help="test log with tau1..tauN (.csv or .npz)")
+    p.add_argument("--json", type=Path, default=None,
+                   help="also write the scores with provenance (cascgp version, command, files, SHA-256) as JSON")
+    a = p.parse_args(argv)
+    return _run(prog, lambda: _evaluate(a, prog, argv))
+
+
+def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
+    from cascgp import __version__
+    from cascgp.features import history_from_data
+    from cascgp.io import write_json
+    from cascgp.metrics import nrmse
+
+    model = _load(a.model)
+    data = _read(a.data)
+    _describe(prog, data, a.data)
+    _check_dof(model, data, a.data)
+    mean, _ = model.predict_data(data)
+    rows = np.ones(data.n_samples, dtype=bool)
+    if model.feature_kind == "df":  # rows without 2 * df_delta of history are not scored
+        rows = history_from_data(data, model.df_delta)[1]
+        if rows.sum() < 2:
+            raise _Fail(f"{a.data}: fewer than 2 rows have the {2 * model.df_delta:g} s of history the -df model "
+                        "needs")
+    tau = data.tau[rows]
+    scores = {model.name: nrmse(mean[rows], tau)}
+    if model.rbd is not None:
+        scores["nominal (rigid body)"] = nrmse(model.rbd.inverse_dynamics(data.q[rows], data.qd[rows],
+                                                                          data.qdd[rows]), tau)
+    names = list(scores)
+    width = max(12, *map(len, names))
+    print(f"nRMSE = RMSE / (max - min) of the test torques, {int(rows.sum())} rows of {a.data}")
+    print("joint  " + "  ".join(f"{n:>{width}}" for n in names))
+    for j in range(model.dof):
+        print(f"{j + 1:>5}  " + "  ".join(f"{scores[n][j]:>{width}.4f}" for n in names))
+    print(f"{'mean':>5}  " + "  ".join(f"{scores[n].mean():>{width}.4f}" for n in names))
+    if a.json is not None:
+        write_json(a.json, {
+            "cascgp_version": __version__,
+            "command": ["cascgp", *prog.split()[1:], *(sys.argv[2:] if argv is None else argv)],
+            "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "metric": _NRMSE_HELP,
+            "model": {"file": str(a.model), "sha256": _sha256(a.model), "name": model.name, "dof": model.dof,
+                      "n_train": model.n_train},
+            "data": {"file": str(a.data), "sha256": _sha256(a.data), "n_rows": data.n_samples,
+                     "n_scored": int(rows.sum()), "qd_source": data.meta.get("qd_source"),
+                     "qdd_source": data.meta.get("qdd_source"),
+                     "derivative_filter": data.meta.get("derivative_filter")},
+            "nrmse": {"model": scores[model.name].tolist(),
+                      "nominal": scores["nominal (rigid body)"].tolist() if model.rbd is not None else None},
+            "mean_nrmse": {"model": float(scores[model.name].mean()),
+                           "nominal": float(scores["nominal (rigid body)"].mean()) if model.rbd is not None
+                           else None},
+        })
+        _note(prog, f"wrote {a.json}")
+    return 0
+
+
+# --------------------------------------------------------------------------- predict
+def predict_main(argv: list[str] | None = None, prog: str | None = None) -> int:
+    """``cascgp predict``: a saved model's torque predictions for the states of a log, as CSV."""
+    prog = prog or "cascgp predict"
+    p = _parser(prog, "Predict joint torques for the states of a log and write them as CSV: t, tau1..tauN "
+                      "(predicted mean, N m), var1..varN (latent variance of each prediction, N^2 m^2). The log's "
+                      "tau columns are optional here.")
+    p.add_argument("--model", type=Path, required=True, help="model file written by 'cascgp fit'")
+    p.add_argument("--data", type=Path, required=True, help="log of states: t, q1..qN (qd, qdd, tau optional)")
+    p.add_argument("--out", type=Path, required=True, help="CSV file to write (replaced atomically)")
+    a = p.parse_args(argv)
+    return _run(prog, lambda: _predict(a, prog))
+
+
+def _predict(a: argparse.Namespace, prog: str) -> int:
+    from cascgp.features import history_from_data
+    from cascgp.logs import write_predictions
+
+    model = _load(a.model)
+    data = _read(a.data, require_tau=False)
+    _describe(prog, data, a.data)
+    _check_dof(model, data, a.data)
+    mean, var = model.predict_data(data)
+    if model.feature_kind == "df":
+        short = int((~history_from_data(data, model.df_delta)[1]).sum())
+        if short:
+            _note(prog, f"note: {short} row(s) lack {2 * model.df_delta:g} s of history within their segment; "
+                        "their predictions use the segment's first position for the missing history")
+    write_predictions(a.out, data.t, mean, var)
+    print(f"wrote {data.n_samples} predictions of {model.name} to {a.out}")
+    return 0

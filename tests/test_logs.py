@@ -1,0 +1,177 @@
+"""The log format of :mod:`cascgp.logs`: round trips, derivative filling, and errors that name file, row and column."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import make_arm, sinusoid_data
+
+from cascgp.data import DynamicsData, SavGol
+from cascgp.logs import DEFAULT_SMOOTHING, LogFormatError, filter_name, read_log, write_log, write_predictions
+
+
+@pytest.fixture(scope="module")
+def data() -> DynamicsData:
+    """3 joints, 50 Hz, two segments (the second starts later and elsewhere)."""
+    arm = make_arm(3)
+    a, b = sinusoid_data(arm, 4.0, 50.0, seed=1), sinusoid_data(arm, 3.0, 50.0, seed=2, noise=0.01)
+    return DynamicsData.concat([a, b])
+
+
+def write_columns(path: Path, data: DynamicsData, groups: tuple[str, ...]) -> Path:
+    """A CSV holding ``t``, ``segment`` and only the given groups (as a logger without some signals would write it)."""
+    cols = {"t": data.t, "segment": data.segment}
+    for g in groups:
+        cols.update({f"{g}{j + 1}": getattr(data, g)[:, j] for j in range(data.dof)})
+    lines = [",".join(cols)] + [",".join(repr(float(cols[k][r])) for k in cols) for r in range(data.n_samples)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+# --------------------------------------------------------------------------- round trips
+def test_csv_round_trip_is_exact(tmp_path: Path, data: DynamicsData) -> None:
+    path = write_log(tmp_path / "log.csv", data)
+    header = path.read_text().splitlines()[0].split(",")
+    assert header[:2] == ["t", "segment"] and header[-1] == "tau3" and len(header) == 2 + 4 * 3
+    back = read_log(path)
+    for name in ("q", "qd", "qdd", "tau", "t", "segment"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(data, name), err_msg=name)
+    assert back.meta["qd_source"] == back.meta["qdd_source"] == "column"
+    assert back.meta["derivative_filter"] is None and back.meta["has_tau"] and back.meta["source"] == str(path)
+    assert not list(tmp_path.glob(".*.tmp"))  # atomic write left no temporary file
+
+
+def test_npz_is_accepted(tmp_path: Path, data: DynamicsData) -> None:
+    back = read_log(write_log(tmp_path / "log.npz", data))
+    np.testing.assert_array_equal(back.tau, data.tau)
+    np.testing.assert_array_equal(back.segment, data.segment)
+    (tmp_path / "broken.npz").write_bytes(b"not a zip archive")
+    with pytest.raises(LogFormatError, match=r"broken\.npz"):
+        read_log(tmp_path / "broken.npz")
+
+
+def test_column_order_blanks_and_blank_lines_do_not_matter(tmp_path: Path) -> None:
+    path = tmp_path / "log.csv"
+    path.write_text(" tau1 , q1 , t\n\n3.0, 1.0, 0.0\n4.0, 1.5, 0.1\n\n")
+    d = read_log(path, smoothing=None)
+    np.testing.assert_array_equal(d.q[:, 0], [1.0, 1.5])
+    np.testing.assert_array_equal(d.tau[:, 0], [3.0, 4.0])
+    np.testing.assert_allclose(d.qd[:, 0], [5.0, 5.0])
+    assert d.meta["derivative_filter"] == filter_name(None)
+
+
+def test_tau_is_optional_only_when_asked(tmp_path: Path, data: DynamicsData) -> None:
+    path = write_columns(tmp_path / "states.csv", data, ("q",))
+    with pytest.raises(LogFormatError, match=r"states\.csv: row 1 \(header\), column 'tau1': missing"):
+        read_log(path)
+    d = read_log(path, require_tau=False)
+    assert d.meta["has_tau"] is False and not d.tau.any()
+
+
+def test_write_predictions(tmp_path: Path) -> None:
+    t, mean, var = np.arange(4) * 0.1, np.arange(8.0).reshape(4, 2), np.full((4, 2), 0.5)
+    text = write_predictions(tmp_path / "p.csv", t, mean, var).read_text().splitlines()
+    assert text[0] == "t,tau1,tau2,var1,var2" and len(text) == 5
+    np.testing.assert_array_equal(np.array([r.split(",") for r in text[1:]], float), np.column_stack([t, mean, var]))
+    with pytest.raises(ValueError, match="predictions"):
+        write_predictions(tmp_path / "q.csv", t, mean, var[:2])
+    assert not (tmp_path / "q.csv").exists()
+
+
+# --------------------------------------------------------------------------- derivatives
+@pytest.mark.parametrize("given", [("q", "tau"), ("q", "qdd", "tau"), ("q", "qd", "tau")])
+def test_missing_derivatives_are_filled(tmp_path: Path, data: DynamicsData, given: tuple[str, ...]) -> None:
+    d = read_log(write_columns(tmp_path / "log.csv", data, given))
+    for g in ("qd", "qdd"):
+        assert d.meta[f"{g}_source"] == ("column" if g in given else "computed")
+        if g in given:
+            np.testing.assert_array_equal(getattr(d, g), getattr(data, g))
+    assert d.meta["derivative_filter"] == filter_name(DEFAULT_SMOOTHING)
+    inner = np.ones(d.n_samples, bool)  # away from the segment ends (the filter's half window)
+    for lo, hi in d.segment_bounds():
+        inner[lo:lo + 6] = inner[hi - 6:hi] = False
+    for g, tol in (("qd", 1e-2), ("qdd", 2e-2)):  # max error relative to the signal's range (measured < 1 %)
+        err = np.abs(getattr(d, g) - getattr(data, g))[inner].max(axis=0)
+        assert np.all(err < tol * np.ptp(getattr(data, g), axis=0)), (g, err)
+
+
+def test_derivatives_stay_within_segments(tmp_path: Path, data: DynamicsData) -> None:
+    """The jump between segments must not leak into the derivative of either segment's rows."""
+    both = read_log(write_columns(tmp_path / "log.csv", data, ("q", "tau")), smoothing=SavGol(5, 2))
+    (lo, hi), (lo2, hi2) = data.segment_bounds()
+    alone = read_log(write_columns(tmp_path / "one.csv", data.take(slice(lo2, hi2)), ("q", "tau")),
+                     smoothing=SavGol(5, 2))
+    np.testing.assert_allclose(both.qd[lo2:hi2], alone.qd, rtol=1e-12, atol=1e-12)
+    assert "window=5" in both.meta["derivative_filter"]
+
+
+def test_nonuniform_sampling_is_warned_about(tmp_path: Path) -> None:
+    t = np.cumsum(np.r_[0.0, np.full(9, 0.02), np.full(10, 0.04)])
+    path = tmp_path / "log.csv"
+    path.write_text("t,q1,tau1\n" + "".join(f"{float(x)!r},{float(np.sin(x))!r},0.5\n" for x in t))
+    with pytest.warns(UserWarning, match="log.csv: sample periods vary"):
+        read_log(path)
+
+
+# --------------------------------------------------------------------------- errors
+HEAD = "t,q1,q2,tau1,tau2"
+CASES = {
+    "missing column": ("t,q1,q2,tau1\n0,1,2,3\n", 1, "tau2", "missing tau2"),
+    "missing t": ("q1,tau1\n1,2\n", 1, "t", "missing required column"),
+    "missing q": ("t,tau1\n0,2\n", 1, "q1", "missing required column"),
+    "unknown column": (HEAD + ",qd_1\n0,1,2,3,4,5\n", 1, "qd_1", "unknown column"),
+    "duplicate column": ("t,q1,q1,tau1\n0,1,1,2\n", 1, "q1", "appears twice"),
+    "N mismatch": (HEAD + ",tau3\n0,1,2,3,4,5\n", 1, "tau3", "N = 2"),
+    "partial group": (HEAD + ",qd2\n0,1,2,3,4,5\n", 1, "qd1", "missing qd1"),
+    "ragged row (short)": (HEAD + "\n0,1,2,3,4\n0.1,1,2\n", 3, "tau1", "the row has 3 cells, the header 5"),
+    "ragged row (long)": (HEAD + "\n0,1,2,3,4,5\n", 2, "tau2", "1 extra cell"),
+    "non-numeric cell": (HEAD + "\n0,1,2,3,4\n0.1,1,two,3,4\n", 3, "q2", "got 'two'"),
+    "empty cell": (HEAD + "\n0,1,,3,4\n", 2, "q2", "got ''"),
+    "NaN cell": (HEAD + "\n0,1,2,3,4\n0.1,1,2,nan,4\n", 3, "tau1", "got 'nan'"),
+    "inf cell": (HEAD + "\n0,1,2,3,4\n0.1,1,2,3,-inf\n", 3, "tau2", "got '-inf'"),
+    "t repeats": (HEAD + "\n0,1,2,3,4\n0.1,1,2,3,4\n0.1,1,2,3,4\n", 4, "t", "strictly increasing"),
+    "t goes back": (HEAD + "\n0,1,2,3,4\n0.2,1,2,3,4\n\n0.1,1,2,3,4\n", 5, "t", "does not come after t = 0.2 (row 3)"),
+    "segment not integer": ("t,segment,q1,tau1\n0,0.5,1,2\n", 2, "segment", "integer"),
+    "segment goes back": ("t,segment,q1,tau1\n0,1,1,2\n0.1,0,1,2\n", 3, "segment", "non-decreasing"),
+    "empty file": ("", 1, None, "empty file"),
+    "blank file": ("\n\n", 1, None, "empty file"),
+    "no data rows": (HEAD + "\n", 2, None, "no data rows"),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_errors_name_file_row_and_column(tmp_path: Path, case: str) -> None:
+    text, row, column, what = CASES[case]
+    path = tmp_path / "my log.csv"
+    path.write_text(text)
+    with pytest.raises(LogFormatError) as err:
+        read_log(path)
+    msg = str(err.value)
+    assert msg.startswith(f"{path}: row {row}"), msg
+    assert column is None or f"column '{column}'" in msg, msg
+    assert what in msg, msg
+    assert isinstance(err.value, ValueError)
+
+
+def test_segments_reset_time(tmp_path: Path) -> None:
+    path = tmp_path / "log.csv"
+    path.write_text("t,segment,q1,tau1\n0,0,1,2\n0.1,0,1,2\n0,1,1,2\n0.1,1,1,2\n")
+    assert read_log(path, smoothing=None).segments.tolist() == [0, 1]
+
+
+def test_other_failures(tmp_path: Path, data: DynamicsData) -> None:
+    with pytest.raises(FileNotFoundError, match=re.escape(str(tmp_path / "none.csv"))):
+        read_log(tmp_path / "none.csv")
+    with pytest.raises(LogFormatError, match="not a file"):
+        read_log(tmp_path)
+    (tmp_path / "bin.csv").write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(LogFormatError, match=r"bin\.csv: not a UTF-8 text file"):
+        read_log(tmp_path / "bin.csv")
+    with pytest.raises(TypeError, match="smoothing"):
+        read_log(tmp_path / "none.csv", smoothing="savgol")
+    with pytest.raises(TypeError, match="data"):
+        write_log(tmp_path / "x.csv", {"q": data.q})
+    assert not (tmp_path / "x.csv").exists()
