@@ -1,10 +1,13 @@
 # One virtual environment for everything; `make demo` and `make test` create it on first use.
 PY ?= python3.11
 VENV := .venv
-STAMP := $(VENV)/.installed-stamp
+# Extras installed into .venv (CI adds ray and video: `make test EXTRAS=test,ray,video`).
+EXTRAS ?= test
+comma := ,
+STAMP := $(VENV)/.installed-$(subst $(comma),-,$(EXTRAS))
 export MUJOCO_GL ?= egl
 
-.PHONY: setup demo test test-all bench
+.PHONY: setup demo test test-slow test-all bench wheel
 
 setup: $(STAMP)
 
@@ -12,15 +15,25 @@ $(STAMP): pyproject.toml
 	$(PY) -m venv $(VENV)
 	$(VENV)/bin/python -m pip install -q --upgrade pip
 	# torch==2.13.0 resolves to the local CPU wheel (pip's find-links); refuse a CUDA build.
-	$(VENV)/bin/python -m pip install -q -e '.[test]'
+	$(VENV)/bin/python -m pip install -q -e '.[$(EXTRAS)]'
 	$(VENV)/bin/python -c "import torch, sys; sys.exit('CUDA build of torch installed' if torch.version.cuda else 0)"
 	touch $@
 
+# A short task-transfer demo: table on stdout, out/demo/transfer.png, out/demo/video/*.mp4.
 demo: $(STAMP)
-	$(VENV)/bin/python -m scripts.task_transfer --quick --overwrite --out out/demo --video out/demo/video
+	$(VENV)/bin/cascgp transfer --quick --overwrite --out out/demo --video out/demo/video
 
+# The default suite (about 4 min on 2 quiet cores): everything but the tests marked slow.
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest
 
+# The long tests alone (full policy runs, multi-worker end-to-end runs, audits).
+test-slow: $(STAMP)
+	$(VENV)/bin/python -m pytest -m slow
+
 test-all: $(STAMP)
 	$(VENV)/bin/python -m pytest -m ''
+
+# The installable distribution (wheel and sdist) in dist/.
+wheel: $(STAMP)
+	$(VENV)/bin/python -m pip wheel --no-deps -w dist .

@@ -20,7 +20,9 @@ load_model          cascgp.models          read a saved model
 GPBank              cascgp.gp              batched exact GPs
 GPFitConfig         cascgp.gp              GP fit options
 RigidBodyModel      cascgp.rbd             Pinocchio RNEA wrapper
-load_nominal        cascgp.rbd             RBD model from a URDF + its sidecar JSON
+load_nominal        cascgp.rbd             RBD model from a URDF (+ its sidecar JSON, if any)
+read_log            cascgp.logs            CSV / .npz log -> DynamicsData (the CSV format's reference)
+write_log           cascgp.logs            DynamicsData -> CSV log (atomic)
 FeedforwardController cascgp.controller    tau = f(q_d, qd_d, qdd_d) + Kp e + Kd e_dot (eq. 2)
 DataBuffer          cascgp.buffer          episodes persisted across tasks
 run_episode         cascgp.episodes        run a controller in a Gymnasium env, record data
@@ -55,6 +57,8 @@ _EXPORTS = {
     "audit_model": "cascgp.fit_audit",
     "RigidBodyModel": "cascgp.rbd",
     "load_nominal": "cascgp.rbd",
+    "read_log": "cascgp.logs",
+    "write_log": "cascgp.logs",
     "FeedforwardController": "cascgp.controller",
     "DataBuffer": "cascgp.buffer",
     "run_episode": "cascgp.episodes",

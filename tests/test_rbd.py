@@ -289,8 +289,9 @@ def test_construction_errors(tmp, exact_urdf):
     lone = tmp / "lone" / "arm.urdf"
     lone.parent.mkdir()
     lone.write_text(exact_urdf.read_text())
-    with pytest.raises(FileNotFoundError, match=r"sidecar JSON .* not found: expected .*arm\.json"):
-        load_nominal(lone)
+    with pytest.warns(UserWarning, match=r"arm\.urdf.*has no sidecar JSON .*arm\.json.*zero armature"):
+        bare = load_nominal(lone)
+    assert bare.meta["sidecar"] is None and not bare.armature.any()
     lone.with_suffix(".json").write_text("{not json")
     with pytest.raises(ValueError, match="not valid JSON"):
         load_nominal(lone)

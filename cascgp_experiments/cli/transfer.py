@@ -42,7 +42,8 @@ from cascgp_experiments.transfer import (FULL_CONTROLLERS, FULL_TASKS, QUICK_CON
                                          write_outputs)
 
 
-def parse_args(argv: list[str] | None = None) -> tuple[TransferConfig, Path, bool, argparse.Namespace]:
+def parse_args(argv: list[str] | None = None, prog: str | None = None
+               ) -> tuple[TransferConfig, Path, bool, argparse.Namespace]:
     p = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, required=True, help="output folder (created; should be new or empty)")
     p.add_argument("--quick", action="store_true",
