@@ -280,8 +280,9 @@ def _regenerate_from_json_alone(out: Path, tmp_path: Path) -> None:
 @pytest.mark.skipif(not _has_excitation(), reason="jaco_env.excitation not available yet")
 def test_smoke_end_to_end(tmp_path: Path) -> None:
     out = tmp_path / "smoke"
-    subprocess.run([sys.executable, "-m", "scripts.data_efficiency", "--out", str(out), "--smoke"],
-                   check=True, env=_env(), cwd=REPO, timeout=600)
+    # the installed console script, from a folder outside the checkout
+    subprocess.run([str(Path(sys.executable).with_name("cascgp")), "study", "--out", str(out), "--smoke"],
+                   check=True, env=_env(), cwd=tmp_path, timeout=600)
     res = read_json(out / "results.json")
     _check_results(out, res)
     assert res["meta"]["settings"]["grid"] == [1.0, 2.0]
@@ -294,8 +295,10 @@ def test_smoke_end_to_end(tmp_path: Path) -> None:
     _regenerate_from_json_alone(out, tmp_path)
 
 
+@pytest.mark.slow
 @pytest.mark.skipif(not _has_excitation(), reason="jaco_env.excitation not available yet")
 def test_quick_end_to_end(tmp_path: Path) -> None:
+    """The --quick preset (about a minute); ``test_smoke_end_to_end`` is its fast sibling."""
     out = tmp_path / "quick"
     subprocess.run([sys.executable, "-m", "scripts.data_efficiency", "--out", str(out), "--quick"],
                    check=True, env=_env(), cwd=REPO, timeout=1200)
