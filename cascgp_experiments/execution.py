@@ -14,10 +14,22 @@ Backends (the same jobs, the same results):
   :class:`concurrent.futures.ProcessPoolExecutor` (``spawn``) of ``N`` processes, each with one
   torch / BLAS thread (``OMP_NUM_THREADS`` ... and :func:`cascgp_experiments.common.limit_threads`);
 * ``ray_address``: the jobs become Ray tasks of one CPU each on the cluster at that address
-  (``ray.init(address=...)``); ``"local"`` starts a local Ray instance with ``num_cpus=workers``.
-  Ray is an optional extra (``pip install -e '.[ray]'``); nothing else imports it. On a cluster,
-  every node needs the project installed and the jobs' input files (and the transfer's buffer
+  (``ray.init(address=...)``); ``"local"`` starts a new local Ray instance with ``num_cpus=workers``
+  (never a cluster already running here, nor ``RAY_ADDRESS``); ``"auto"``: the cluster this machine
+  belongs to. Ray is an optional extra (``pip install -e '.[ray]'``); nothing else imports it. On a
+  cluster, every node needs the project installed and the jobs' input files (and the transfer's buffer
   folders) at the same paths, e.g. on a shared file system; only this process writes the cache.
+
+Ray token authentication (as in Ray 2.60, the version the extra pins): ``ray start --head`` turns it on when a
+token exists (``~/.ray/auth_token``, which Ray also writes the first time a local instance starts, e.g.
+``--ray local``), and ``ray.init`` sends the token only when ``RAY_AUTH_MODE=token`` or for
+``address="auto"``, never on its own for an explicit ``HOST:PORT``. So that ``--ray HOST:PORT`` works
+like ``--ray auto`` for a cluster on this machine, :func:`run_jobs` (and :func:`check_args`) set
+``RAY_AUTH_MODE=token`` in this process when the address is one of this machine's, ``RAY_AUTH_MODE`` is
+unset and Ray finds a token (``RAY_AUTH_TOKEN``, ``RAY_AUTH_TOKEN_PATH`` or ``~/.ray/auth_token``). The
+token is never sent on its own to another machine's address (as Ray, which leaves that to the user):
+there a cluster that wants a token is a :class:`RayAuthenticationError` that says what to set, not
+Ray's traceback.
 
 Progress: one tqdm bar for the whole run, counted in *units* (one per job by default). A long job
 reports units as it goes with :func:`report_progress` (a no-op outside :func:`run_jobs`), e.g. one
@@ -61,7 +73,7 @@ from tqdm import tqdm
 from cascgp.io import json_safe, read_json, write_json
 
 __all__ = ["run_jobs", "report_progress", "session", "default_workers", "check_workers", "job_key", "JobError",
-           "JobResults", "add_execution_args", "check_args", "THREAD_ENV"]
+           "JobResults", "RayAuthenticationError", "add_execution_args", "check_args", "THREAD_ENV"]
 
 #: Environment of every worker process: one thread for OpenMP / OpenBLAS / MKL.
 THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
@@ -77,6 +89,18 @@ class JobError(RuntimeError):
         super().__init__(message)
         self.inputs = dict(inputs)
         self.error = error
+
+
+class RayAuthenticationError(RuntimeError):
+    """The Ray cluster at ``address`` refused this process: it wants a token (Ray's token authentication) that
+    this process did not send, or not the one it sent. The message says which and what to set; ``auth_mode``
+    is ``RAY_AUTH_MODE`` as this process had it (``None``: unset), ``ray_error`` Ray's own message."""
+
+    def __init__(self, message: str, address: str, auth_mode: str | None, ray_error: str) -> None:
+        super().__init__(message)
+        self.address = address
+        self.auth_mode = auth_mode
+        self.ray_error = ray_error
 
 
 class JobResults(list):
@@ -122,7 +146,13 @@ def add_execution_args(parser: Any) -> None:
 
 
 def check_args(parser: Any, args: Any) -> None:
-    """Validate ``--workers`` / ``--ray`` (``parser.error`` on a bad value or a missing Ray)."""
+    """Validate ``--workers`` / ``--ray`` (``parser.error`` on a bad value or a missing Ray).
+
+    With a cluster address (``--ray HOST:PORT`` or ``auto``, not ``local``) this also connects to the
+    cluster, so that an unreachable cluster or a refused token ends the command at once with a one-line
+    ``error:`` (exit status 2) naming the fix, before any work and without Ray's traceback. The
+    connection stays open for the run (:func:`run_jobs` and :func:`session` use it and leave it open;
+    Ray closes it at exit)."""
     if args.workers is not None and args.workers < 1:
         parser.error(f"--workers: expected an integer >= 1, got {args.workers}")
     if args.ray is not None:
@@ -130,6 +160,14 @@ def check_args(parser: Any, args: Any) -> None:
             import ray  # noqa: F401
         except ImportError:
             parser.error("--ray needs Ray, an optional extra: pip install -e '.[ray]'")
+        if args.ray != "local":
+            try:
+                _ray_connect(args.ray, check_workers(args.workers))
+            except RayAuthenticationError as exc:
+                parser.error(str(exc))
+            except ConnectionError as exc:
+                parser.error(f"--ray {args.ray}: could not connect to Ray ({exc}). Is the cluster running "
+                             f"(`ray start --head` on the head node; `ray status` there lists it)?")
 
 
 def check_workers(workers: int | None) -> int:
@@ -523,17 +561,144 @@ def _import_ray():
     return ray
 
 
+#: Ray's variable for its authentication mode: ``token`` makes this process send its token.
+RAY_AUTH_MODE_VAR = "RAY_AUTH_MODE"
+#: Where Ray looks for a token, in its order (for messages).
+RAY_TOKEN_PLACES = "RAY_AUTH_TOKEN, the file named by RAY_AUTH_TOKEN_PATH, or ~/.ray/auth_token"
+
+
+def _address_host(address: str) -> str | None:
+    """The host of a Ray address ``[scheme://]HOST[:PORT]`` (``[...]`` around an IPv6 host); ``None`` if empty."""
+    rest = address.split("://", 1)[-1].strip()
+    if rest.startswith("["):
+        return rest[1:rest.index("]")] if "]" in rest else None
+    host = rest.rsplit(":", 1)[0] if rest.count(":") == 1 else rest
+    return host or None
+
+
+def _is_this_machine(host: str) -> bool:
+    """True when ``host`` names an address of this machine (loopback or one of its interfaces): a socket can
+    be bound to it. A name that does not resolve is not this machine."""
+    import socket
+
+    try:
+        infos = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
+    except (OSError, UnicodeError):
+        return False
+    for family, _, _, _, sockaddr in infos:
+        try:
+            with socket.socket(family, socket.SOCK_STREAM) as s:
+                s.bind((sockaddr[0], 0))
+            return True
+        except OSError:
+            continue
+    return False
+
+
+def _ray_has_token() -> bool | None:
+    """Whether Ray finds an authentication token (:data:`RAY_TOKEN_PLACES`), asked to Ray's own loader;
+    ``None`` for a Ray without token authentication (older versions)."""
+    try:
+        from ray._raylet import AuthenticationTokenLoader
+    except ImportError:
+        return None
+    return bool(AuthenticationTokenLoader.instance().has_token(ignore_auth_mode=True))
+
+
+def _use_local_token(address: str) -> str | None:
+    """For an explicit address of this machine, with ``RAY_AUTH_MODE`` unset and a token at hand: set
+    ``RAY_AUTH_MODE=token`` in this process (and for its children), as ``ray.init(address="auto")`` and
+    ``ray start`` do for a cluster they find here. Return a note saying so, or ``None`` when nothing changed.
+
+    Another machine's address is left alone: the local token is not sent there unasked."""
+    if address in ("local", "auto") or os.environ.get(RAY_AUTH_MODE_VAR) is not None:
+        return None
+    host = _address_host(address)
+    if host is None or not _is_this_machine(host) or not _ray_has_token():
+        return None
+    from ray._raylet import Config
+
+    os.environ[RAY_AUTH_MODE_VAR] = "token"
+    Config.initialize("")  # Ray reads its configuration once: make it see the new mode (as Ray's own code does)
+    return (f"--ray {address} is on this machine and Ray finds a token here ({RAY_TOKEN_PLACES}): connecting "
+            f"with {RAY_AUTH_MODE_VAR}=token, as --ray auto does")
+
+
+def _auth_failure(exc: BaseException) -> str | None:
+    """Ray's message when ``exc`` (or an exception it was raised from) is a refused or missing token, else
+    ``None``. ``ray.init`` reports a refused token as a ``ConnectionError`` whose cause holds the
+    ``AuthenticationError`` as text (Ray's traceback of its last attempt), hence the text match."""
+    markers = ("AuthenticationError", "InvalidAuthToken", "Token authentication is enabled but")
+    seen: set[int] = set()
+    e: BaseException | None = exc
+    while e is not None and id(e) not in seen:
+        seen.add(id(e))
+        lines = str(e).splitlines()
+        if type(e).__name__ == "AuthenticationError":
+            return _first_sentence(lines[0]) if lines else type(e).__name__
+        for line in lines:
+            if any(m in line for m in markers):
+                return _first_sentence(line.split("AuthenticationError: ", 1)[-1])
+        e = e.__cause__ or e.__context__
+    return None
+
+
+def _first_sentence(text: str) -> str:
+    """Ray's error without the help it appends (" Note: ...", " Ensure that ...") and the final full stop."""
+    for cut in (" Note: ", " Ensure that "):
+        text = text.split(cut, 1)[0]
+    return text.strip().rstrip(".")
+
+
+def _auth_message(address: str, ray_error: str) -> str:
+    """What went wrong with the token at ``address`` and what to set, for the mode this process ran in."""
+    mode = os.environ.get(RAY_AUTH_MODE_VAR)
+    has_token = _ray_has_token()
+    head = f"--ray {address}: the Ray cluster refused this process (Ray: {ray_error}). "
+    if mode is None or mode.lower() != "token":
+        why = ("RAY_AUTH_MODE is unset, so no token was sent: the cluster has token authentication on "
+               "(`ray start --head` turns it on when ~/.ray/auth_token exists), and Ray sends the token to an "
+               "explicit HOST:PORT only with RAY_AUTH_MODE=token"
+               if mode is None else
+               f"RAY_AUTH_MODE={mode} is set, so no token was sent, but the cluster has token authentication on")
+        local = _address_host(address) is not None and _is_this_machine(_address_host(address) or "")
+        fix = ("Fix: run with RAY_AUTH_MODE=token (and the head node's token in "
+               f"{RAY_TOKEN_PLACES}; `ray get-auth-token` on the head prints it), or use --ray auto on the head node")
+        if mode is not None and local and has_token:
+            fix = "Fix: unset RAY_AUTH_MODE (a cluster on this machine then gets the local token), or set it to token"
+        return f"{head}{why}. {fix}."
+    what = ("RAY_AUTH_MODE=token, but the token sent is not this cluster's" if has_token else
+            f"RAY_AUTH_MODE=token, but no token was found ({RAY_TOKEN_PLACES})")
+    return (f"{head}{what}. Fix: use the head node's token (`ray get-auth-token` on the head prints it): put it "
+            f"in ~/.ray/auth_token here, or set RAY_AUTH_TOKEN / RAY_AUTH_TOKEN_PATH.")
+
+
 def _ray_connect(address: str, workers: int) -> bool:
-    """Connect to (``"local"``: start) Ray unless connected already; True when this call connected."""
+    """Connect to (``"local"``: start) Ray unless connected already; True when this call connected.
+
+    ``"local"`` is passed to Ray as ``address="local"``: always a new instance, never a cluster that
+    ``ray start`` left running on this machine (which ``ray.init()`` without an address would join, and
+    refuse ``num_cpus`` for). For a cluster address, :func:`_use_local_token` first; a refused or missing
+    token raises :class:`RayAuthenticationError` (Ray's traceback left out, its message kept)."""
     import logging
 
     ray = _import_ray()
     if ray.is_initialized():
         return False
     if address == "local":
-        ray.init(num_cpus=workers, include_dashboard=False, logging_level=logging.WARNING)
-    else:
+        ray.init(address="local", num_cpus=workers, include_dashboard=False, logging_level=logging.WARNING)
+        return True
+    note = _use_local_token(address)
+    if note:
+        tqdm.write(note, file=sys.stderr)
+    try:
         ray.init(address=address, logging_level=logging.WARNING)
+    except Exception as exc:  # noqa: BLE001 - only a refused token is translated; anything else goes on as it is
+        ray_error = _auth_failure(exc)
+        if ray_error is None:
+            raise
+        mode = os.environ.get(RAY_AUTH_MODE_VAR)
+        raise RayAuthenticationError(_auth_message(address, ray_error), address, mode, ray_error) from None
     return True
 
 
