@@ -26,6 +26,15 @@ Rendering: :meth:`JacoMujocoEnv.render` before the first :meth:`reset` raises
 ``gymnasium.error.ResetNeeded`` (as the ``OrderEnforcing`` wrapper of ``gym.make`` does). An env
 that rendered and is never closed is closed at interpreter exit, before the OpenGL (EGL)
 display is terminated, so that no tracebacks are printed at exit.
+
+``render_mode="human"`` opens a GLFW window (Gymnasium's ``WindowViewer``). Without a display,
+GLFW fails an assertion in native code and *aborts the process* (SIGABRT: no exception, no
+cleanup, the whole test run or notebook kernel gone; e.g. ``gymnasium.utils.env_checker.check_env``
+tries every declared render mode). So ``human`` raises :class:`NoDisplayError` instead, before GLFW is
+asked for a window: at construction when neither ``DISPLAY`` nor ``WAYLAND_DISPLAY`` is set (X11 /
+Wayland systems), and at the first ``human`` render when GLFW cannot be initialised or finds no
+monitor (e.g. a ``DISPLAY`` whose X server is gone). Off-screen modes (``rgb_array``,
+``depth_array``) need no display (``MUJOCO_GL=egl`` or ``osmesa``).
 """
 
 from __future__ import annotations
@@ -37,8 +46,10 @@ import math
 import multiprocessing.util
 import os
 import shutil
+import sys
 import tempfile
 import threading
+import warnings
 import weakref
 from typing import Any
 
@@ -157,6 +168,53 @@ def _close_at_exit(env_ref: weakref.ref) -> None:
         env.close()
 
 
+# ------------------------------------------------------------------ "human" rendering without a display
+class NoDisplayError(error.Error, RuntimeError):
+    """``render_mode="human"`` where no window can open (no display). A ``RuntimeError`` and a
+    ``gymnasium.error.Error``; the message names what is missing and the off-screen alternatives."""
+
+
+def no_display_reason() -> str | None:
+    """Why a ``human`` window cannot open here, judged from the environment alone (GLFW untouched):
+    on X11 / Wayland systems (not macOS or Windows) a display is named by ``DISPLAY`` or
+    ``WAYLAND_DISPLAY``. ``None`` when nothing is known to be missing."""
+    if sys.platform in ("darwin", "win32", "cygwin"):
+        return None
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return None
+    return "neither DISPLAY nor WAYLAND_DISPLAY is set"
+
+
+def _glfw_failure() -> str | None:
+    """Initialise GLFW and look for a monitor, as Gymnasium's ``WindowViewer`` does first (it does not
+    check, and GLFW's assertion on the missing monitor aborts the process); the reason when either fails."""
+    import glfw
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            ok = bool(glfw.init())
+            monitor = glfw.get_primary_monitor() if ok else None
+        except Exception as exc:  # noqa: BLE001 - pyGLFW raises instead of warning when so configured
+            return f"GLFW could not be initialised ({exc})"
+    said = "; ".join(str(w.message) for w in caught)
+    if not ok:
+        return f"GLFW could not be initialised ({said or 'glfw.init() failed'})"
+    if not monitor:
+        return f"GLFW finds no monitor ({said or 'glfw.get_primary_monitor() is NULL'})"
+    return None
+
+
+def _no_display_message(reason: str) -> str:
+    """The :class:`NoDisplayError` text: ``reason``, the display variables as they are, and what to do."""
+    return (f"render_mode='human' opens a window, but there is no display: {reason} "
+            f"(DISPLAY={os.environ.get('DISPLAY')!r}, WAYLAND_DISPLAY={os.environ.get('WAYLAND_DISPLAY')!r}, "
+            f"MUJOCO_GL={os.environ.get('MUJOCO_GL')!r}). Render off-screen instead: render_mode='rgb_array' "
+            "(frames as arrays; gymnasium.wrappers.RecordVideo writes them to MP4) or 'depth_array', with "
+            "MUJOCO_GL=egl (GPU) or MUJOCO_GL=osmesa (software). For a window, run where a display is: set "
+            "DISPLAY (or WAYLAND_DISPLAY), or start a virtual one (xvfb-run -a python ...).")
+
+
 def check_options(options: dict | None, allowed: tuple[str, ...]) -> dict:
     """The reset options as a dict (``{}`` for None); unknown keys raise ``ValueError``."""
     if options is None:
@@ -198,6 +256,8 @@ class JacoMujocoEnv(MujocoEnv):
             raise TypeError(f"sensor_noise must be a SensorNoise or None, got {type(sensor_noise).__name__}")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        if render_mode == "human" and (reason := no_display_reason()) is not None:
+            raise NoDisplayError(_no_display_message(reason))
         self.control_mode = control_mode
         self.sensor_noise = sensor_noise if sensor_noise is not None else SensorNoise.none()
         self.control_dt = 1.0 / float(control_freq)
@@ -339,9 +399,14 @@ class JacoMujocoEnv(MujocoEnv):
             self._warned_terminated = True
 
     def render(self):
-        """Render a frame (Gymnasium's ``MujocoEnv.render``); ``ResetNeeded`` before the first ``reset``."""
+        """Render a frame (Gymnasium's ``MujocoEnv.render``); ``ResetNeeded`` before the first ``reset``;
+        in ``human`` mode, :class:`NoDisplayError` before the window is opened if it cannot be."""
         if self._last_obs is None:
             raise error.ResetNeeded("Cannot call `env.render()` before calling `env.reset()`: the scene is not set up")
+        if self.render_mode == "human" and getattr(self.mujoco_renderer, "_viewers", {}).get("human") is None:
+            reason = no_display_reason() or _glfw_failure()
+            if reason is not None:
+                raise NoDisplayError(_no_display_message(reason))
         frame = super().render()
         if self._exit_closer is None:
             # Registered after the renderer's OpenGL context exists, hence after EGL's own atexit
