@@ -4,6 +4,7 @@ reference (on the planar test arm), and the reading rules of both steps on synth
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from cascgp.gp import GPFitConfig
 from cascgp.models import make_model
@@ -130,19 +131,19 @@ def test_step3_effects_reading_and_reproduction() -> None:
     assert md.count("(contrast)") == 2 and "front_effect: above 1.1 on 6 of 6" in md
 
 
-def test_cli_errors(tmp_path) -> None:
-    import subprocess
-    import sys
-    from pathlib import Path
+def test_cli_errors(tmp_path, capsys) -> None:
+    """Argument errors exit with status 2 and a message naming the option (in-process: no work starts)."""
+    from scripts.lag_diagnosis import main
 
-    repo = Path(__file__).resolve().parents[1]
     for args, msg in ((["--refit", "--factorial"], "one step at a time"),
                       (["--episodes", "--refit"], "one step at a time"), (["--seeds", "a,b"], "--seeds"),
                       (["--episodes", "--reference", __file__], "nothing to check against"),
                       (["--reference", str(tmp_path / "none.json")], "--reference")):
-        r = subprocess.run([sys.executable, "-m", "scripts.lag_diagnosis", "--out", str(tmp_path), *args], cwd=repo,
-                           capture_output=True, text=True)
-        assert r.returncode == 2 and msg in r.stderr, r.stderr
+        with pytest.raises(SystemExit) as exc:
+            main(["--out", str(tmp_path), *args])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        assert msg in err, err
 
 
 def test_link_side_model_is_the_true_scene_without_the_drive() -> None:

@@ -33,6 +33,7 @@ def tiny_runs() -> dict[str, list[dict]]:
             "gated": controller_job(cfg, GATED, None)}
 
 
+@pytest.mark.slow  # three tiny transfer runs (about 30 s)
 def test_paired_episodes_change_nothing_in_the_learners_run(tiny_runs) -> None:
     paired, alone = tiny_runs["paired"], tiny_runs["alone"]
     assert [{k: v for k, v in a.items() if k not in ("paired", "fit_seconds")} for a in paired] == \
@@ -40,6 +41,7 @@ def test_paired_episodes_change_nothing_in_the_learners_run(tiny_runs) -> None:
     assert all(set(a["paired"]) == {GATED} for a in paired)
 
 
+@pytest.mark.slow  # three tiny transfer runs (about 30 s)
 def test_a_paired_controller_equal_to_the_learner_gives_the_same_episode(tiny_runs) -> None:
     paired, gated = tiny_runs["paired"], tiny_runs["gated"]
     # Before any data both are the RBD feedforward: the same episode.
