@@ -42,7 +42,7 @@ import numpy as np
 
 from .io import atomic_savez, check_format_header, read_npz
 
-__all__ = ["DynamicsData", "SavGol", "FORMAT_VERSION"]
+__all__ = ["DynamicsData", "SavGol", "FORMAT_VERSION", "differentiate"]
 
 #: Version of the ``.npz`` layout written by :meth:`DynamicsData.save`.
 FORMAT_VERSION = 1
@@ -123,6 +123,31 @@ class SavGol:
 
         c = savgol_coeffs(self.window, self.polyorder, deriv=1, delta=float(dt), use="dot")
         return float(np.sum(c * c))
+
+
+def differentiate(t: np.ndarray, x: np.ndarray, segment: np.ndarray, smoothing: SavGol | None) -> np.ndarray:
+    r"""Time derivative of ``x`` (T, N) within each segment: the filter of :meth:`DynamicsData.from_measurements`
+    and of logs without derivative columns (:mod:`cascgp.logs`).
+
+    With ``smoothing`` a segment of at least ``smoothing.window`` rows uses :func:`scipy.signal.savgol_filter`
+    (``deriv=1``, ``delta`` = the segment's median period, ``mode="interp"``); shorter segments and
+    ``smoothing=None`` use :func:`numpy.gradient` on the sample times. A one-row segment gets 0.
+    """
+    out = np.zeros_like(x, dtype=np.float64)
+    cuts = np.flatnonzero(np.diff(segment) != 0) + 1
+    for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(t)]):
+        if hi - lo < 2:
+            continue
+        ts = t[lo:hi]
+        if smoothing is not None and hi - lo >= smoothing.window:
+            from scipy.signal import savgol_filter
+
+            h = float(np.median(np.diff(ts)))
+            out[lo:hi] = savgol_filter(x[lo:hi], smoothing.window, smoothing.polyorder, deriv=1, delta=h, axis=0,
+                                       mode="interp")
+        else:
+            out[lo:hi] = np.gradient(x[lo:hi], ts, axis=0, edge_order=1)
+    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -293,19 +318,7 @@ class DynamicsData:
         # Build once without qdd to get all shape/finite/time checks with the usual messages.
         probe = cls(q=q, qd=qd_a, qdd=np.zeros_like(qd_a), tau=tau, t=t, segment=segment,
                     meta=meta or {})
-        qdd = np.zeros_like(probe.qd)
-        for lo, hi in probe.segment_bounds():
-            if hi - lo < 2:
-                continue
-            ts, v = probe.t[lo:hi], probe.qd[lo:hi]
-            if smoothing is not None and hi - lo >= smoothing.window:
-                from scipy.signal import savgol_filter
-
-                h = float(np.median(np.diff(ts)))
-                qdd[lo:hi] = savgol_filter(v, smoothing.window, smoothing.polyorder, deriv=1,
-                                           delta=h, axis=0, mode="interp")
-            else:
-                qdd[lo:hi] = np.gradient(v, ts, axis=0, edge_order=1)
+        qdd = differentiate(probe.t, probe.qd, probe.segment, smoothing)
         meta2 = dict(probe.meta)
         meta2.setdefault("qdd_source", "numerical differentiation of qd" + (
             f" (Savitzky-Golay window={smoothing.window}, polyorder={smoothing.polyorder})"

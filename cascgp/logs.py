@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from cascgp.data import DynamicsData, SavGol
+from cascgp.data import DynamicsData, SavGol, differentiate
 from cascgp.io import atomic_write
 
 __all__ = ["LogFormatError", "DEFAULT_SMOOTHING", "read_log", "write_log", "write_predictions", "differentiate",
@@ -70,31 +70,6 @@ def filter_name(smoothing: SavGol | None) -> str:
     if smoothing is None:
         return "central differences (numpy.gradient)"
     return f"Savitzky-Golay (window={smoothing.window}, polyorder={smoothing.polyorder})"
-
-
-def differentiate(t: np.ndarray, x: np.ndarray, segment: np.ndarray, smoothing: SavGol | None) -> np.ndarray:
-    r"""Time derivative of ``x`` (T, N) within each segment (the filter of the module docstring).
-
-    With ``smoothing`` a segment of at least ``smoothing.window`` rows uses
-    :func:`scipy.signal.savgol_filter` (``deriv=1``, ``delta`` = the segment's median period, ``mode="interp"``),
-    as :meth:`cascgp.data.DynamicsData.from_measurements` does for accelerations; otherwise
-    :func:`numpy.gradient` on the sample times. A one-row segment gets 0.
-    """
-    out = np.zeros_like(x, dtype=np.float64)
-    cuts = np.flatnonzero(np.diff(segment) != 0) + 1
-    for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(t)]):
-        if hi - lo < 2:
-            continue
-        ts = t[lo:hi]
-        if smoothing is not None and hi - lo >= smoothing.window:
-            from scipy.signal import savgol_filter
-
-            h = float(np.median(np.diff(ts)))
-            out[lo:hi] = savgol_filter(x[lo:hi], smoothing.window, smoothing.polyorder, deriv=1, delta=h, axis=0,
-                                       mode="interp")
-        else:
-            out[lo:hi] = np.gradient(x[lo:hi], ts, axis=0, edge_order=1)
-    return out
 
 
 # --------------------------------------------------------------------------- reading

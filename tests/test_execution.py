@@ -380,6 +380,7 @@ def test_collection_in_a_vector_env_identical(tiny_study_serial: Path, tmp_path:
     _assert_same_data(tiny_study_serial, tmp_path / "vec")
 
 
+@pytest.mark.slow  # end to end through a killed command (15-25 s); the job layer's resume is tested fast above
 def test_tiny_study_killed_and_resumed_identical(tiny_study_serial: Path, tmp_path: Path) -> None:
     out = tmp_path / "killed"
     # first the data (so that the kill lands among the fits), then a run killed after its first fit job
@@ -430,6 +431,7 @@ def test_tiny_transfer_ray_local_identical(tiny_transfer_serial: Path, tmp_path:
     assert _transfer_numbers(out) == _transfer_numbers(tiny_transfer_serial)
 
 
+@pytest.mark.slow  # end to end through a killed command (15-25 s); the job layer's resume is tested fast above
 def test_tiny_transfer_killed_and_resumed_identical(tiny_transfer_serial: Path, tmp_path: Path) -> None:
     out = tmp_path / "killed"
     cache = out / "cache" / "transfer"
