@@ -16,10 +16,14 @@ case                what the child process does
                     is imported, ``torch.set_num_threads(1)``, ``threads=None``
 ==================  ===================================================================================
 
+``--background-load K`` runs K single-threaded busy processes beside the fits for the whole benchmark, as on a
+machine shared with other jobs (the situation in which torch's default threads were measured 11-16x slower).
+
 Usage::
 
     python -m scripts.bench_fit_threads --out out/bench --sarcos PATH/ias_sarcos_data.mat   # SARCOS n = 300, 7 outputs
     python -m scripts.bench_fit_threads --out out/bench                                      # synthetic data
+    python -m scripts.bench_fit_threads --out out/bench_load --sarcos ... --background-load 1  # one busy neighbour
 
 Prints a table (median time per case and its ratio to ``bench-1thread``) and writes ``bench_fit_threads.json``.
 """
@@ -88,18 +92,28 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--restarts", type=int, default=10)
     ap.add_argument("--reps", type=int, default=2, help="fits per case (the cases alternate)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--background-load", type=int, default=0,
+                    help="busy single-threaded processes running beside the fits (a shared machine)")
     args = ap.parse_args(argv)
+    if args.background_load < 0:
+        ap.error(f"--background-load: expected an integer >= 0, got {args.background_load}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     runs: dict[str, list[dict]] = {c: [] for c in CASES}
     load0 = os.getloadavg()
     t0 = time.perf_counter()
-    for r in range(args.reps):
-        for case in CASES:
-            res = run_case(case, args)
-            runs[case].append(res)
-            print(f"rep {r + 1}/{args.reps} {case:>13}: {res['time_s']:7.2f} s (torch threads before the fit "
-                  f"{res['torch_threads_before']}, after {res['torch_threads_after']})", flush=True)
+    hogs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(args.background_load)]
+    try:
+        for r in range(args.reps):
+            for case in CASES:
+                res = run_case(case, args)
+                runs[case].append(res)
+                print(f"rep {r + 1}/{args.reps} {case:>13}: {res['time_s']:7.2f} s (torch threads before the fit "
+                      f"{res['torch_threads_before']}, after {res['torch_threads_after']})", flush=True)
+    finally:
+        for h in hogs:
+            h.kill()
+            h.wait()
     import numpy as np
 
     med = {c: float(np.median([x["time_s"] for x in runs[c]])) for c in CASES}
@@ -111,8 +125,9 @@ def main(argv: list[str] | None = None) -> int:
         summary[c] = {"median_s": med[c], "ratio_to_bench_1thread": med[c] / ref, "max_abs_nll_gap": gap}
         print(f"{c:>13} | {med[c]:8.2f} | {med[c] / ref:15.2f} | {gap:.2e}")
     res = {"command": " ".join(["python -m scripts.bench_fit_threads"] + (argv if argv is not None else sys.argv[1:])),
-           "cpus": os.cpu_count(), "load_avg_start": load0, "load_avg_end": os.getloadavg(), "n": args.n, "outputs": args.outputs,
-           "restarts": args.restarts, "reps": args.reps, "runs": runs, "summary": summary,
+           "cpus": os.cpu_count(), "load_avg_start": load0, "load_avg_end": os.getloadavg(), "n": args.n,
+           "outputs": args.outputs, "restarts": args.restarts, "reps": args.reps,
+           "background_load": args.background_load, "runs": runs, "summary": summary,
            "wall_s": time.perf_counter() - t0}
     from cascgp.io import write_json
 
