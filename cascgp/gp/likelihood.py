@@ -108,12 +108,10 @@ def blas_threads(k: int) -> Iterator[None]:
 def fit_threads(k: int | None) -> Iterator[None]:
     """Run a fit with ``k`` threads in torch's intra-op pool and in BLAS/LAPACK, restoring both afterwards.
 
-    ``k = None`` changes nothing. The rule for the default (``GPFitConfig.threads = 1``) is in
-    :class:`cascgp.gp.GPFitConfig`. Measured on a shared 2-core machine (SARCOS, n = 300, 7 outputs): a plain
-    script with torch's default threads took 151-212 s against 13.5 s on one thread, because torch's OpenMP
-    workers spin-wait for cores that another process holds (``python -m scripts.bench_fit_threads`` measures it side
-    by side). torch's setting is process-wide: other Python threads of the process see it
-    while the fit runs.
+    ``k = None`` changes nothing. The rule for the default (``GPFitConfig.threads = 1``) and its measurement are in
+    :class:`cascgp.gp.GPFitConfig`: torch's OpenMP workers spin-wait for cores that another process holds, which
+    made a plain script 2.7x (one busy neighbour) to 16x (a busy machine) slower than one thread. torch's setting
+    is process-wide: other Python threads of the process see it while the fit runs.
     """
     if k is None:
         yield

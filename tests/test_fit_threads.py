@@ -1,0 +1,67 @@
+"""A fit sets torch's and BLAS's threads to GPFitConfig.threads while it runs and restores the caller's afterwards."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from cascgp.gp import GPBank, GPFitConfig
+
+
+def _data(n: int = 30) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    rng = np.random.default_rng(0)
+    X = rng.uniform(-1, 1, (n, 2))
+    return [X], [np.sin(3 * X[:, 0]) + 0.01 * rng.standard_normal(n)]
+
+
+@pytest.mark.parametrize("threads, expected", [(1, 1), (2, 2), (None, 3)])
+def test_fit_runs_with_its_threads_and_restores_the_callers(monkeypatch, threads, expected) -> None:
+    from threadpoolctl import threadpool_info
+
+    seen: dict[str, object] = {}
+    real_fit = GPBank._fit
+
+    def spy(self, X, y, init):
+        seen["torch"] = torch.get_num_threads()
+        seen["blas"] = {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
+        return real_fit(self, X, y, init)
+
+    monkeypatch.setattr(GPBank, "_fit", spy)
+    before = torch.get_num_threads()
+    torch.set_num_threads(3)
+    try:
+        GPBank(GPFitConfig(n_restarts=1, max_iter=5, threads=threads)).fit(*_data())
+        assert seen["torch"] == expected
+        if threads is not None:
+            assert seen["blas"] <= {threads}
+        assert torch.get_num_threads() == 3
+    finally:
+        torch.set_num_threads(before)
+
+
+def test_threads_are_restored_when_the_fit_raises(monkeypatch) -> None:
+    before = torch.get_num_threads()
+    torch.set_num_threads(3)
+
+    def boom(self, X, y, init):
+        raise RuntimeError("inside the fit")
+
+    monkeypatch.setattr(GPBank, "_fit", boom)
+    try:
+        with pytest.raises(RuntimeError, match="inside the fit"):
+            GPBank(GPFitConfig(threads=1)).fit(*_data())
+        assert torch.get_num_threads() == 3
+    finally:
+        torch.set_num_threads(before)
+
+
+@pytest.mark.parametrize("bad", [0, -1, 1.5, True, "2"])
+def test_bad_thread_counts_are_refused(bad) -> None:
+    with pytest.raises(ValueError, match="threads: expected None or an integer >= 1"):
+        GPFitConfig(threads=bad)
+
+
+def test_saved_configs_without_the_field_load_with_the_default() -> None:
+    d = {k: v for k, v in GPFitConfig().__dict__.items() if k != "threads"}
+    assert GPFitConfig.from_dict(d).threads == 1
