@@ -316,6 +316,9 @@ def test_construction_errors(arm3_rbd):
         make_model("np-standard-df", 3, df_delta=0.0)
     with pytest.raises(RuntimeError, match="not fitted"):
         make_model("np-standard", 3).predict(np.zeros(3), np.zeros(3), np.zeros(3))
+    for one in ("predict_one", "predict_one_var"):  # predict_one raised AttributeError on None before
+        with pytest.raises(RuntimeError, match="not fitted"):
+            getattr(make_model("np-standard", 3), one)(np.zeros(3), np.zeros(3), np.zeros(3))
     assert isinstance(make_model("np-standard", 3, arm3_rbd), CascadedGPModel)  # rbd ignored for NP
 
 

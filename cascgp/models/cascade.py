@@ -11,7 +11,7 @@ import os
 import warnings
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -85,7 +85,7 @@ class CascadedGPModel:
             if int(rbd.dof) != self.dof:
                 raise ValueError(f"rbd: DOF mismatch: the model has dof={self.dof}, the rigid-body model has "
                                  f"{rbd.dof} joints")
-        self.rbd = rbd if self.parametric == "sp" else None
+        self.rbd: Any = rbd if self.parametric == "sp" else None
         if gp_config is None:
             gp_config = GPFitConfig()
         if not isinstance(gp_config, GPFitConfig):
@@ -121,9 +121,10 @@ class CascadedGPModel:
         return (f"CascadedGPModel(name={self.name!r}, dof={self.dof}, fitted={self.fitted}, "
                 f"n_train={self.n_train})")
 
-    def _require_fitted(self) -> None:
-        if not self.fitted:
+    def _require_fitted(self) -> FastPath:
+        if not self.fitted or self._fast is None:  # fit() and adopt_banks() install both; returns the fast path
             raise RuntimeError(f"model {self.name!r}: not fitted; call fit() or load_model() first")
+        return self._fast
 
     @property
     def fit_info(self) -> list[dict]:
@@ -234,7 +235,7 @@ class CascadedGPModel:
         t = self.gp_config.noise_floor_target
         return replace(self.gp_config, noise_floor_target=(t[j],)) if isinstance(t, tuple) else self.gp_config
 
-    def adopt_banks(self, banks: list[GPBank], where: list[tuple[int, int]], n_train: int) -> None:
+    def adopt_banks(self, banks: list[GPBank], where: Sequence[Sequence[int]], n_train: int) -> None:
         """Install fitted banks (``where[j] = (bank, GP)`` locates joint j's GP), e.g. read from a file;
         ``ValueError`` if they do not fit this model's joints and inputs. Changes nothing on error."""
         N = self.dof
@@ -249,11 +250,11 @@ class CascadedGPModel:
         if len(rows) != 1:
             raise ValueError(f"banks: the joints' GPs hold different numbers of training rows {sorted(rows)}")
         post, fast = self._built(banks, where)  # may raise: nothing assigned yet
-        self.banks, self.where, self.n_train = list(banks), [tuple(w) for w in where], int(n_train)
+        self.banks, self.where, self.n_train = list(banks), [(k, b) for k, b in where], int(n_train)
         self._install(post, fast)
 
     # ------------------------------------------------------------------ caches
-    def _built(self, banks: list[GPBank], where: list[tuple[int, int]]) -> tuple[list[Any], FastPath]:
+    def _built(self, banks: list[GPBank], where: Sequence[Sequence[int]]) -> tuple[list[Any], FastPath]:
         """Posterior factors per joint and the padded arrays of the single-query path (assigns nothing)."""
         post = [banks[k].posterior(b) for k, b in where]
         return post, FastPath.build(post, self.specs, self.order)
@@ -488,7 +489,8 @@ class CascadedGPModel:
         :mod:`cascgp.models.fastpath`). Equals :meth:`predict` to round-off (~1e-12), except while an online
         window is open (:meth:`start_online`): then it includes the online samples, which :meth:`predict` does
         not. Inputs are checked for shape and finiteness (``ValueError``)."""
-        return self._fast.mean(self._load_query(q, qd, qdd, q_hist))
+        f, tau_rbd = self._load_query(q, qd, qdd, q_hist)
+        return f.mean(tau_rbd)
 
     def predict_one_var(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None
                         ) -> tuple[np.ndarray, np.ndarray]:
@@ -496,8 +498,8 @@ class CascadedGPModel:
         ``predict(..., propagate=True)`` (equal to round-off; with an online window open, of the enlarged
         sets). The first call builds one ``(n, n)`` matrix per joint (:meth:`prepare_variance`); a query then
         costs one ``(n, n)`` product per joint on top of :meth:`predict_one`."""
-        tau_rbd = self._load_query(q, qd, qdd, q_hist)
-        return self.prepare_variance().mean_var(self._fast, tau_rbd)
+        f, tau_rbd = self._load_query(q, qd, qdd, q_hist)
+        return self.prepare_variance().mean_var(f, tau_rbd)
 
     def prepare_variance(self) -> FastVariance:
         """Build the single-query variance path now (one ``(n, n)`` triangular inverse per joint), e.g. before an
@@ -566,11 +568,9 @@ class CascadedGPModel:
         online = getattr(self, "_online", None)
         return 0 if online is None else online.n_added
 
-    def _load_query(self, q: Any, qd: Any, qdd: Any, q_hist: Any) -> np.ndarray | None:
-        """Check one query and write its state into the fast path's buffer; returns the RBD torque (SP) or None."""
-        f = self._fast
-        if f is None:
-            self._require_fitted()
+    def _load_query(self, q: Any, qd: Any, qdd: Any, q_hist: Any) -> tuple[FastPath, np.ndarray | None]:
+        """Check one query and write its state into the fast path's buffer; returns it and the RBD torque (NP: None)."""
+        f = self._require_fitted()
         N = self.dof
         q = _one_real("q", q)
         if q.shape != (N,):
@@ -599,7 +599,7 @@ class CascadedGPModel:
             buf[2:3 * N:3] = h[1]
         if not np.isfinite(buf).all():
             raise ValueError("q/qd/qdd/q_hist: non-finite value (NaN or inf) in the query")
-        return self._rbd_torque(q, qd, qdd) if self.parametric == "sp" else None
+        return f, (self._rbd_torque(q, qd, qdd) if self.parametric == "sp" else None)
 
     # ------------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike) -> Path:
