@@ -47,9 +47,8 @@ class DataBuffer:
         self._episodes: list[DynamicsData] = []
         if self.folder is not None:
             self.folder.mkdir(parents=True, exist_ok=True)
-            files = sorted((p for p in self.folder.iterdir() if _EPISODE_FILE.match(p.name)),
-                           key=lambda p: int(_EPISODE_FILE.match(p.name).group(1)))
-            self._episodes = [DynamicsData.load(p) for p in files]
+            found = [(int(m.group(1)), p) for p in self.folder.iterdir() if (m := _EPISODE_FILE.match(p.name))]
+            self._episodes = [DynamicsData.load(p) for _, p in sorted(found, key=lambda e: e[0])]
 
     def __len__(self) -> int:
         return len(self._episodes)
@@ -80,6 +79,7 @@ class DataBuffer:
 
     def _next_index(self) -> int:
         """One past the highest episode number on disk (0 for an empty folder)."""
+        assert self.folder is not None  # called only for a buffer kept in a folder
         nums = [int(m.group(1)) for p in self.folder.iterdir() if (m := _EPISODE_FILE.match(p.name))]
         return max(nums, default=-1) + 1
 

@@ -267,14 +267,14 @@ class FeedforwardController:
         self.dof = int(self.torque_limits.shape[0])
         self.kp = _as_gain(kp, self.dof, "kp")
         self.kd = _as_gain(kd, self.dof, "kd")
-        self.model = model
+        self.model: Any = model  # duck-typed (predict_one / inverse_dynamics); None: PD only
         if model is not None:
             model_dof = getattr(model, "dof", self.dof)
             if int(model_dof) != self.dof:
                 raise ValueError(f"model.dof ({model_dof}) does not match torque_limits ({self.dof} joints)")
         if fallback is None and model is not None and hasattr(model, "inverse_dynamics"):
             fallback = model
-        if fallback is None and getattr(model, "rbd", None) is not None:
+        if fallback is None and model is not None and getattr(model, "rbd", None) is not None:
             fallback = model.rbd  # an SP model's own nominal model (the module docstring's promise)
         self.fallback = fallback
         if gate is True:  # the default rule (docs/gate_rule.md): innovation where the model's states allow it
@@ -292,12 +292,12 @@ class FeedforwardController:
         self.last_gate: np.ndarray | None = None
         if self.gate:
             needs = "predict_one" if self.gate == "innovation" else "predict_one_var"
-            if not hasattr(model, needs):
+            if model is None or not hasattr(model, needs):
                 raise ValueError(f"gate: needs a fitted cascgp model (with {needs}), got {type(model).__name__}")
-            self._nominal = fallback if fallback is not None else getattr(model, "rbd", None)
-            if self._nominal is None:
+            if fallback is None:  # an SP model's own rbd became the fallback above
                 raise ValueError("gate: needs a nominal rigid-body model to fall back toward: pass fallback=... "
                                  "(an SP model's own rbd is used when there is none)")
+            self._nominal: InverseDynamics = fallback
             self._prior = None if self.gate == "innovation" else np.asarray(model.signal_var, dtype=float)
         if online is not None:
             if not hasattr(model, "start_online"):
@@ -333,7 +333,7 @@ class FeedforwardController:
         if self.model is None:
             return "pd"
         name = str(getattr(self.model, "name", type(self.model).__name__))
-        gate = GATE_SUFFIXES.get(self.gate, "")
+        gate = GATE_SUFFIXES.get(self.gate, "") if self.gate else ""
         return name + gate + ("-online" if self.online else "")
 
     def feedforward(self, t: float, reference: Reference) -> np.ndarray:
@@ -369,7 +369,7 @@ class FeedforwardController:
                 if self._uses_history:
                     q_hist = np.stack([reference(t - self._delta)[0], reference(t - 2.0 * self._delta)[0]])
                 if self.gate:
-                    return self._gated(q_d, qd_d, qdd_d, q_hist)
+                    return self._gated(self.gate, q_d, qd_d, qdd_d, q_hist)
                 return np.asarray(model.predict_one(q_d, qd_d, qdd_d, q_hist=q_hist), dtype=float)
             return np.asarray(model.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
         except Exception as exc:  # noqa: BLE001
@@ -379,17 +379,17 @@ class FeedforwardController:
             self.last_model_error = f"{type(exc).__name__}: {exc}"
             return None
 
-    def _gated(self, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, q_hist: np.ndarray | None
+    def _gated(self, rule: str, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, q_hist: np.ndarray | None
                ) -> np.ndarray:
-        """The gated feedforward (see the class docstring)."""
+        """The gated feedforward with gate ``rule`` (see the class docstring)."""
         nominal = np.asarray(self._nominal.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
-        if self.gate == "innovation":
+        if rule == "innovation":
             d = np.asarray(self.model.predict_one(q_d, qd_d, qdd_d, q_hist=q_hist), dtype=float) - nominal
             w = self._innovation_w.copy()  # last_gate is the caller's
         else:
             mean, var = self.model.predict_one_var(q_d, qd_d, qdd_d, q_hist=q_hist)
             d = mean - nominal
-            w = gate_weights(d, var, self.gate, self._prior)
+            w = gate_weights(d, var, rule, self._prior)
         self.last_gate = w
         return nominal + w * d
 

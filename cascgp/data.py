@@ -165,6 +165,12 @@ class DynamicsData:
     segment: np.ndarray | None = None
     meta: dict = field(default_factory=dict)
 
+    @property
+    def _ids(self) -> np.ndarray:
+        """``segment`` as :meth:`__post_init__` stores it (``None`` is only ever a constructor argument)."""
+        assert self.segment is not None
+        return self.segment
+
     # ------------------------------------------------------------------ construction
     def __post_init__(self) -> None:
         arrays: dict[str, np.ndarray] = {}
@@ -268,13 +274,13 @@ class DynamicsData:
     @property
     def segments(self) -> np.ndarray:
         """The distinct segment ids in order."""
-        return np.unique(self.segment)
+        return np.unique(self._ids)
 
     def segment_bounds(self) -> list[tuple[int, int]]:
         """``[(start, stop), ...]`` row ranges of the segments, in order."""
         if self.n_samples == 0:
             return []
-        cuts = np.flatnonzero(np.diff(self.segment) != 0) + 1
+        cuts = np.flatnonzero(np.diff(self._ids) != 0) + 1
         starts = np.concatenate([[0], cuts])
         stops = np.concatenate([cuts, [self.n_samples]])
         return [(int(a), int(b)) for a, b in zip(starts, stops)]
@@ -282,7 +288,7 @@ class DynamicsData:
     def _within_segment_diffs(self) -> np.ndarray:
         if self.n_samples < 2:
             return np.zeros(0)
-        same = np.diff(self.segment) == 0
+        same = np.diff(self._ids) == 0
         return np.diff(self.t)[same]
 
     def __len__(self) -> int:
@@ -318,7 +324,7 @@ class DynamicsData:
         # Build once without qdd to get all shape/finite/time checks with the usual messages.
         probe = cls(q=q, qd=qd_a, qdd=np.zeros_like(qd_a), tau=tau, t=t, segment=segment,
                     meta=meta or {})
-        qdd = differentiate(probe.t, probe.qd, probe.segment, smoothing)
+        qdd = differentiate(probe.t, probe.qd, probe._ids, smoothing)
         meta2 = dict(probe.meta)
         meta2.setdefault("qdd_source", "numerical differentiation of qd" + (
             f" (Savitzky-Golay window={smoothing.window}, polyorder={smoothing.polyorder})"
@@ -342,7 +348,7 @@ class DynamicsData:
                     f"DynamicsData.concat: parts[{i}]: dof {p.dof} differs from parts[0]'s {parts[0].dof}")
         segs, offset = [], 0
         for p in parts:
-            _, inv = np.unique(p.segment, return_inverse=True)
+            _, inv = np.unique(p._ids, return_inverse=True)
             segs.append(inv.astype(np.int64) + offset)
             offset += int(inv.max()) + 1
         if meta is None:
@@ -368,7 +374,7 @@ class DynamicsData:
             elif sel.dtype.kind not in "iu":
                 raise TypeError(f"take: idx: expected integer indices, a boolean mask or a slice, got {sel.dtype}")
         return DynamicsData(q=self.q[sel], qd=self.qd[sel], qdd=self.qdd[sel], tau=self.tau[sel],
-                            t=self.t[sel], segment=self.segment[sel], meta=self.meta)
+                            t=self.t[sel], segment=self._ids[sel], meta=self.meta)
 
     def subsample(self, rate_hz: float) -> "DynamicsData":
         """Keep rows at (about) ``rate_hz`` within each segment: the first row of a segment,
@@ -425,7 +431,7 @@ class DynamicsData:
         return atomic_savez(path, exclusive=exclusive, arrays={
             "format_kind": np.array(_KIND), "format_version": np.array(FORMAT_VERSION),
             "q": self.q, "qd": self.qd, "qdd": self.qdd, "tau": self.tau, "t": self.t,
-            "segment": self.segment, "meta_json": np.array(json.dumps(self.meta)),
+            "segment": self._ids, "meta_json": np.array(json.dumps(self.meta)),
         })
 
     @classmethod

@@ -80,7 +80,11 @@ def states_from_arrays(kind: str, q: np.ndarray, qd: np.ndarray | None = None,
     """
     _check_kind(kind)
     if kind == "db":
+        if qd is None or qdd is None:
+            raise ValueError("states_from_arrays: kind 'db' needs qd and qdd")
         return np.stack([q, qd, qdd], axis=-1)
+    if q_hist is None:
+        raise ValueError("states_from_arrays: kind 'df' needs q_hist")
     return np.stack([q, q_hist[:, 0, :], q_hist[:, 1, :]], axis=-1)
 
 

@@ -31,7 +31,7 @@ import tempfile
 import zipfile
 import zlib
 from pathlib import Path
-from typing import IO, Any, Callable
+from typing import IO, Any, Callable, cast
 
 import numpy as np
 
@@ -63,10 +63,10 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
+def remove_stale_temporaries(folder: str | os.PathLike[str]) -> list[Path]:
     """Remove the temporary files of :func:`atomic_write` in ``folder`` whose writing process is gone
     (killed before it could clean up). Returns the removed paths."""
-    removed = []
+    removed: list[Path] = []
     try:
         entries = list(os.scandir(folder))
     except OSError:
@@ -82,7 +82,7 @@ def remove_stale_temporaries(folder: str | os.PathLike) -> list[Path]:
     return removed
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], None], *, exclusive: bool = False) -> Path:
+def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], object], *, exclusive: bool = False) -> Path:
     """Create ``path`` atomically: ``write(fh)`` fills a temporary binary file in the same
     folder, which is fsync'ed and moved over ``path``. On any error the temporary file is
     removed and ``path`` is left as it was. Returns ``path``.
@@ -124,7 +124,8 @@ def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
 def atomic_savez(path: str | os.PathLike, arrays: dict[str, np.ndarray], *, exclusive: bool = False) -> Path:
     """Write ``arrays`` to ``path`` (``.npz``) atomically (``exclusive``: see :func:`atomic_write`).
     ``numpy.savez`` would append ``.npz`` to a name without it; the path is kept exactly as given."""
-    return atomic_write(path, lambda f: np.savez(f, **arrays), exclusive=exclusive)
+    named = cast("dict[str, Any]", arrays)  # numpy's stub checks **kwds against its allow_pickle: bool
+    return atomic_write(path, lambda f: np.savez(f, **named), exclusive=exclusive)
 
 
 def json_safe(x: Any) -> Any:
@@ -205,6 +206,7 @@ def check_format_header(z: dict[str, np.ndarray], path: str | os.PathLike, kind:
     if got_kind != kind:
         raise ValueError(f"{path}: format_kind: expected {kind!r}, got {got_kind!r}")
     raw = z.get("format_version")
+    got_version: int | str | None
     if raw is None or (raw.shape == () and raw.dtype.kind in "iu"):
         got_version = None if raw is None else int(raw)
     else:

@@ -214,7 +214,7 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
         if paired:
             record["paired"] = _paired_episodes(paired, env, model, rbd, feedback, seed=config.seed * 1000 + i,
                                                 options={"task": task, **options}, meta={"attempt": i, "phase": phase})
-        if learns and phase == "train":
+        if buffer is not None and phase == "train":  # buffer: a learning controller
             buffer.append(result.data)
             t0 = time.perf_counter()
             new = model_factory(base, rbd, GPFitConfig(n_restarts=config.restarts,

@@ -194,20 +194,21 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
     if arr["qd"] is None or arr["qdd"] is None:
         _check_uniform(path, t, seg, smoothing)
         meta["derivative_filter"] = filter_name(smoothing)
-        short = smoothing is not None and np.min(np.diff(np.r_[0, np.flatnonzero(np.diff(seg)) + 1, len(t)])) \
-            < smoothing.window
-        if short:
+        if smoothing is not None and np.min(np.diff(np.r_[0, np.flatnonzero(np.diff(seg)) + 1, len(t)])) \
+                < smoothing.window:
             meta["derivative_filter"] += f"; central differences on segments shorter than {smoothing.window} rows"
-    if arr["qd"] is None:
-        arr["qd"] = differentiate(t, arr["q"], seg, smoothing)
+    q, qd, qdd, tau = arr["q"], arr["qd"], arr["qdd"], arr["tau"]
+    assert q is not None  # _header refuses a log without q1..qN
+    if qd is None:
+        qd = differentiate(t, q, seg, smoothing)
         meta["qd_source"] = "computed"
-    if arr["qdd"] is None:
-        arr["qdd"] = differentiate(t, arr["qd"], seg, smoothing)
+    if qdd is None:
+        qdd = differentiate(t, qd, seg, smoothing)
         meta["qdd_source"] = "computed"
-    if arr["tau"] is None:
-        arr["tau"] = np.zeros_like(arr["q"])  # placeholder: meta["has_tau"] is False
+    if tau is None:
+        tau = np.zeros_like(q)  # placeholder: meta["has_tau"] is False
     try:
-        return DynamicsData(q=arr["q"], qd=arr["qd"], qdd=arr["qdd"], tau=arr["tau"], t=t, segment=seg, meta=meta)
+        return DynamicsData(q=q, qd=qd, qdd=qdd, tau=tau, t=t, segment=seg, meta=meta)
     except (ValueError, TypeError) as exc:  # not expected after the checks above; still name the file
         raise LogFormatError(f"{path}: {exc}") from exc
 
@@ -283,6 +284,7 @@ def write_log(path: str | os.PathLike, data: DynamicsData) -> Path:
         return data.save(path)
     cols: dict[str, np.ndarray] = {"t": data.t}
     if len(data.segments) > 1:
+        assert data.segment is not None  # DynamicsData stores the ids (None is only a constructor argument)
         cols["segment"] = data.segment
     for g in _GROUPS:
         for j in range(data.dof):

@@ -76,7 +76,7 @@ class Link:
     """One URDF link built from a MuJoCo body (or a site, then massless)."""
 
     name: str
-    parent: str | None
+    parent: str  # "world" for the first link
     joint_name: str
     joint_type: str  # "revolute" | "fixed"
     origin_xyz: np.ndarray  # (3,) position in the parent frame
@@ -129,9 +129,9 @@ def extract_links(
         parent_id = int(m.body_parentid[b])
         parent = "world" if parent_id == 0 else _name(m, mujoco.mjtObj.mjOBJ_BODY, parent_id)
         njnt = int(m.body_jntnum[b])
-        rot = np.empty(9)
-        mujoco.mju_quat2Mat(rot, m.body_iquat[b])
-        rot = rot.reshape(3, 3)
+        flat = np.empty(9)
+        mujoco.mju_quat2Mat(flat, m.body_iquat[b])
+        rot = flat.reshape(3, 3)
         inertia = rot @ np.diag(m.body_inertia[b]) @ rot.T
         inertia = 0.5 * (inertia + inertia.T)
         common = dict(
@@ -276,6 +276,8 @@ def urdf_text(links: list[Link], robot_name: str, header: str) -> str:
             f'    <origin xyz="{_v(link.origin_xyz)}" rpy="{_v(link.origin_rpy)}"/>',
         ]
         if link.joint_type == "revolute":
+            if link.axis is None or link.limit is None or link.effort is None or link.velocity is None:
+                raise ValueError(f"revolute joint {link.joint_name!r} needs its axis, limit, effort and velocity")
             lines += [
                 f'    <axis xyz="{_v(link.axis)}"/>',
                 f'    <limit lower="{_f(link.limit[0])}" upper="{_f(link.limit[1])}"'

@@ -72,6 +72,7 @@ class _Objective:
             f, g, jit = nll_and_grad(torch.as_tensor(Th, dtype=DTYPE), X[gsel], y[gsel], self.mask[gsel],
                                      cfg.kernel, floor, cfg.jitter_max, chunk=self.chunk,
                                      snr_max=cfg.snr_max)
+            assert g is not None  # need_grad (the default) returns the gradient
             np.maximum.at(self.max_jit, gp_of[idx], jit.numpy())
             self.n_eval += len(idx)
             self.stage_evals[stage] += len(idx)
@@ -255,16 +256,16 @@ class GPBank:
             best_r[b] = int(np.argmin(np.where(np.isfinite(rec.nll[b]), rec.nll[b], np.inf)))
 
         data.theta = final_theta
-        self._set_data(data)
+        factors = self._set_data(data)
         self.fit_info = [{
             "nll": [json_num(v) for v in rec.nll[b]],
             "n_iter": [int(v) for v in rec.n_iter[b]],
             "n_eval": [int(v) for v in rec.n_eval[b]],
             "reason": list(rec.reason[b]),
             "best": int(best_r[b]),
-            "best_nll": float(self._factors.nll[b]),
+            "best_nll": float(factors.nll[b]),
             "converged": "constant_target" if data.const_y[b] else rec.reason[b][int(best_r[b])],
-            "jitter": float(self._factors.jitter[b]),
+            "jitter": float(factors.jitter[b]),
             "max_jitter_fit": float(obj.max_jit[b]),
             "constant_target": bool(data.const_y[b]),
             "warm_start": warm,
@@ -339,11 +340,12 @@ class GPBank:
         starts = np.stack([sst[m].x if np.isfinite(sst[m].f) else x0[m] for m in kept])
         return (kept, starts, np.array([sst[m].n_iter for m in kept]), np.array([sst[m].n_eval for m in kept]))
 
-    def _set_data(self, data: BankData) -> None:
-        """Adopt ``data`` (training set, normalisation, hyperparameters) and compute its factors."""
+    def _set_data(self, data: BankData) -> Factors:
+        """Adopt ``data`` (training set, normalisation, hyperparameters) and compute its factors (returned)."""
         Xn, yn = data.normalised()
         self._factors = compute_factors(self.config, Xn, yn, data.mask, data.theta, self.config.floors(data.y_std))
         self._data = data
+        return self._factors
 
     # ------------------------------------------------------------------ prediction
     def predict(self, X: list[np.ndarray], return_var: bool = True,
@@ -360,6 +362,7 @@ class GPBank:
         """
         s = self._require_fitted()
         f = self._factors
+        assert f is not None  # _require_fitted checks it
         X = as_list(X, "X")
         B = self.n_gps
         if len(X) != B:
@@ -391,6 +394,7 @@ class GPBank:
         """NumPy factors of GP ``b`` (see :class:`GPPosterior`)."""
         s = self._require_fitted()
         f = self._factors
+        assert f is not None  # _require_fitted checks it
         b = self._check_b(b)
         d = int(s.dims[b])
         act = s.mask[b, :d] > 0

@@ -155,10 +155,8 @@ class GPFitConfig:
             return None
         ys = np.asarray(y_std, dtype=np.float64).reshape(-1)
         t = self.noise_floor_target
-        if isinstance(t, tuple):
-            if len(t) != ys.size:
-                raise ValueError(f"noise_floor_target: expected one value per GP ({ys.size}), got {len(t)}")
-            t = np.array(t, dtype=np.float64)
+        if isinstance(t, tuple) and len(t) != ys.size:
+            raise ValueError(f"noise_floor_target: expected one value per GP ({ys.size}), got {len(t)}")
         return np.maximum(float(self.noise_floor), np.asarray(t, dtype=np.float64) / ys**2)
 
 

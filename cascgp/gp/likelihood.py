@@ -232,6 +232,7 @@ def nll_and_grad(
         raise ValueError(f"noise_floor: expected a number or shape ({k_},), got shape {floor_k.shape}")
     kern = get_kernel(kernel)
     r2s = kern.r2_scale
+    floor_1 = noise_floor if isinstance(noise_floor, (int, float)) else math.nan  # used when floor_k is None
     with np.errstate(over="ignore", invalid="ignore"):
         sf2_all = np.exp(th_np[:, D])
         en_all = np.exp(th_np[:, D + 1])
@@ -260,7 +261,7 @@ def nll_and_grad(
             m = s0 + i
             sf2 = float(sf2_all[m])
             en = float(en_all[m])
-            sn2 = (noise_floor if floor_k is None else float(floor_k[m])) + sf2 * inv_snr + en
+            sn2 = (floor_1 if floor_k is None else float(floor_k[m])) + sf2 * inv_snr + en
             if not (row_ok[m] and math.isfinite(sn2) and math.isfinite(sf2)):
                 continue  # a trial point far out (huge step): NLL inf, the line search backs off
             cf, jit = _potrf_jitter(A[i], C[i], sf2, sn2, jitter_max)
@@ -276,7 +277,7 @@ def nll_and_grad(
             if not math.isfinite(f):
                 continue
             nll[m] = f
-            if not need_grad:
+            if grad is None:  # not need_grad
                 continue
             ci, info = _dpotri(cf, lower=1, overwrite_c=1)
             if prof is not None:

@@ -85,7 +85,7 @@ def warm_theta(config: GPFitConfig, old: BankData, new: BankData, D: int,
     B = old.theta.shape[0]
     old_fl = config.floors(old.y_std)
     new_fl = new_config.floors(new.y_std) if new_config is not None else None
-    new_cfg = config if new_fl is None else new_config
+    new_cfg = config if new_config is None or new_fl is None else new_config
     out = np.zeros((B, D + 2))
     Dold = old.theta.shape[1] - 2
     for b in range(B):
