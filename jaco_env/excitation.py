@@ -22,6 +22,7 @@ Use it with ``JacoPayload-v0`` in velocity mode: ``action = gen.velocity(t)``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any, Callable
 
 import numpy as np
 
@@ -104,7 +105,7 @@ class SumOfSinusoids:
 
 
 def make_command(seed: int = 0, duration: float | None = None, q0: np.ndarray | None = None,
-                 **kwargs) -> "callable":
+                 **kwargs) -> Callable[[Any], np.ndarray]:
     """A seeded velocity command ``v(t) -> (6,)`` starting at ``q0`` (default: the home pose).
 
     ``duration`` is accepted for interface symmetry; the command is valid (within the position

@@ -187,7 +187,7 @@ class OracleController(PDController):
         self.follow_marbles = follow_marbles
         self.model: mujoco.MjModel | None = None
         self.data: mujoco.MjData | None = None
-        self._env = None
+        self._env: Any = None  # the pouring env whose marbles are followed, or None
         self._extra = 0.0
         self._payload_b = -1
         # Payload body origin in the bottle frame (same orientation as the bottle).
@@ -209,22 +209,22 @@ class OracleController(PDController):
         follow = self.follow_marbles and n_marbles > 0 and hasattr(env, "marbles_in_bottle_frame")
         self._env = env if follow else None
 
-    def _update_marbles(self) -> None:
+    def _update_marbles(self, model: mujoco.MjModel) -> None:
         loc, in_bottle = self._env.marbles_in_bottle_frame()
         m_in = scene.MARBLE_MASS * int(in_bottle.sum())
         c = loc[in_bottle].mean(axis=0) - self._payload_origin if m_in > 0 else np.zeros(3)
         total = max(self._extra + m_in, 1e-9)
-        self.model.body_mass[self._payload_b] = total
-        self.model.body_ipos[self._payload_b] = m_in * c / total
+        model.body_mass[self._payload_b] = total
+        model.body_ipos[self._payload_b] = m_in * c / total
 
     def feedforward(self, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray) -> np.ndarray:
-        if self.model is None:
+        model, d = self.model, self.data
+        if model is None or d is None:  # _build sets both
             raise RuntimeError("OracleController has no model: pass payload_mass or call start(env, info)")
         if self._env is not None:
-            self._update_marbles()
-        d = self.data
+            self._update_marbles(model)
         d.qpos[:_N] = q_d
         d.qvel[:_N] = qd_d
         d.qacc[:_N] = qdd_d
-        mujoco.mj_inverse(self.model, d)
+        mujoco.mj_inverse(model, d)
         return d.qfrc_inverse[:_N].copy()

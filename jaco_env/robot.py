@@ -81,6 +81,7 @@ import os
 
 import numpy as np
 from dm_control import mjcf
+from numpy.typing import ArrayLike
 
 N_JOINTS = 6
 JOINT_NAMES: tuple[str, ...] = tuple(f"joint_{i}" for i in range(1, N_JOINTS + 1))
@@ -122,7 +123,7 @@ def kinova_asset_dir() -> str:
     return os.path.join(os.path.dirname(dm_control.__file__), "third_party", "kinova")
 
 
-def axis_angle_quat(axis: np.ndarray, angle: float) -> np.ndarray:
+def axis_angle_quat(axis: ArrayLike, angle: float) -> np.ndarray:
     axis = np.asarray(axis, dtype=float)
     axis = axis / np.linalg.norm(axis)
     return np.concatenate([[np.cos(angle / 2)], np.sin(angle / 2) * axis])

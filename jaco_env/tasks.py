@@ -76,8 +76,8 @@ class PouringTask:
     settle: float = 0.5
     speed: float = 0.8
     tip_speed: float = 0.9
-    _segments: list = field(default=None, init=False, repr=False, compare=False)
-    _bounds: np.ndarray = field(default=None, init=False, repr=False, compare=False)
+    _segments: list[Segment] | None = field(default=None, init=False, repr=False, compare=False)
+    _bounds: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         self.jar_pos = np.asarray(self.jar_pos, dtype=float).copy()
@@ -120,7 +120,13 @@ class PouringTask:
         h = self.pre_height + (self.pour_height - self.pre_height) * min(tilt / self.tilt, 1.0)
         return np.array([self.jar_pos[0], self.jar_pos[1], rim + h]) - self.pour_offset * frac * side
 
-    def _build(self) -> None:
+    def _plan(self) -> tuple[list[Segment], np.ndarray]:
+        """The reference's segments and their start times (s), built on first use."""
+        if self._segments is None or self._bounds is None:
+            self._segments, self._bounds = self._build()
+        return self._segments, self._bounds
+
+    def _build(self) -> tuple[list[Segment], np.ndarray]:
         q_home = home_pose()
         tilts = np.linspace(0.0, self.tilt, N_TIP_POINTS)
         # Pre-pour pose by continuation: move the target from the home pose to the pre-pour pose
@@ -135,16 +141,16 @@ class PouringTask:
             rot = np.array([[np.cos(ang), -np.sin(ang), 0], [np.sin(ang), np.cos(ang), 0], [0, 0, 1]])
             p = (1 - lam) * (rot @ p_home) + lam * p_pre
             guess, _ = solve_ik(p, target_rotation(a, 0.0), guess)
-        qs = []
+        sols = []
         for th in tilts:
             q, err = solve_ik(self.mouth_target(th), target_rotation(self.approach, th), guess)
             if err > 1e-4:
                 raise ValueError(
                     f"task {self.name!r}: jar_pos {self.jar_pos.tolist()} is not reachable "
                     f"(IK residual {err:.3g} at tilt {np.rad2deg(th):.0f} deg)")
-            qs.append(q)
+            sols.append(q)
             guess = q
-        qs = np.array(qs)
+        qs = np.array(sols)
         q_pre = qs[0]
         segs = []
         path, mx = line_path(q_home, q_pre)
@@ -159,16 +165,14 @@ class PouringTask:
         segs.append(Segment(path, segment_duration(mx, self.speed)))
         path, _ = line_path(q_home, q_home)
         segs.append(Segment(path, self.settle))
-        self._segments = segs
-        self._bounds = np.cumsum([0.0] + [s.duration for s in segs])
+        return segs, np.cumsum([0.0] + [s.duration for s in segs])
 
     @property
     def phase_times(self) -> dict[str, float]:
         """Start times (s) of the phases approach, tip, hold, untip, return, settle, and 'end'."""
-        if self._segments is None:
-            self._build()
+        _, bounds = self._plan()
         names = ("approach", "tip", "hold", "untip", "return", "settle", "end")
-        return dict(zip(names, (float(b) for b in self._bounds)))
+        return dict(zip(names, (float(b) for b in bounds)))
 
     @property
     def duration(self) -> float:
@@ -188,8 +192,7 @@ class PouringTask:
         start pose and after ``duration`` the final pose are held (zero velocity/acceleration).
         A ``t`` that is not real (str, bool, complex) raises ``TypeError``, a NaN/inf one ``ValueError``.
         """
-        if self._segments is None:
-            self._build()
+        segments, bounds = self._plan()
         scalar = np.ndim(t) == 0
         raw = np.asarray(t)
         if raw.dtype.kind not in "iuf":  # a string, bool or complex t is refused, not cast
@@ -201,11 +204,11 @@ class PouringTask:
         q = np.empty((len(tt), n))
         qd = np.zeros((len(tt), n))
         qdd = np.zeros((len(tt), n))
-        idx = np.clip(np.searchsorted(self._bounds, tt, side="right") - 1, 0, len(self._segments) - 1)
-        for k, seg in enumerate(self._segments):
+        idx = np.clip(np.searchsorted(bounds, tt, side="right") - 1, 0, len(segments) - 1)
+        for k, seg in enumerate(segments):
             sel = idx == k
             if np.any(sel):
-                local = np.clip(tt[sel] - self._bounds[k], 0.0, seg.duration)
+                local = np.clip(tt[sel] - bounds[k], 0.0, seg.duration)
                 q[sel], qd[sel], qdd[sel] = seg.evaluate(local)
         if scalar:
             return q[0], qd[0], qdd[0]

@@ -69,7 +69,9 @@ MAX_PHYSICS_STEP = 0.002
 MAX_JOINT_SPEED = 50.0
 MAX_MARBLE_SPEED = 20.0
 
-DEFAULT_CAMERA = {"distance": 2.0, "azimuth": 150.0, "elevation": -25.0, "lookat": np.array([0.3, 0.0, 0.25])}
+# dict[str, Any]: MuJoCo's viewer takes lookat as an array (gymnasium annotates the values as numbers only)
+DEFAULT_CAMERA: dict[str, Any] = {"distance": 2.0, "azimuth": 150.0, "elevation": -25.0,
+                                  "lookat": np.array([0.3, 0.0, 0.25])}
 
 _N = robot.N_JOINTS
 
@@ -241,6 +243,7 @@ class JacoMujocoEnv(MujocoEnv):
     #: ``scene.build_scene`` kind and observation length; set by each environment.
     _scene_kind = "payload"
     _obs_dim = MEASUREMENT_DIM
+    action_space: spaces.Box  # a Box of the torque or velocity limits (_set_action_space)
 
     def __init__(self, *, control_mode: str, control_freq: float, sensor_noise: SensorNoise | None, n_marbles: int,
                  render_mode: str | None, width: int, height: int, camera_name: str | None):

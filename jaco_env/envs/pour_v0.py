@@ -225,17 +225,17 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         Rb = d.xmat[self._bottle_body].reshape(3, 3).copy()
         r = scene.MARBLE_RADIUS
         ring = scene.BOTTLE_INNER_RADIUS - r - 0.0015
-        local = []
+        spots: list[list[float]] = []
         layer = 0
-        while len(local) < self.n_marbles:
+        while len(spots) < self.n_marbles:
             z = scene.BOTTLE_BOTTOM + r + 0.001 + layer * (2 * r + 0.001)
             rot = layer * np.pi / 8
-            local.append([0.0, 0.0, z])
+            spots.append([0.0, 0.0, z])
             for k in range(8):
                 a = rot + 2 * np.pi * k / 8
-                local.append([ring * np.cos(a), ring * np.sin(a), z])
+                spots.append([ring * np.cos(a), ring * np.sin(a), z])
             layer += 1
-        local = np.array(local[: self.n_marbles])
+        local = np.array(spots[: self.n_marbles])
         local[:, :2] += self.np_random.uniform(-3e-4, 3e-4, size=(self.n_marbles, 2))
         world = xb + local @ Rb.T
         for k in range(self.n_marbles):
