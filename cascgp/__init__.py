@@ -64,7 +64,7 @@ _EXPORTS = {
     "run_episode": "cascgp.episodes",
 }
 
-__all__ = sorted(_EXPORTS)
+__all__ = sorted(_EXPORTS)  # noqa: PLE0605 - sorted() returns a list
 
 
 def __getattr__(name: str) -> Any:

@@ -231,7 +231,7 @@ class DynamicsData:
         try:
             meta = json.loads(json.dumps(meta))
         except (TypeError, ValueError) as exc:
-            raise TypeError(f"DynamicsData.meta: expected a JSON-serialisable dict ({exc})")
+            raise TypeError(f"DynamicsData.meta: expected a JSON-serialisable dict ({exc})") from None
         for name, a in arrays.items():
             a.setflags(write=False)
             object.__setattr__(self, name, a)

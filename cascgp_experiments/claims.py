@@ -164,8 +164,9 @@ def claims_markdown(res: dict[str, Any]) -> str:
             for j in (3, 5):
                 if j < N:
                     L.append(f"- **Outward beats inward on joint {j + 1} (NP, DB)**: measured inward/outward "
-                             + ", ".join(f"{IV[k]} {_f(rows[npdb[0]][j][k])}/{_f(rows[npdb[1]][j][k])}" for k in range(3))
-                             + f" (paper: " + ", ".join(f"{_f(paper[npdb[0]][j][k])}/{_f(paper[npdb[1]][j][k])}"
+                             + ", ".join(f"{IV[k]} {_f(rows[npdb[0]][j][k])}/{_f(rows[npdb[1]][j][k])}"
+                                         for k in range(3))
+                             + " (paper: " + ", ".join(f"{_f(paper[npdb[0]][j][k])}/{_f(paper[npdb[1]][j][k])}"
                                                      for k in range(3)) + ").")
         if _have(rows, npdb + spdb):
             L.append("- **SP below NP (the RBD mean helps)**: mean nRMSE over joints, standard models, NP/SP: "
@@ -174,7 +175,7 @@ def claims_markdown(res: dict[str, Any]) -> str:
                      + " (paper: " + ", ".join(f"{_f(np.mean(_a(paper, npdb[2])[:, k]))}/{_f(np.mean(_a(paper, spdb[2])[:, k]))}"
                                                for k in range(3)) + ").")
         if RBD in rows:
-            L.append(f"- **RBD alone** (nominal model without the payload): nRMSE per joint "
+            L.append("- **RBD alone** (nominal model without the payload): nRMSE per joint "
                      + ", ".join(f"{_f(v[0])}" for v in rows[RBD]) + ".")
         all12 = [model_name(p, s, df) for df in (False, True) for p in ("np", "sp")
                  for s in ("inward", "outward", "standard")]
@@ -196,8 +197,9 @@ def claims_markdown(res: dict[str, Any]) -> str:
         L.append(f"\nSARCOS ({s['n_subsets']} subsets, {s['n_test_rows']} de-duplicated test rows):\n")
         L.append(f"- **Cascade beats standard NP** on {'/'.join(map(str, c))} of {N} joints ({', '.join(IV)}); "
                  f"inward beats outward in {int(iw.sum())} of {iw.size} cells.")
-        L.append(f"- **Outward beats inward on the last joint (7)**: inward/outward "
-                 + ", ".join(f"{IV[k]} {_f(t['np-inward'][N - 1][k])}/{_f(t['np-outward'][N - 1][k])}" for k in range(3)) + ".")
+        L.append("- **Outward beats inward on the last joint (7)**: inward/outward "
+                 + ", ".join(f"{IV[k]} {_f(t['np-inward'][N - 1][k])}/{_f(t['np-outward'][N - 1][k])}"
+                             for k in range(3)) + ".")
         if all("nrmse_all" in v for v in s["models"].values()):
             L += paired_markdown(s, "SARCOS")
     it = res.get("iterations")

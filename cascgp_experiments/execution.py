@@ -534,8 +534,8 @@ def _drive_pool(pool: ProcessPoolExecutor, fn, jobs, todo, progress, finished) -
             except BrokenProcessPool as exc:
                 lost = [i] + [j for j in running.values()]
                 raise RuntimeError(
-                    f"a worker process died (crashed or killed, e.g. out of memory) while these jobs were "
-                    f"running or waiting: " + "; ".join(f"{fn.__name__}({_short(jobs[j], 300)})"
+                    "a worker process died (crashed or killed, e.g. out of memory) while these jobs were "
+                    "running or waiting: " + "; ".join(f"{fn.__name__}({_short(jobs[j], 300)})"
                                                         for j in lost[:8])
                     + ("; ..." if len(lost) > 8 else "")
                     + ". The finished jobs are cached (with a cache folder): run again to resume") from exc

@@ -174,7 +174,7 @@ def ratios(results: dict[str, Any]) -> list[dict[str, Any]]:
     for seed, run in results["runs"].items():
         ung, gat, rbd = run[UNGATED], run[GATED], run["rbd"]
 
-        def add(quantity: str, task: str, num: float | None, den: float | None) -> None:
+        def add(quantity: str, task: str, num: float | None, den: float | None, seed: str = seed) -> None:
             # a non-finite RMSE went through JSON as None: its ratio is NaN (and shows as such in the tables)
             num, den = (float("nan") if v is None else float(v) for v in (num, den))
             with np.errstate(divide="ignore", invalid="ignore"):

@@ -173,7 +173,7 @@ def ratios(results: dict[str, Any]) -> list[dict[str, Any]]:
                          "ratio": float(np.divide(num, den))})
 
     for seed, run in results["runs"].items():
-        def rmse(label: str, task: str, k: int) -> float:
+        def rmse(label: str, task: str, k: int, run: dict = run) -> float:
             return find_attempt(run[label], task, k)["tracking_rmse"]
 
         gated = _gated_labels(run)

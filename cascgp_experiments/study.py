@@ -133,8 +133,6 @@ def run_study(out: str | Path, settings: Settings, *, models: list[str] | None =
 def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None, workers: int | None,
                ray_address: str | None, sarcos: str | Path | None, do_iterations: bool, do_plots: bool,
                command: str) -> dict[str, Any]:
-    from cascgp.data import DynamicsData
-
     from cascgp_experiments import collect as col
     from cascgp_experiments.analyses import spearman_block
 

@@ -13,8 +13,6 @@ PD alone leaves a steady gravity error of about 13 N m / 66 N m/rad = 0.2 rad on
 
 from __future__ import annotations
 
-import numpy as np
-
 from jaco_env.robot import DESIGN_INERTIA
 
 #: Closed-loop natural frequency (rad/s) and damping ratio of the recommended PD.

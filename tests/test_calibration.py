@@ -259,7 +259,7 @@ def test_calibration_recalibrates_on_an_unseen_training_motion(arms, tmp_path: P
         m = make_model("sp-inward", 6, rbd, gp_config=GPFitConfig(n_restarts=1)).fit(
             motions[k].subsample(10.0).first_seconds(0.5))
 
-        def factor(motion):
+        def factor(motion, m=m):
             cal = motion.subsample(10.0)
             mean, var = m.predict(cal.q, cal.qd, cal.qdd, propagate=True)
             return std_scale_for_level(mean, var + m.noise_var, cal.tau)

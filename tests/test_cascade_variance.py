@@ -94,7 +94,7 @@ def test_mean_jacobian_matches_finite_differences(fitted) -> None:
     J = model.mean_jacobian(q, qd, qdd)
     assert J.shape == (q.shape[0], 3, 3, 3)
     h = 1e-5
-    for c, base in enumerate((q, qd, qdd)):
+    for c in range(3):
         for k in range(3):
             up, dn = [a.copy() for a in (q, qd, qdd)], [a.copy() for a in (q, qd, qdd)]
             up[c][:, k] += h

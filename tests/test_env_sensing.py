@@ -111,11 +111,11 @@ def test_torque_loop_residual():
     env = gym.make("JacoPayload-v0", sensor_noise=None)
     env.reset(seed=0)
     u = env.unwrapped
-    m, d = u.model, u.data
+    d = u.data
     rng = np.random.default_rng(0)
     tau_prev = np.zeros(6)
     act_prev = d.act[:6].copy()
-    for k in range(60):
+    for _ in range(60):
         g = d.qfrc_bias[u.arm_dof_adr].copy()
         cmd = np.clip(g + rng.normal(0, 0.03, 6) * robot.TORQUE_LIMITS, -robot.TORQUE_LIMITS, robot.TORQUE_LIMITS)
         obs, *_ = env.step(cmd)

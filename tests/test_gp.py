@@ -76,7 +76,7 @@ def test_nll_and_grad_equal_numpy_reference_padded_batch(kernel):
         X[b, :, :d] = rng.normal(size=(n, d))
         mask[b, :d] = 1
     y = rng.normal(size=(B, n))
-    for trial in range(3):
+    for _ in range(3):
         theta = np.concatenate([rng.uniform(-1.0, 1.5, size=(B, D)), rng.uniform(-1, 1, size=(B, 1)),
                                 rng.uniform(-5, -1, size=(B, 1))], axis=1)
         theta[:, :D] *= mask
@@ -149,8 +149,8 @@ def test_batched_fit_equals_fitting_each_alone_and_is_an_optimum():
         yn = (y[b] - y[b].mean()) / y[b].std()
         th = bank.theta[b]
         # (bounded to +-5 log units around it: an unbounded first step can overflow exp in the reference)
-        res = scipy.optimize.minimize(lambda t: ref_nll_grad(t, Xn, yn, np.ones(Xn.shape[1], bool), "matern52"),
-                                      th, jac=True, method="L-BFGS-B", bounds=[(t - 5.0, t + 5.0) for t in th])
+        res = scipy.optimize.minimize(ref_nll_grad, th, args=(Xn, yn, np.ones(Xn.shape[1], bool), "matern52"),
+                                      jac=True, method="L-BFGS-B", bounds=[(t - 5.0, t + 5.0) for t in th])
         assert res.fun >= info["best_nll"] - 1e-4
 
 

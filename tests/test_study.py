@@ -242,7 +242,7 @@ def _check_results(out: Path, res: dict) -> None:
     jaco = res["jaco"]
     assert set(jaco["models"]) == set(VARIANTS) | {RBD}
     G = len(jaco["grid_s"])
-    for m, v in jaco["models"].items():
+    for v in jaco["models"].values():
         mu = np.asarray(v["nrmse_mean"], float)
         assert mu.shape == (G, 6) and np.isfinite(mu).all() and (mu > 0).all()
         np.testing.assert_allclose(v["nrmse_median"], np.median(np.asarray(v["nrmse_all"], float), 0))

@@ -215,7 +215,7 @@ def lbfgs_member(st: MemberState, opt: LBFGSOptions) -> Generator[np.ndarray, Ev
         gtd = float(g @ d)
         if gtd > -1e-300 or not np.all(np.isfinite(d)):
             # not a descent direction (broken curvature information): restart from steepest descent
-            S.clear(); Y.clear(); RHO.clear()
+            S.clear(); Y.clear(); RHO.clear()  # noqa: E702
             d = -g
             gtd = float(g @ d)
             t = min(1.0, 1.0 / max(float(np.abs(g).sum()), 1e-300))
@@ -224,7 +224,7 @@ def lbfgs_member(st: MemberState, opt: LBFGSOptions) -> Generator[np.ndarray, Ev
         st.n_iter += 1
         if not ok:
             if S:  # retry once from steepest descent before giving up
-                S.clear(); Y.clear(); RHO.clear()
+                S.clear(); Y.clear(); RHO.clear()  # noqa: E702
                 d = -g
                 t = min(1.0, 1.0 / max(float(np.abs(g).sum()), 1e-300))
                 if st.n_iter < opt.max_iter and st.n_eval < max_eval:
@@ -255,8 +255,8 @@ def lbfgs_member(st: MemberState, opt: LBFGSOptions) -> Generator[np.ndarray, Ev
         ys = float(y @ s)
         if ys > 1e-10 * max(float(y @ y), 1e-300) ** 0.5 * max(float(s @ s), 1e-300) ** 0.5:
             if len(S) == opt.history:
-                S.pop(0); Y.pop(0); RHO.pop(0)
-            S.append(s); Y.append(y); RHO.append(1.0 / ys)
+                S.pop(0); Y.pop(0); RHO.pop(0)  # noqa: E702
+            S.append(s); Y.append(y); RHO.append(1.0 / ys)  # noqa: E702
         # two-loop recursion
         q = -g
         al = [0.0] * len(S)
