@@ -693,7 +693,7 @@ def _ray_connect(address: str, workers: int) -> bool:
         tqdm.write(note, file=sys.stderr)
     try:
         ray.init(address=address, logging_level=logging.WARNING)
-    except Exception as exc:  # noqa: BLE001 - only a refused token is translated; anything else goes on as it is
+    except Exception as exc:  # only a refused token is translated; anything else goes on as it is
         ray_error = _auth_failure(exc)
         if ray_error is None:
             raise

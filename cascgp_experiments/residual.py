@@ -17,13 +17,13 @@ import numpy as np
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-import gymnasium as gym  # noqa: E402
+import gymnasium as gym
 
-import jaco_env  # noqa: E402
-from cascgp.data import DynamicsData, SavGol  # noqa: E402
-from cascgp.rbd import load_nominal  # noqa: E402
-from cascgp_experiments.common import NOMINAL_URDF  # noqa: E402
-from jaco_env.excitation import make_command  # noqa: E402
+import jaco_env
+from cascgp.data import DynamicsData, SavGol
+from cascgp.rbd import load_nominal
+from cascgp_experiments.common import NOMINAL_URDF
+from jaco_env.excitation import make_command
 
 #: Rows of the printed table: (key of :func:`breakdown`'s result, label).
 ROWS = (("tau_std", "std of measured torque"), ("residual_mean", "mean of RBD residual"),

@@ -30,14 +30,14 @@ import numpy as np
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-import gymnasium as gym  # noqa: E402
+import gymnasium as gym
 
-import jaco_env  # noqa: E402  (registers the environments)
-from cascgp.io import atomic_write_text, read_json, write_json  # noqa: E402
-from cascgp.learning import (PLAIN_CONTROLLERS, Attempt, ControllerRun, Feedback, RetrainConfig,  # noqa: E402
+import jaco_env  # registers the environments
+from cascgp.io import atomic_write_text, read_json, write_json
+from cascgp.learning import (PLAIN_CONTROLLERS, Attempt, ControllerRun, Feedback, RetrainConfig,
                              attempt_plan, check_controller, run_controller)
-from cascgp.rbd import load_nominal  # noqa: E402
-from cascgp_experiments.common import NOMINAL_URDF, save_figure  # noqa: E402
+from cascgp.rbd import load_nominal
+from cascgp_experiments.common import NOMINAL_URDF, save_figure
 
 ENV_ID = "JacoPour-v0"
 FULL_CONTROLLERS = ("pd", "rbd", "sp-standard", "sp-inward", "sp-outward", "np-inward", "sp-inward-gated",

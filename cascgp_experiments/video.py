@@ -43,8 +43,8 @@ import numpy as np
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from cascgp.episodes import EpisodeResult, run_episode  # noqa: E402
-from cascgp.io import atomic_write  # noqa: E402
+from cascgp.episodes import EpisodeResult, run_episode
+from cascgp.io import atomic_write
 
 __all__ = ["DEFAULT_FPS", "INSTALL_HINT", "EpisodeRecorder", "caption_frame", "every_for_fps", "side_by_side",
            "write_mp4", "record_episode", "record_comparison", "make_video_env", "VIDEO_CAMERA"]

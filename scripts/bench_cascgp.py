@@ -44,10 +44,10 @@ if __name__ == "__main__":  # BLAS reads these when NumPy is first imported
     for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(_v, _t or "1")
 
-import numpy as np  # noqa: E402
+import numpy as np
 
-from cascgp.io import write_json  # noqa: E402
-from cascgp_experiments.audit_suite import benchmark_data as load_data  # noqa: E402
+from cascgp.io import write_json
+from cascgp_experiments.audit_suite import benchmark_data as load_data
 
 
 #: cascgp settings of the benchmark. "default" is ``GPFitConfig()`` as a new user gets it (every GP's leading start
@@ -134,7 +134,7 @@ def bench_gpy(X: np.ndarray, Y: np.ndarray, restarts: int, threads: int) -> dict
 def bench_cascade(X: np.ndarray, Y: np.ndarray, n_queries: int) -> dict | None:
     """Median latency of one single-query 6-joint NP inward cascade prediction (needs cascgp.models)."""
     try:
-        from cascgp import models  # noqa: F401
+        from cascgp import models
         from cascgp.data import DynamicsData
     except ImportError:
         return None

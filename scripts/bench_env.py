@@ -27,7 +27,7 @@ import gymnasium as gym  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-import jaco_env  # noqa: E402,F401
+import jaco_env  # noqa: E402
 from jaco_env.oracle import OracleController  # noqa: E402
 
 

@@ -46,8 +46,8 @@ def make_controller(controller: str):
     if controller == "pd":
         return PDController()
     if controller == "nominal":
-        from cascgp.controller import FeedforwardController  # noqa: PLC0415
-        from cascgp.rbd import load_nominal  # noqa: PLC0415
+        from cascgp.controller import FeedforwardController
+        from cascgp.rbd import load_nominal
 
         return FeedforwardController(load_nominal(str(NOMINAL_URDF)), DEFAULT_KP, DEFAULT_KD, robot.TORQUE_LIMITS)
     raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
@@ -74,11 +74,11 @@ class MouthError:
 def run_one(task: str, controller: str, payload: float, seed: int, n_marbles: int) -> dict:
     """One episode through :func:`cascgp.episodes.run_episode`; returns the metrics (JSON-serialisable)."""
     import gymnasium as gym
-    import torch  # noqa: PLC0415  (cascgp needs it; keep it single-threaded)
+    import torch  # cascgp needs it; keep it single-threaded
 
     torch.set_num_threads(1)
     import jaco_env  # noqa: F401
-    from cascgp.episodes import run_episode  # noqa: PLC0415
+    from cascgp.episodes import run_episode
 
     env = gym.make("JacoPour-v0", n_marbles=n_marbles)
     mouth = MouthError()

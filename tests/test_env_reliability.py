@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from gymnasium.error import ResetNeeded
 
-import jaco_env  # noqa: F401
+import jaco_env
 from jaco_env.envs import JacoPayloadEnv, JacoPourEnv
 from jaco_env.oracle import OracleController, PDController
 from jaco_env.sensors import SensorNoise

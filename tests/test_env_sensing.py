@@ -12,7 +12,7 @@ import mujoco
 import numpy as np
 import pytest
 
-import jaco_env  # noqa: F401
+import jaco_env
 from jaco_env import excitation, robot, scene
 from jaco_env.tasks import DEFAULT_TASKS
 

@@ -16,10 +16,10 @@ os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering (set before MuJo
 
 pytest.importorskip("moviepy", reason="gymnasium.wrappers.RecordVideo needs MoviePy: pip install 'cascgp-jaco[video]'")
 
-import gymnasium as gym  # noqa: E402
-from gymnasium.wrappers import RecordVideo  # noqa: E402
+import gymnasium as gym
+from gymnasium.wrappers import RecordVideo
 
-import jaco_env  # noqa: E402,F401  (registers the environments)
+import jaco_env  # noqa: F401  (registers the environments)
 
 WIDTH, HEIGHT, STEPS = 96, 80, 6
 

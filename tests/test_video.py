@@ -11,10 +11,10 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-import imageio.v3 as iio  # noqa: E402  (in the test extra: CI checks a real MP4)
+import imageio.v3 as iio  # in the test extra: CI checks a real MP4
 
-from cascgp.controller import FeedforwardController  # noqa: E402
-from cascgp_experiments import video  # noqa: E402
+from cascgp.controller import FeedforwardController
+from cascgp_experiments import video
 
 
 def _read(path):
