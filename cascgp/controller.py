@@ -73,7 +73,7 @@ def _as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
 
 #: The gate rules of :class:`FeedforwardController` (see its docstring).
 GATE_RULES = ("wiener", "floor", "variance", "innovation")
-#: The controller-name suffix of each rule (:attr:`FeedforwardController.name`, :func:`cascgp.learning.parse_controller`).
+#: Controller-name suffix of each rule (:attr:`FeedforwardController.name`, :func:`cascgp.learning.parse_controller`).
 GATE_SUFFIXES = {"wiener": "-gated", "floor": "-fgated", "variance": "-vgated", "innovation": "-igated"}
 #: Half-life (s) of the innovation gate's error sums: a model's error counts half after this time. Fixed before the
 #: rule was run (docs/gate_rule.md): a task's reference crosses its part of the workspace in seconds, so errors

@@ -13,8 +13,8 @@ where the model has predicted this episode's measured torques worse than the RBD
 ``-fgated`` (``"floor"``) or ``-vgated`` (``"variance"``; the last three where the model is unsure), and
 ``-online`` (new samples enter the model during each attempt, window :data:`ONLINE_WINDOW`, hyperparameters held
 until the next refit), e.g. ``"sp-inward-igated-online"``. Before a learning controller has any data, an SP
-model is its RBD mean (RBD feedforward) and an NP model is zero (PD). After every ``"train"`` attempt of a learning controller,
-the measured episode joins a :class:`cascgp.buffer.DataBuffer` and a new model is fitted on
+model is its RBD mean (RBD feedforward) and an NP model is zero (PD). After every ``"train"`` attempt of a learning
+controller, the measured episode joins a :class:`cascgp.buffer.DataBuffer` and a new model is fitted on
 everything seen so far (subsampled to ``rate_hz``, at most ``cap`` rows), warm-started from the
 previous model's hyperparameters.
 
@@ -106,7 +106,8 @@ def parse_controller(name: str) -> tuple[str, str | None, bool]:
             break
     if base not in PLAIN_CONTROLLERS and base not in MODEL_NAMES or (base in PLAIN_CONTROLLERS and (gate or online)):
         raise ValueError(f"unknown controller {name!r}; expected 'pd', 'rbd' or one of {list(MODEL_NAMES)}, "
-                         "a model name optionally followed by '-gated' (or '-fgated', '-vgated', '-igated') and/or '-online'")
+                         "a model name optionally followed by '-gated' (or '-fgated', '-vgated', '-igated') "
+                         "and/or '-online'")
     if gate == "floor" and not base.startswith("sp-"):
         raise ValueError(f"unknown controller {name!r}: '-fgated' needs a semi-parametric model ('sp-...')")
     if gate == "innovation" and base.endswith("-df"):

@@ -170,10 +170,10 @@ def claims_markdown(res: dict[str, Any]) -> str:
                                                      for k in range(3)) + ").")
         if _have(rows, npdb + spdb):
             L.append("- **SP below NP (the RBD mean helps)**: mean nRMSE over joints, standard models, NP/SP: "
-                     + ", ".join(f"{IV[k]} {_f(np.mean(_a(rows, npdb[2])[:, k]))}/{_f(np.mean(_a(rows, spdb[2])[:, k]))}"
-                                 for k in range(3))
-                     + " (paper: " + ", ".join(f"{_f(np.mean(_a(paper, npdb[2])[:, k]))}/{_f(np.mean(_a(paper, spdb[2])[:, k]))}"
-                                               for k in range(3)) + ").")
+                     + ", ".join(f"{IV[k]} {_f(np.mean(_a(rows, npdb[2])[:, k]))}/"
+                                 f"{_f(np.mean(_a(rows, spdb[2])[:, k]))}" for k in range(3))
+                     + " (paper: " + ", ".join(f"{_f(np.mean(_a(paper, npdb[2])[:, k]))}/"
+                                               f"{_f(np.mean(_a(paper, spdb[2])[:, k]))}" for k in range(3)) + ").")
         if RBD in rows:
             L.append("- **RBD alone** (nominal model without the payload): nRMSE per joint "
                      + ", ".join(f"{_f(v[0])}" for v in rows[RBD]) + ".")

@@ -10,8 +10,8 @@ seeded random starts around the data-driven default, optimised with the library'
 
 Equivalence audit: a seeded random ``audit_fraction`` (default 5 %) of the grid fits is fitted a
 second time with ``n_restarts`` *cold* starts, each run to convergence (no warm start, no
-early stopping: :func:`cascgp.fit_audit.cold_config`), and the per-joint gap of the best negative log marginal likelihood
-(protocol minus cold, nats; <= 0 means the protocol found an equal or better optimum) is recorded.
+early stopping: :func:`cascgp.fit_audit.cold_config`), and the per-joint gap of the best negative log marginal
+likelihood (protocol minus cold, nats; <= 0 means the protocol found an equal or better optimum) is recorded.
 
 Same rows for every variant: the derivative-free (-df) models cannot use the first
 ``2 * df_delta`` of each segment (no history), so the derivative-based models drop those rows

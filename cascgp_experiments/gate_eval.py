@@ -142,7 +142,8 @@ def run_gate_eval(out: Path, cfg: TransferConfig = GATE_EVAL_CONFIG, seeds: tupl
     jobs = gate_jobs(cfg, seeds)
     t0 = time.perf_counter()
     res = run_jobs(controller_job, jobs, workers=workers, ray_address=ray_address, cache_dir=out / "cache",
-                   desc="attempts", units=[len(cfg.plan())] * len(jobs), unit="attempt", priority=[-j["config"]["seed"] for j in jobs],
+                   desc="attempts", units=[len(cfg.plan())] * len(jobs), unit="attempt",
+                   priority=[-j["config"]["seed"] for j in jobs],
                    label=lambda j: f"seed {j['config']['seed']} {j['name']}", show_progress=show_progress)
     runs: dict[int, dict[str, list[dict[str, Any]]]] = {}
     for job, attempts in zip(jobs, res):

@@ -8,8 +8,9 @@ worse at the wrist afterwards. The Wiener rule plugs the correction's own square
 smaller than its standard deviation is removed almost entirely (:math:`w d \approx d^3 / v`). The ``"floor"`` rule
 :math:`w = P / (P + v)`, :math:`P = \max(d^2, p)` with :math:`p` the GP's signal variance, floors that power at what
 the GP learned corrections are: it keeps at least half a correction where :math:`v \le p` and never shrinks more
-than the Wiener rule (:class:`cascgp.controller.FeedforwardController`). It was written down from that diagnosis (a first
-form, :math:`p / (p + v)`, was dropped after a smoke run on seed 99, see ``docs/gate_rule.md``). The protocol below was committed before the run:
+than the Wiener rule (:class:`cascgp.controller.FeedforwardController`). It was written down from that diagnosis (a
+first form, :math:`p / (p + v)`, was dropped after a smoke run on seed 99, see ``docs/gate_rule.md``). The protocol
+below was committed before the run:
 
 * **Settings.** Those of the wrist replication on seeds 8-11: :data:`~cascgp_experiments.gate_eval.GATE_EVAL_CONFIG`
   cut to the tasks front and left (4 attempts each, then the revisit of front; 1.2 kg unknown payload; cap 500;
@@ -276,7 +277,8 @@ def summary_markdown(results: dict[str, Any]) -> str:
               "|---|" + "---|" * len(results["wrist"])]
     for seed in results["runs"]:
         lines.append(f"| {seed} | " + " | ".join(
-            "{g0:.2f}, {m0:.2f}, {m13:.2f}".format(**results["wrist"][label][seed]) for label in results["wrist"]) + " |")
+            "{g0:.2f}, {m0:.2f}, {m13:.2f}".format(**results["wrist"][label][seed]) for label in results["wrist"])
+            + " |")
     lines += ["", "| seed | quantity | numerator | denominator | ratio |", "|---|---|---|---|---|"]
     for r in results["ratios"]:
         lines.append(f"| {r['seed']} | {r['quantity']} | {r['num']:.4g} | {r['den']:.4g} | {r['ratio']:.3f} |")

@@ -316,7 +316,8 @@ def tests_of_hypotheses(rows: list[dict[str, Any]]) -> dict[str, Any]:
     x, y = np.log(col("rel_var_gl_vs_ul")), np.log(col("gate_learners_last"))
     ok = np.isfinite(x) & np.isfinite(y)
     rho = stats.spearmanr(x[ok], y[ok]) if ok.sum() > 2 else None
-    out["spearman_rel_var_vs_lag"] = None if rho is None else {"rho": float(rho.statistic), "p_two_sided": float(rho.pvalue), "n": int(ok.sum())}
+    out["spearman_rel_var_vs_lag"] = None if rho is None else {"rho": float(rho.statistic),
+                                                                "p_two_sided": float(rho.pvalue), "n": int(ok.sum())}
     ev = out["early_tracking_gl_vs_ul"], out["rel_var_gl_vs_ul"]
     out["divergence_hypothesis_supported"] = bool(
         all(e["p"] is not None and e["median_ratio"] > 1 and e["p"] < 0.05 for e in ev)
@@ -330,14 +331,15 @@ def summary_markdown(results: dict[str, Any]) -> str:
     """The summary, the tests and every ratio, from the JSON alone."""
     s, t, cfg = results["summary"], results["tests"], results["config"]
     lines = [f"Seeds {cfg['seeds']}, tasks {cfg['tasks']}, {cfg['attempts']} attempts each, "
-             f"payload {cfg['payload_mass']} kg; wall {results['wall_seconds']:.0f} s with {results['jobs']['n_cached']} "
-             f"of {results['jobs']['n_jobs']} jobs from the cache; the jobs took {results['jobs']['job_seconds_sum']:.0f} s "
-             "in all when they ran.", ""]
+             f"payload {cfg['payload_mass']} kg; wall {results['wall_seconds']:.0f} s with "
+             f"{results['jobs']['n_cached']} of {results['jobs']['n_jobs']} jobs from the cache; the jobs took "
+             f"{results['jobs']['job_seconds_sum']:.0f} s in all when they ran.", ""]
     if "reproduction" in results:
         r = results["reproduction"]
         lines += [f"Reproduction of docs/gate_eval.json (GL, UL): {r['identical']} of {r['attempts_compared']} attempt "
                   f"RMSEs identical (largest difference {r['max_abs_difference']:.2e} rad).", ""]
-    lines += ["| ratio | n | median | IQR | min | worst | <= 1.10 (the criterion's count) |", "|---|---|---|---|---|---|---|"]
+    lines += ["| ratio | n | median | IQR | min | worst | <= 1.10 (the criterion's count) |",
+              "|---|---|---|---|---|---|---|"]
     for q, st in s.items():
         if not st["n"]:
             continue
@@ -345,17 +347,18 @@ def summary_markdown(results: dict[str, Any]) -> str:
         lines.append(f"| {q} | {st['n']} | {st['median']:.3f} | {st['q1']:.3f}-{st['q3']:.3f} | {st['min']:.3f} "
                      f"| {st['max']:.3f} | {meet} |")
     sp = t["spread_gate_vs_null"]
-    lines += ["", f"- null within 10 % in both directions (1/1.1 <= ratio <= 1.1): {t['null_within_10pct']} of {t['null_n']}",
-              f"- median |log ratio|: gated learner {sp['median_abs_log_gate']:.3f}, null {sp['median_abs_log_null']:.3f}; "
-              f"one-sided Mann-Whitney p = {sp['p_mannwhitney_gate_greater']}"]
+    lines += ["", f"- null within 10 % in both directions (1/1.1 <= ratio <= 1.1): {t['null_within_10pct']} of "
+              f"{t['null_n']}",
+              f"- median |log ratio|: gated learner {sp['median_abs_log_gate']:.3f}, null "
+              f"{sp['median_abs_log_null']:.3f}; one-sided Mann-Whitney p = {sp['p_mannwhitney_gate_greater']}"]
     for q in ("early_tracking_gl_vs_ul", "rel_var_gl_vs_ul"):
         e = t[q]
         lines.append(f"- {q}: median {e['median_ratio']}, {e.get('n_above_1')} of {e['n']} above 1, one-sided Wilcoxon "
                      f"p = {e['p']}")
     sr = t["spearman_rel_var_vs_lag"]
     if sr:
-        lines.append(f"- Spearman rho(log rel_var ratio, log gate_learners_last) = {sr['rho']:.3f} (p = {sr['p_two_sided']:.3g}, "
-                     f"n = {sr['n']})")
+        lines.append(f"- Spearman rho(log rel_var ratio, log gate_learners_last) = {sr['rho']:.3f} "
+                     f"(p = {sr['p_two_sided']:.3g}, n = {sr['n']})")
     lines.append(f"- divergence hypothesis supported (rule 2): {t['divergence_hypothesis_supported']}")
     lines.append(f"- median |log| share: gate on GL's model {t['median_abs_log_share']['gate_on_gl_model']:.3f}, "
                  f"GL's model vs UL {t['median_abs_log_share']['gl_model_vs_ul']:.3f}")
@@ -368,7 +371,8 @@ def summary_markdown(results: dict[str, Any]) -> str:
                                                   if q in d else "-" for q in qs) + " |")
     lines += ["", "| seed | task | quantity | numerator | denominator | ratio |", "|---|---|---|---|---|---|"]
     for r in results["ratios"]:
-        lines.append(f"| {r['seed']} | {r['task']} | {r['quantity']} | {r['num']:.4g} | {r['den']:.4g} | {r['ratio']:.3f} |")
+        lines.append(f"| {r['seed']} | {r['task']} | {r['quantity']} | {r['num']:.4g} | {r['den']:.4g} "
+                     f"| {r['ratio']:.3f} |")
     return "\n".join(lines) + "\n"
 
 

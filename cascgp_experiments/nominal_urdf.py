@@ -1,4 +1,5 @@
-"""The nominal URDF of the simulated Jaco 2 arm (``jaco_env/assets/jaco2_nominal.urdf`` + ``.json`` sidecar, shipped as package data).
+"""The nominal URDF of the simulated Jaco 2 arm (``jaco_env/assets/jaco2_nominal.urdf`` + ``.json`` sidecar, shipped
+as package data).
 
 This module owns what is Jaco-specific about the nominal model: which MuJoCo model is exported (the
 *bare* simulated robot, ``jaco_env.robot.build_arm_mjcf(armature=None, frictionloss=None,

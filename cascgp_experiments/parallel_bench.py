@@ -90,10 +90,12 @@ def markdown(rows: list[dict[str, Any]]) -> str:
         base = first.setdefault(r["case"], r)
         lines.append(f"| {r['case']} | {r['setting']} | {r['wall_s']:.0f} | {base['wall_s'] / r['wall_s']:.2f} "
                      f"| {r['n_jobs']} | {r['job_seconds_sum']:.0f} | {r['job_seconds_max']:.0f} "
-                     f"| {'yes' if r['same_numbers'] else 'NO'} | {r['load_before'][0]:.1f} / {r['load_after'][0]:.1f} |")
+                     f"| {'yes' if r['same_numbers'] else 'NO'} "
+                     f"| {r['load_before'][0]:.1f} / {r['load_after'][0]:.1f} |")
     with_jobs = {name: base for name, base in first.items() if base["n_jobs"]}
     if with_jobs:
-        lines += ["", "| case | jobs | longest job (s) | serial part (s) | estimated wall, 2 / 8 / 32 / all-jobs cores (s) |",
+        lines += ["", "| case | jobs | longest job (s) | serial part (s) "
+                      "| estimated wall, 2 / 8 / 32 / all-jobs cores (s) |",
                   "|---|---|---|---|---|"]
     for name, base in with_jobs.items():
         est = [cluster_estimate(base, k) for k in (2, 8, 32, max(1, base["n_jobs"]))]

@@ -247,7 +247,8 @@ def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bo
             job["video"] = {**asdict(video), "controllers": list(video.controllers), "attempts": list(video.attempts)}
     res = run_jobs(controller_job, jobs, workers=workers, ray_address=ray_address,
                    cache_dir=None if out is None else transfer_cache(out), desc="attempts",
-                   units=[len(plan)] * len(jobs), unit="attempt", priority=[name not in PLAIN_CONTROLLERS for name in cfg.controllers],
+                   units=[len(plan)] * len(jobs), unit="attempt",
+                   priority=[name not in PLAIN_CONTROLLERS for name in cfg.controllers],
                    label=lambda j: j["name"], show_progress=show_progress)
     runs = [ControllerRun(name, list(attempts)) for name, attempts in zip(cfg.controllers, res)]
     if video is not None:
@@ -269,7 +270,8 @@ def summary_table(runs: list[ControllerRun]) -> str:
         train = [a for a in run.attempts if a["phase"] == "train"]
         revisit = next((a for a in run.attempts if a["phase"] == "revisit"), None)
         mean_jar = np.mean([a["in_jar"] for a in run.attempts])
-        lines.append(f"| {run.name} | {fmt(train[0], 'tracking_rmse', '.4f')} | {fmt(train[-1], 'tracking_rmse', '.4f')} "
+        lines.append(f"| {run.name} | {fmt(train[0], 'tracking_rmse', '.4f')} "
+                     f"| {fmt(train[-1], 'tracking_rmse', '.4f')} "
                      f"| {fmt(revisit, 'tracking_rmse', '.4f')} | {mean_jar:.2f} | {fmt(train[-1], 'in_jar', '.2f')} "
                      f"| {fmt(revisit, 'in_jar', '.2f')} |")
     return "\n".join(lines)

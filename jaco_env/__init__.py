@@ -61,8 +61,8 @@ from jaco_env.sensors import (  # noqa: E402
     split_obs,
 )
 
-__all__ = ["__version__", "NOMINAL_URDF", "robot", "SensorNoise", "DEFAULT_KP", "DEFAULT_KD", "split_obs", "OBS_Q", "OBS_QD", "OBS_TAU",
-           "OBS_TIME", "OBS_JAR", "MEASUREMENT_DIM", "POUR_OBS_DIM"]
+__all__ = ["__version__", "NOMINAL_URDF", "robot", "SensorNoise", "DEFAULT_KP", "DEFAULT_KD", "split_obs", "OBS_Q",
+           "OBS_QD", "OBS_TAU", "OBS_TIME", "OBS_JAR", "MEASUREMENT_DIM", "POUR_OBS_DIM"]
 
 #: 60 s at the default 40 Hz control rate.
 MAX_EPISODE_STEPS = 2400

@@ -11,8 +11,8 @@ Data: the SARCOS IAS file when ``--sarcos`` is given (training rows subsampled t
 torques of joints 1-6 as the 6 outputs; ``--outputs 7``: all 21 inputs and all 7 torques), otherwise a smooth
 synthetic inverse-dynamics-like function (both from :func:`cascgp_experiments.audit_suite.benchmark_data`). For
 every cascgp setting it also reports evaluations per start, the cost of one NLL+gradient evaluation and its
-breakdown (kernel, Cholesky, inverse, gradient, optimiser and the rest; from ``cascgp.gp.likelihood.PROFILE``). ``--scaling``
-instead measures time per evaluation and peak memory against n.
+breakdown (kernel, Cholesky, inverse, gradient, optimiser and the rest; from ``cascgp.gp.likelihood.PROFILE``).
+``--scaling`` instead measures time per evaluation and peak memory against n.
 
 Usage::
 

@@ -85,7 +85,8 @@ def main(argv: list[str] | None = None) -> None:
                       progress=lambda row: bar.update())
     bar.close()
     res["wall_s"] = time.perf_counter() - t0
-    res["command"] = "python -m scripts.calibration " + " ".join(argv if argv is not None else __import__("sys").argv[1:])
+    res["command"] = "python -m scripts.calibration " + " ".join(argv if argv is not None
+                                                                  else __import__("sys").argv[1:])
     write(res, out)
     print(summary_table(res))
     if a.recalibrate:

@@ -225,7 +225,8 @@ def test_gated_feedforward_follows_its_rule(rule, request, arm3_rbd, arm3_train)
         nominal = arm3_rbd.inverse_dynamics(*query)
         d = mean - nominal
         p = model.signal_var
-        w = {"wiener": d**2 / (d**2 + var), "floor": np.maximum(d**2, p) / (np.maximum(d**2, p) + var), "variance": np.clip(1 - var / p, 0, 1)}[rule]
+        w = {"wiener": d**2 / (d**2 + var), "floor": np.maximum(d**2, p) / (np.maximum(d**2, p) + var),
+             "variance": np.clip(1 - var / p, 0, 1)}[rule]
         np.testing.assert_allclose(ctrl.last_gate, w, rtol=1e-6, atol=1e-9)
         np.testing.assert_allclose(tau, nominal + w * d, rtol=1e-9, atol=1e-6)
         if query is state:

@@ -102,7 +102,8 @@ def test_jobs_are_one_per_seed_and_learner_with_the_null_offset() -> None:
     jobs = gr.gate_rule_jobs(gr.GATE_RULE_CONFIG, (12, 13))
     assert [(j["config"]["seed"], j["_label"]) for j in jobs[:5]] == [(12, k) for k in gr.LEARNERS]
     by = {j["_label"]: j for j in jobs if j["config"]["seed"] == 13}
-    assert by["UL'"]["config"]["fit_seed_offset"] == gr.NULL_FIT_SEED_OFFSET and by["UL"]["config"]["fit_seed_offset"] == 0
+    assert by["UL'"]["config"]["fit_seed_offset"] == gr.NULL_FIT_SEED_OFFSET
+    assert by["UL"]["config"]["fit_seed_offset"] == 0
     assert by["GLf"]["name"] == "sp-inward-fgated" and by["GLf"]["paired"] == [gr.UNGATED]
     assert by["rbd"]["paired"] is None and tuple(by["rbd"]["config"]["tasks"]) == ("front", "left")
 

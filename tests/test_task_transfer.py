@@ -124,8 +124,8 @@ def test_gated_learner_within_ten_percent_of_the_ungated_after_three_attempts_on
     where this run meets it (task A: 0.142 vs 0.135 rad, 1.05). On task B this run misses it narrowly (0.0530 vs
     0.0476, 1.11; the Wiener rule missed it here by 1.35). Two learners that collect their own data drift apart:
     of two *ungated* learners that differ only in the random starts of their fits, one is more than 10 % slower
-    on about a third of (seed, task) pairs (docs/learner_divergence.md), so one seed cannot decide it. On new seeds 20-27
-    the innovation learner meets it in the median on task B (1.05; docs/gate_rule.md), where the Wiener learner
+    on about a third of (seed, task) pairs (docs/learner_divergence.md), so one seed cannot decide it. On new seeds
+    20-27 the innovation learner meets it in the median on task B (1.05; docs/gate_rule.md), where the Wiener learner
     lagged (1.36 on seeds 12-19: the gate shrank the wrist correction on the first attempt, docs/lag_diagnosis.md).
     The paired test below checks the gate's own effect on one model, on both tasks."""
     assert _rmse(runs[GATED], TASK_A, k=3) <= 1.10 * _rmse(runs["sp-inward"], TASK_A, k=3)

@@ -20,7 +20,8 @@ hyperparameters are optimised in log space,
 
 so that :math:`s_f^2 = e^{\theta_{d+1}} > 0` and :math:`s_n^2 = s_{n,\min}^2 + s_f^2/\rho_{\max} + e^{\theta_{d+2}}`
 (``noise_floor`` :math:`s_{n,\min}^2`, default 1e-6 in normalised units, keeps the noise away from exactly zero;
-``snr_max`` :math:`\rho_{\max}`, default 1e6, bounds the signal-to-noise variance ratio, see "Conditioning" in :mod:`cascgp.gp.likelihood`).
+``snr_max`` :math:`\rho_{\max}`, default 1e6, bounds the signal-to-noise variance ratio, see "Conditioning" in
+:mod:`cascgp.gp.likelihood`).
 
 Where each part lives
 ---------------------

@@ -62,8 +62,9 @@ class GPFitConfig:
             idle-spinning OpenMP/OpenBLAS workers cost much when the cores are shared (SARCOS, n = 300, 7 outputs,
             ``python -m scripts.bench_fit_threads``: on 2 quiet cores torch's default two threads took 0.85x the
             one-thread time, beside one busy process 2.7x); parallelism across fits belongs to processes
-            (``--workers``), and ``threads=2`` suits a dedicated machine. ``None`` leaves the caller's settings untouched; an integer
-            ``k >= 1`` uses ``k`` threads. It changes no hyperparameter beyond the round-off of reduction order.
+            (``--workers``), and ``threads=2`` suits a dedicated machine. ``None`` leaves the caller's settings
+            untouched; an integer ``k >= 1`` uses ``k`` threads. It changes no hyperparameter beyond the round-off
+            of reduction order.
     """
 
     kernel: str = "matern52"

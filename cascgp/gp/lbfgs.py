@@ -174,7 +174,8 @@ def _line_search(st: MemberState, opt: LBFGSOptions, x: np.ndarray, t: float, d:
         n_ls += 1
         gtd_new = float(g_new @ d) if math.isfinite(f_new) else math.nan
         if not math.isfinite(f_new) or f_new > f + opt.c1 * t * gtd or f_new >= bf[low]:
-            bracket[high], bf[high], bg[high], bgtd[high] = t, (f_new if math.isfinite(f_new) else math.inf), g_new, gtd_new
+            bracket[high], bf[high], bg[high], bgtd[high] = (t, (f_new if math.isfinite(f_new) else math.inf), g_new,
+                                                             gtd_new)
             low, high = (0, 1) if bf[0] <= bf[1] else (1, 0)
         else:
             if abs(gtd_new) <= -opt.c2 * gtd:

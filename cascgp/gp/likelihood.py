@@ -8,7 +8,8 @@ With :math:`K = s_f^2 k(R^2) + s_n^2 I = L L^\top` and :math:`\alpha = K^{-1} \t
 
     \mathcal L(\theta) = \tfrac12 \tilde y^\top \alpha + \sum_i \log L_{ii} + \tfrac n2 \log 2\pi,
     \qquad
-    \frac{\partial \mathcal L}{\partial \theta_j} = \tfrac12 \operatorname{tr}\!\Big(M \frac{\partial K}{\partial \theta_j}\Big),
+    \frac{\partial \mathcal L}{\partial \theta_j}
+    = \tfrac12 \operatorname{tr}\!\Big(M \frac{\partial K}{\partial \theta_j}\Big),
     \quad M = K^{-1} - \alpha\alpha^\top.
 
 For the lengthscales, with scaled inputs :math:`Z = \tilde X \operatorname{diag}(1/\ell)`,
@@ -56,7 +57,8 @@ predictions off by ~1e-4 from an exact solve. With :math:`s_n^2 \ge s_f^2 / \rho
 there (``snr_max=None`` removes it).
 
 Jitter is added only when a Cholesky fails (``dpotrf`` in the fit, ``torch.linalg.cholesky_ex`` for the final
-factors), for just the failing members, starting at ``1e-8`` times the mean diagonal and growing 10x up to ``jitter_max``; the amount is recorded in ``fit_info``.
+factors), for just the failing members, starting at ``1e-8`` times the mean diagonal and growing 10x up to
+``jitter_max``; the amount is recorded in ``fit_info``.
 A point where even that fails has NLL ``inf`` (the line search backs off).
 
 """
@@ -75,7 +77,8 @@ from scipy.linalg.lapack import dpotrf as _dpotrf, dpotri as _dpotri, dpotrs as 
 from cascgp.gp.config import GPFitConfig
 from cascgp.gp.kernels import get_kernel
 
-__all__ = ["nll_and_grad", "estimate_fit_bytes", "plan_chunk", "blas_threads", "fit_threads", "PROFILE", "DTYPE", "LOG2PI"]
+__all__ = ["nll_and_grad", "estimate_fit_bytes", "plan_chunk", "blas_threads", "fit_threads", "PROFILE", "DTYPE",
+           "LOG2PI"]
 
 #: Every GP computation is float64.
 DTYPE = torch.float64
@@ -202,7 +205,8 @@ def nll_and_grad(
         need_grad: compute the gradient.
         chunk: members per block (``None``: cache-sized).
         snr_max: if set, the noise floor grows with the signal: ``floor = noise_floor + s_f^2 / snr_max``
-            (see :class:`~cascgp.gp.config.GPFitConfig`), which bounds :math:`\operatorname{cond}(K) \le 1 + n\,\mathrm{snr\_max}`.
+            (see :class:`~cascgp.gp.config.GPFitConfig`), which bounds
+            :math:`\operatorname{cond}(K) \le 1 + n\,\mathrm{snr\_max}`.
 
     Returns:
         ``(nll (k,), grad (k, D+2) or None, jitter (k,))``; ``nll`` is ``inf`` where the Cholesky failed even with
@@ -228,11 +232,11 @@ def nll_and_grad(
     bufC = torch.empty(chunk, n, n, dtype=DTYPE)
     inv_snr = 0.0 if snr_max is None else 1.0 / snr_max
     floor_k = None if isinstance(noise_floor, (int, float)) else np.asarray(noise_floor, dtype=np.float64)
+    floor_1 = noise_floor if isinstance(noise_floor, (int, float)) else math.nan  # used when floor_k is None
     if floor_k is not None and floor_k.shape != (k_,):
         raise ValueError(f"noise_floor: expected a number or shape ({k_},), got shape {floor_k.shape}")
     kern = get_kernel(kernel)
     r2s = kern.r2_scale
-    floor_1 = noise_floor if isinstance(noise_floor, (int, float)) else math.nan  # used when floor_k is None
     with np.errstate(over="ignore", invalid="ignore"):
         sf2_all = np.exp(th_np[:, D])
         en_all = np.exp(th_np[:, D + 1])

@@ -27,8 +27,10 @@ __all__ = ["COMMANDS", "main"]
 #: subcommand -> ("module:function" that implements it, one-line summary for ``cascgp --help``).
 COMMANDS: dict[str, tuple[str, str]] = {
     "fit": ("cascgp_experiments.cli.model_commands:fit_main", "fit a model to logged data and save it (.npz)"),
-    "evaluate": ("cascgp_experiments.cli.model_commands:evaluate_main", "per-joint nRMSE of a saved model on logged data"),
-    "predict": ("cascgp_experiments.cli.model_commands:predict_main", "torque predictions of a saved model, written as CSV"),
+    "evaluate": ("cascgp_experiments.cli.model_commands:evaluate_main",
+                 "per-joint nRMSE of a saved model on logged data"),
+    "predict": ("cascgp_experiments.cli.model_commands:predict_main",
+                "torque predictions of a saved model, written as CSV"),
     "transfer": ("cascgp_experiments.cli.transfer:main", "task-transfer pouring episodes on JacoPour-v0"),
     "study": ("cascgp_experiments.cli.study:main", "the paper's data-efficiency study (Jaco data, SARCOS)"),
     "sarcos": ("cascgp_experiments.cli.sarcos:main", "SARCOS data-efficiency curves (NP models)"),

@@ -61,8 +61,9 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
                    help="delete the data buffers and job cache of an earlier run in --out (without it, the same "
                         "command resumes a stopped run)")
     p.add_argument("--video", type=Path, default=None,
-                   help="write MP4 clips (pip install 'cascgp-jaco[video]'): the first and last attempt of every task and the "
-                        "revisit, RBD and the learned controller side by side, with RMSE and marbles on the frame")
+                   help="write MP4 clips (pip install 'cascgp-jaco[video]'): the first and last attempt of every task "
+                        "and the revisit, RBD and the learned controller side by side, with RMSE and marbles on the "
+                        "frame")
     p.add_argument("--video-controller", type=str, default=None,
                    help="the learned controller shown next to RBD (default: the last controller that learns)")
     add_execution_args(p)
