@@ -18,7 +18,7 @@ Only fixed-base models whose configuration and velocity spaces coincide
 joint angles as ``(N,)`` vectors.
 
 ``load_nominal(urdf_path)`` reads the JSON sidecar written next to the URDF by
-:mod:`cascgp.urdf_export` (armature, torque and velocity limits, gravity,
+:mod:`cascgp_experiments.urdf_export` (armature, torque and velocity limits, gravity,
 calibration error and seed) when there is one; without it (a URDF of your own
 robot) the armature is zero, the limits come from the URDF's ``<limit>`` tags
 and gravity is Pinocchio's default, with a ``UserWarning`` saying so. The
@@ -43,7 +43,7 @@ import pinocchio as pin
 __all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
            "SUPPORTED_SIDECAR_VERSIONS", "SIDECAR_REQUIRED_FIELDS"]
 
-#: Version of the sidecar layout that :mod:`cascgp.urdf_export` writes.
+#: Version of the sidecar layout that :mod:`cascgp_experiments.urdf_export` writes.
 SIDECAR_FORMAT_VERSION = 1
 #: Sidecar layout versions this module can read.
 SUPPORTED_SIDECAR_VERSIONS = (SIDECAR_FORMAT_VERSION,)
@@ -296,7 +296,7 @@ def _without_sidecar(urdf_path: Path, js: Path, dof: int | None) -> RigidBodyMod
 def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> RigidBodyModel:
     """Load a nominal model: the URDF plus, when present, its JSON sidecar (same name, ``.json``).
 
-    The sidecar (written by :func:`cascgp.urdf_export.write_urdf`) holds ``armature``,
+    The sidecar (written by :func:`cascgp_experiments.urdf_export.write_urdf`) holds ``armature``,
     ``torque_limits``, ``velocity_limits``, ``gravity``, ``calibration_error``,
     ``seed``, ``joint_names``, ``dof`` and provenance; the whole dict is kept as
     ``model.meta``.

@@ -17,7 +17,8 @@ claims               the paper's claims checked on ``results.json``
 plots                figures, tables and CSVs from ``results.json`` alone (no torch/jaco_env)
 audit_suite          the GP fit equivalence audit's data sets and report
 transfer             the task-transfer experiment on ``JacoPour-v0`` (uses :mod:`cascgp.learning`)
-nominal_urdf         the Jaco 2 nominal URDF (uses :mod:`cascgp.urdf_export`)
+urdf_export          a compiled MuJoCo arm model -> URDF + JSON sidecar (conversion, seeded calibration error)
+nominal_urdf         the Jaco 2 nominal URDF (uses :mod:`cascgp_experiments.urdf_export`)
 residual             what the nominal model misses on the simulated Jaco 2
 parallel_bench       wall time of the experiments with 1 vs N workers (``scripts.bench_parallel``)
 calibration          coverage of the cascade's predictive intervals on held-out episodes (issue 10)

@@ -5,7 +5,7 @@ This module owns what is Jaco-specific about the nominal model: which MuJoCo mod
 *bare* simulated robot, ``jaco_env.robot.build_arm_mjcf(armature=None, frictionloss=None,
 damping=None)``: the six-joint arm with the welded hand, no payload, no joint friction or damping),
 its limits and the provenance text. The conversion itself, the seeded calibration error and the file
-format are :mod:`cascgp.urdf_export`'s (see its docstring for the rules).
+format are :mod:`cascgp_experiments.urdf_export`'s (see its docstring for the rules).
 
 Jaco specifics: the welded hand and finger bodies become ``fixed`` joints (Pinocchio folds their
 inertia into link 6); the three MuJoCo sites (``wristsite``, ``jaco_hand/gripsite``,
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import mujoco
 
-from cascgp.urdf_export import check_urdf_path, convert, format_float, make_sidecar, write_urdf
+from cascgp_experiments.urdf_export import check_urdf_path, convert, format_float, make_sidecar, write_urdf
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "jaco_env" / "assets" / "jaco2_nominal.urdf"
 #: Command written into the files' provenance.
@@ -48,7 +48,7 @@ def generate(error: float = 0.1, seed: int = 0, urdf_name: str = DEFAULT_OUT.nam
     """Build the nominal URDF text and the sidecar dict (nothing written).
 
     Args:
-        error: relative calibration error ``e`` in [0, 1) (:mod:`cascgp.urdf_export`).
+        error: relative calibration error ``e`` in [0, 1) (:mod:`cascgp_experiments.urdf_export`).
         seed: seed of the calibration error.
         urdf_name: file name of the URDF recorded in the sidecar.
 

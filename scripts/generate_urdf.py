@@ -6,7 +6,7 @@ Usage::
 
 writes ``jaco_env/assets/jaco2_nominal.urdf`` and ``.json`` (package data of ``jaco_env``). What is exported and why:
 :mod:`cascgp_experiments.nominal_urdf`; the conversion, the calibration error rule and the sidecar
-format: :mod:`cascgp.urdf_export`.
+format: :mod:`cascgp_experiments.urdf_export`.
 """
 
 from __future__ import annotations

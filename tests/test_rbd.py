@@ -1,4 +1,4 @@
-"""Tests of cascgp.rbd (Pinocchio RNEA wrapper), cascgp.urdf_export and the nominal URDF
+"""Tests of cascgp.rbd (Pinocchio RNEA wrapper), cascgp_experiments.urdf_export and the nominal URDF
 (cascgp_experiments.nominal_urdf, written by ``python -m scripts.generate_urdf``).
 
 Reference: MuJoCo's inverse dynamics (``mj_inverse``) of the bare simulated arm with
@@ -21,7 +21,7 @@ import pinocchio as pin
 import pytest
 
 from cascgp.rbd import RigidBodyModel, load_nominal
-from cascgp.urdf_export import sidecar_text
+from cascgp_experiments.urdf_export import sidecar_text
 from cascgp_experiments import nominal_urdf as gen
 from jaco_env import robot
 

@@ -1,0 +1,31 @@
+"""The library ``cascgp`` knows no simulator: importing every one of its modules loads neither ``mujoco`` nor
+``jaco_env`` (nor ``cascgp_experiments``, which sits on top of it)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+_CODE = """
+import importlib, pkgutil, sys
+import cascgp
+names = sorted(m.name for m in pkgutil.walk_packages(cascgp.__path__, "cascgp."))
+for name in names:
+    importlib.import_module(name)
+bad = sorted(m for m in sys.modules if m.split(".")[0] in ("mujoco", "jaco_env", "cascgp_experiments", "dm_control"))
+assert len(names) > 20, names
+assert not bad, bad
+print(len(names))
+"""
+
+
+def test_importing_every_cascgp_module_loads_no_simulator() -> None:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    out = subprocess.run([sys.executable, "-c", _CODE], env=env, cwd=REPO, capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]
