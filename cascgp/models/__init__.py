@@ -56,6 +56,9 @@ Modules
 =================================  ==========================================================
 :mod:`cascgp.models.cascade`       :class:`CascadedGPModel`: training and batched prediction
 :mod:`cascgp.models.fastpath`      the single-query path a controller calls every tick
+:mod:`cascgp.models.queries`       checks of the queries; each joint's GP input
+:mod:`cascgp.models.jacobian`      derivatives of the cascaded mean (the input-noise term)
+:mod:`cascgp.models.online`        learning inside an episode (:meth:`CascadedGPModel.start_online`)
 :mod:`cascgp.models.io`            model files (:func:`load_model`, ``model.save``)
 =================================  ==========================================================
 """

@@ -1,8 +1,10 @@
 r"""The cascaded GP model: one GP per joint, chained in cascade order (:class:`CascadedGPModel`).
 
 Owns training (one batched :class:`~cascgp.gp.GPBank` fit, or N fits in cascade order with
-``train_on_predicted``) and batched prediction; the single-query path is :mod:`cascgp.models.fastpath`, files are
-:mod:`cascgp.models.io`. The variants and their meaning are in :mod:`cascgp.models`.
+``train_on_predicted``) and batched prediction; the single-query path is :mod:`cascgp.models.fastpath`, the checks
+of queries :mod:`cascgp.models.queries`, the derivatives of the mean (input noise) :mod:`cascgp.models.jacobian`,
+learning inside an episode :mod:`cascgp.models.online`, files :mod:`cascgp.models.io`. The variants and their
+meaning are in :mod:`cascgp.models`.
 """
 
 from __future__ import annotations
@@ -15,12 +17,14 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from cascgp.data import DynamicsData, as_real_array
+from cascgp.data import DynamicsData
 from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
 from cascgp.gp import GPBank, GPFitConfig
 from cascgp.gp.config import check_target_floor
 from cascgp.gp.checks import check_scale
-from cascgp.models.fastpath import ZCLIP, FastPath, FastVariance
+from cascgp.models.fastpath import FastPath, FastVariance
+from cascgp.models.jacobian import check_input_var, mean_jacobian_arrays
+from cascgp.models.queries import check_queries, clipped, load_query, state_cols
 
 __all__ = ["MODEL_NAMES", "CascadedGPModel", "make_model", "parse_name"]
 
@@ -35,27 +39,6 @@ def parse_name(name: str) -> tuple[str, str, str]:
         raise ValueError(f"name: expected one of {MODEL_NAMES}, got {name!r}")
     parts = name.split("-")
     return parts[0], parts[1], ("df" if len(parts) == 3 else "db")
-
-
-def _one_real(name: str, a: Any) -> np.ndarray:
-    """Cheap check of one controller query (no warnings machinery: this runs every control tick)."""
-    x = np.asarray(a)
-    if x.dtype.kind not in "fiu":
-        raise TypeError(f"{name}: expected a real numeric array, got dtype {x.dtype}")
-    return x.astype(np.float64, copy=False)
-
-
-def _as_query(name: str, a: Any, N: int, extra: tuple[int, ...] = ()) -> np.ndarray:
-    x = as_real_array(name, a, "(T, N)")
-    if x.ndim == 1 + len(extra):
-        x = x[None]
-    if x.ndim != 2 + len(extra) or x.shape[1:] != (*extra, N) or x.shape[0] == 0:
-        want = ", ".join(["T", *map(str, extra), str(N)])
-        raise ValueError(f"{name}: expected shape ({want}) or ({', '.join([*map(str, extra), str(N)])}), got {x.shape}")
-    if not np.isfinite(x).all():
-        r = int(np.flatnonzero((~np.isfinite(x.reshape(x.shape[0], -1))).any(axis=1))[0])
-        raise ValueError(f"{name}: non-finite value (NaN or inf) at row {r}")
-    return x
 
 
 class CascadedGPModel:
@@ -214,7 +197,7 @@ class CascadedGPModel:
             sflat = S.reshape(S.shape[0], -1)
             for k, j in enumerate(self.order):
                 sj, tj = self.specs[j]
-                x = _state_cols(sflat, sj)
+                x = state_cols(sflat, sj)
                 if tj is not None:
                     x = np.concatenate([x, tau_hat[:, tj:tj + 1]], axis=1)
                 ib = init_banks[k] if init_banks else None
@@ -270,32 +253,6 @@ class CascadedGPModel:
         self._online = None
 
     # ------------------------------------------------------------------ prediction
-    def _check_queries(self, q: Any, qd: Any, qdd: Any, q_hist: Any
-                       ) -> tuple[bool, np.ndarray, np.ndarray | None, np.ndarray | None, np.ndarray | None]:
-        N = self.dof
-        single = np.ndim(q) == 1
-        q = _as_query("q", q, N)
-        T = q.shape[0]
-        need_deriv = self.feature_kind == "db" or self.parametric == "sp"
-        if need_deriv:
-            if qd is None or qdd is None:
-                raise ValueError(f"qd/qdd: model {self.name!r} needs velocities and accelerations, got None")
-        qd = _as_query("qd", qd, N) if qd is not None else None
-        qdd = _as_query("qdd", qdd, N) if qdd is not None else None
-        for nm, x in (("qd", qd), ("qdd", qdd)):
-            if x is not None and x.shape[0] != T:
-                raise ValueError(f"{nm}: expected {T} rows (as q), got {x.shape[0]}")
-        if self.feature_kind == "df":
-            if q_hist is None:
-                raise ValueError(f"q_hist: model {self.name!r} (derivative free) needs q_hist of shape "
-                                 f"(T, 2, {N}) = (q(t-delta), q(t-2 delta)), got None")
-            q_hist = _as_query("q_hist", q_hist, N, extra=(2,))
-            if q_hist.shape[0] != T:
-                raise ValueError(f"q_hist: expected {T} rows (as q), got {q_hist.shape[0]}")
-        else:
-            q_hist = None
-        return single, q, qd, qdd, q_hist
-
     def predict(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None, *,
                 propagate: bool = False, input_var: Any = None) -> tuple[np.ndarray, np.ndarray]:
         r"""Predicted joint torques.
@@ -348,27 +305,13 @@ class CascadedGPModel:
         training inputs were noisy too; their effect is in the fitted noise variance, as in an exact GP.
         """
         self._require_fitted()
-        single, q, qd, qdd, q_hist = self._check_queries(q, qd, qdd, q_hist)
-        input_var = self._check_input_var(input_var) if input_var is not None else None
+        single, q, qd, qdd, q_hist = check_queries(self, q, qd, qdd, q_hist)
+        input_var = check_input_var(self, input_var) if input_var is not None else None
         mean, var = self._predict_arrays(q, qd, qdd, q_hist, return_var=True, propagate=propagate)
         if input_var is not None:
-            J = self._mean_jacobian_arrays(q, qd, qdd, mean)  # the chained inputs are this prediction's mean
+            J = mean_jacobian_arrays(self, q, qd, qdd, mean)  # the chained inputs are this prediction's mean
             var = var + (J * J) @ input_var.reshape(-1)  # sum_s J_js^2 sigma_s^2 (see above)
         return (mean[0], var[0]) if single else (mean, var)
-
-    def _check_input_var(self, input_var: Any) -> np.ndarray:
-        if self.feature_kind != "db":
-            raise ValueError(f"input_var: the input-noise term needs a derivative-based model (states q, qd, qdd), "
-                             f"got {self.name!r}")
-        v = as_real_array("input_var", input_var, "(N, 3)")
-        try:
-            v = np.broadcast_to(v, (self.dof, 3)).astype(np.float64)
-        except ValueError:
-            raise ValueError(f"input_var: expected a shape that broadcasts to ({self.dof}, 3) (q, qd, qdd "
-                             f"variances per joint), got {v.shape}") from None
-        if not (np.isfinite(v).all() and (v >= 0).all()):
-            raise ValueError("input_var: expected finite variances >= 0")
-        return v
 
     def mean_jacobian(self, q: Any, qd: Any, qdd: Any) -> np.ndarray:
         r"""Total derivative of the predicted (cascaded) mean torque with respect to the measured states.
@@ -386,54 +329,9 @@ class CascadedGPModel:
         self._require_fitted()
         if self.feature_kind != "db":
             raise ValueError(f"mean_jacobian: needs a derivative-based model (states q, qd, qdd), got {self.name!r}")
-        single, q, qd, qdd, _ = self._check_queries(q, qd, qdd, None)
-        J = self._mean_jacobian_arrays(q, qd, qdd).reshape(q.shape[0], self.dof, self.dof, 3)
+        single, q, qd, qdd, _ = check_queries(self, q, qd, qdd, None)
+        J = mean_jacobian_arrays(self, q, qd, qdd).reshape(q.shape[0], self.dof, self.dof, 3)
         return J[0] if single else J
-
-    def _mean_jacobian_arrays(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
-                              mean: np.ndarray | None = None) -> np.ndarray:
-        """(T, N, 3N) total Jacobian of the mean (state columns ``3 k + c`` as in the flattened states);
-        ``mean``: the predicted torques at these states (the chained inputs) when the caller has them."""
-        T, N = q.shape
-        sflat = self._states(q, qd, qdd, None).reshape(T, -1)
-        if mean is None:
-            mean, _ = self._predict_arrays(q, qd, qdd, None, return_var=False)
-        J = self._rbd_jacobian(q, qd, qdd) if self.parametric == "sp" else np.zeros((T, N, 3 * N))
-        for j in self.order:  # cascade order: J[:, tj] is complete before joint j uses it
-            sj, tj = self.specs[j]
-            cols = np.concatenate([[3 * s, 3 * s + 1, 3 * s + 2] for s in sj])
-            x = sflat[:, cols]
-            if tj is not None:
-                x = np.concatenate([x, mean[:, tj:tj + 1]], axis=1)
-            P = self._post[j]
-            g = P.mean_grad_all(_clipped(P, x)) * (np.abs((x - P.x_mean) / P.x_scale) <= ZCLIP)
-            J[:, j, cols] += g[:, :len(cols)]
-            if tj is not None:
-                J[:, j] += g[:, -1:] * J[:, tj]
-        return J
-
-    def _rbd_jacobian(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, h: float = 1e-6) -> np.ndarray:
-        """(T, N, 3N) derivative of the rigid-body torque, column ``3 k + c`` by state ``c`` (q, qd, qdd) of
-        joint ``k``: analytic where the nominal model gives it (``inverse_dynamics_derivatives``, e.g.
-        :class:`cascgp.rbd.RigidBodyModel`'s from Pinocchio), else by central differences (step ``h``), which is
-        all a user's ``inverse_dynamics``-only model offers."""
-        T, N = q.shape
-        derivatives = getattr(self.rbd, "inverse_dynamics_derivatives", None)
-        if derivatives is not None:
-            D = np.stack([np.asarray(d, dtype=np.float64).reshape(T, N, N) for d in derivatives(q, qd, qdd)], axis=-1)
-            if not np.isfinite(D).all():
-                raise ValueError("rbd: the rigid-body model returned non-finite torque derivatives")
-            return D.reshape(T, N, 3 * N)
-        J = np.empty((T, N, 3 * N))
-        states = (q, qd, qdd)
-        for c in range(3):
-            for k in range(N):
-                step = np.zeros_like(states[c])
-                step[:, k] = h
-                hi = [s + step if i == c else s for i, s in enumerate(states)]
-                lo = [s - step if i == c else s for i, s in enumerate(states)]
-                J[:, :, 3 * k + c] = (self._rbd_torque(*hi) - self._rbd_torque(*lo)) / (2.0 * h)
-        return J
 
     @property
     def noise_var(self) -> np.ndarray:
@@ -459,11 +357,11 @@ class CascadedGPModel:
         var = np.zeros((T, N))
         for j in self.order:  # cascade order: the torque input is the already PREDICTED torque
             sj, tj = self.specs[j]
-            x = _state_cols(sflat, sj)
+            x = state_cols(sflat, sj)
             if tj is not None:
                 x = np.concatenate([x, mean[:, tj:tj + 1]], axis=1)
             P = self._post[j]
-            x = _clipped(P, x)
+            x = clipped(P, x)
             m, v = P.predict(x, return_var=return_var)
             mean[:, j] = m + (tau_rbd[:, j] if tau_rbd is not None else 0.0)
             if return_var:
@@ -489,7 +387,7 @@ class CascadedGPModel:
         :mod:`cascgp.models.fastpath`). Equals :meth:`predict` to round-off (~1e-12), except while an online
         window is open (:meth:`start_online`): then it includes the online samples, which :meth:`predict` does
         not. Inputs are checked for shape and finiteness (``ValueError``)."""
-        f, tau_rbd = self._load_query(q, qd, qdd, q_hist)
+        f, tau_rbd = load_query(self, q, qd, qdd, q_hist)
         return f.mean(tau_rbd)
 
     def predict_one_var(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None
@@ -498,7 +396,7 @@ class CascadedGPModel:
         ``predict(..., propagate=True)`` (equal to round-off; with an online window open, of the enlarged
         sets). The first call builds one ``(n, n)`` matrix per joint (:meth:`prepare_variance`); a query then
         costs one ``(n, n)`` product per joint on top of :meth:`predict_one`."""
-        f, tau_rbd = self._load_query(q, qd, qdd, q_hist)
+        f, tau_rbd = load_query(self, q, qd, qdd, q_hist)
         return self.prepare_variance().mean_var(f, tau_rbd)
 
     def prepare_variance(self) -> FastVariance:
@@ -544,23 +442,7 @@ class CascadedGPModel:
         the RBD torque for SP), as in training. Rejects non-finite values (``ValueError``), changing nothing."""
         if getattr(self, "_online", None) is None:
             raise RuntimeError(f"model {self.name!r}: call start_online() before add_sample()")
-        N = self.dof
-        arr = {}
-        for nm, v in (("q", q), ("qd", qd), ("qdd", qdd), ("tau", tau)):
-            a = _one_real(nm, v)
-            if a.shape != (N,) or not np.isfinite(a).all():
-                raise ValueError(f"{nm}: expected a finite array of shape ({N},), got {a!r}")
-            check_scale(np.stack([a, np.zeros(N)]), nm)
-            arr[nm] = a
-        S = self._states(arr["q"][None], arr["qd"][None], arr["qdd"][None], None).reshape(-1)
-        target = arr["tau"] - (self._rbd_torque(arr["q"][None], arr["qd"][None], arr["qdd"][None])[0]
-                               if self.parametric == "sp" else 0.0)
-        xs = []
-        for j in range(N):
-            sj, tj = self.specs[j]
-            x = _state_cols(S[None], sj)[0]
-            xs.append(np.append(x, arr["tau"][tj]) if tj is not None else x)
-        self._online.add(xs, target)
+        self._online.add_measured(q, qd, qdd, tau)
 
     @property
     def n_online(self) -> int:
@@ -568,59 +450,12 @@ class CascadedGPModel:
         online = getattr(self, "_online", None)
         return 0 if online is None else online.n_added
 
-    def _load_query(self, q: Any, qd: Any, qdd: Any, q_hist: Any) -> tuple[FastPath, np.ndarray | None]:
-        """Check one query and write its state into the fast path's buffer; returns it and the RBD torque (NP: None)."""
-        f = self._require_fitted()
-        N = self.dof
-        q = _one_real("q", q)
-        if q.shape != (N,):
-            raise ValueError(f"q: expected shape ({N},), got {q.shape}")
-        buf = f.buf
-        buf[0:3 * N:3] = q
-        if self.feature_kind == "db" or self.parametric == "sp":
-            if qd is None or qdd is None:
-                raise ValueError(f"qd/qdd: model {self.name!r} needs velocities and accelerations, got None")
-            qd = _one_real("qd", qd)
-            qdd = _one_real("qdd", qdd)
-            if qd.shape != (N,) or qdd.shape != (N,):
-                raise ValueError(f"qd/qdd: expected shape ({N},), got {qd.shape} and {qdd.shape}")
-            if self.feature_kind == "df" and not (np.isfinite(qd).all() and np.isfinite(qdd).all()):
-                raise ValueError("qd/qdd: non-finite value (NaN or inf) in the query")
-        if self.feature_kind == "db":
-            buf[1:3 * N:3] = qd
-            buf[2:3 * N:3] = qdd
-        else:
-            if q_hist is None:
-                raise ValueError(f"q_hist: model {self.name!r} needs q_hist of shape (2, {N}), got None")
-            h = _one_real("q_hist", q_hist)
-            if h.shape != (2, N):
-                raise ValueError(f"q_hist: expected shape (2, {N}), got {h.shape}")
-            buf[1:3 * N:3] = h[0]
-            buf[2:3 * N:3] = h[1]
-        if not np.isfinite(buf).all():
-            raise ValueError("q/qd/qdd/q_hist: non-finite value (NaN or inf) in the query")
-        return f, (self._rbd_torque(q, qd, qdd) if self.parametric == "sp" else None)
-
     # ------------------------------------------------------------------ persistence
     def save(self, path: str | os.PathLike) -> Path:
         """Write the fitted model to ``path`` (``.npz``, atomically); see :func:`cascgp.models.io.save_model`."""
         from cascgp.models.io import save_model
 
         return save_model(self, path)
-
-
-def _state_cols(sflat: np.ndarray, state_joints: tuple[int, ...]) -> np.ndarray:
-    cols = np.concatenate([[3 * s, 3 * s + 1, 3 * s + 2] for s in state_joints])
-    return sflat[:, cols]
-
-
-def _clipped(P: Any, x: np.ndarray) -> np.ndarray:
-    """``x`` with its normalised values clipped to +-ZCLIP (finite output for finite input)."""
-    z = (x - P.x_mean) / P.x_scale
-    if not (np.abs(z) <= ZCLIP).all():
-        zc = np.clip(z, -ZCLIP, ZCLIP)
-        x = np.where(np.isfinite(P.x_scale), P.x_mean + zc * P.x_scale, x)
-    return x
 
 
 def make_model(name: str, dof: int, rbd: Any = None, *, gp_config: Any = None, df_delta: float = 0.1,

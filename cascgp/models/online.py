@@ -33,9 +33,11 @@ from typing import Any
 import numpy as np
 from scipy.linalg import cholesky, solve_triangular
 
+from cascgp.gp.checks import check_scale
 from cascgp.gp.kernels import get_kernel
 from cascgp.gp.likelihood import blas_threads
 from cascgp.models.fastpath import FastPath, FastVariance
+from cascgp.models.queries import one_real, state_cols
 
 __all__ = ["OnlineWindow", "check_supported"]
 
@@ -156,6 +158,30 @@ class OnlineWindow:
     def extra_var(self, j: int, kap: np.ndarray, u: np.ndarray) -> float:
         """Hook of :meth:`FastVariance.mean_var`: the window term of joint ``j``."""
         return self.joints[j].extra_var(kap[self.n0:], u)
+
+    def add_measured(self, q: Any, qd: Any, qdd: Any, tau: Any) -> None:
+        """Add one measured sample ``(q, qd, qdd, tau)``, each (N,)
+        (:meth:`~cascgp.models.CascadedGPModel.add_sample`): each joint's input holds its states and the
+        *measured* neighbour torque, its target the measured torque (minus the RBD torque for SP models), as in
+        training. ``ValueError`` for a non-finite value, changing nothing."""
+        model = self.model
+        N = model.dof
+        arr = {}
+        for nm, v in (("q", q), ("qd", qd), ("qdd", qdd), ("tau", tau)):
+            a = one_real(nm, v)
+            if a.shape != (N,) or not np.isfinite(a).all():
+                raise ValueError(f"{nm}: expected a finite array of shape ({N},), got {a!r}")
+            check_scale(np.stack([a, np.zeros(N)]), nm)
+            arr[nm] = a
+        S = model._states(arr["q"][None], arr["qd"][None], arr["qdd"][None], None).reshape(-1)
+        target = arr["tau"] - (model._rbd_torque(arr["q"][None], arr["qd"][None], arr["qdd"][None])[0]
+                               if model.parametric == "sp" else 0.0)
+        xs = []
+        for j in range(N):
+            sj, tj = model.specs[j]
+            x = state_cols(S[None], sj)[0]
+            xs.append(np.append(x, arr["tau"][tj]) if tj is not None else x)
+        self.add(xs, target)
 
     def add(self, x_per_joint: list[np.ndarray], y: np.ndarray) -> None:
         """Add one sample: each joint's raw GP input (states, measured neighbour torque) and target. BLAS runs
