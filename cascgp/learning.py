@@ -33,7 +33,8 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from cascgp.buffer import DataBuffer
-from cascgp.controller import GATE_SUFFIXES, FeedforwardController
+from cascgp.controller import FeedforwardController
+from cascgp.gates import GATE_SUFFIXES
 from cascgp.episodes import EpisodeResult, run_episode
 from cascgp.gp import GPFitConfig
 from cascgp.models import MODEL_NAMES, make_model

@@ -327,6 +327,50 @@ def test_innovation_errors_are_taken_before_the_sample_enters_the_online_window(
     assert not np.allclose(model.predict_one(states[1][0], states[1][1], np.zeros(3)), before)  # it did learn
 
 
+def test_gate_rules_are_objects_behind_one_protocol(fitted_planar_sp_model, arm3_rbd, arm3_train):
+    """Each named rule is a GateRule object; passing the object gives the same controller as passing its name; a
+    rule of one's own (here a constant weight) plugs in the same way."""
+    from cascgp.gates import GATE_RULES, GATE_SUFFIXES, FloorGate, GateRule, InnovationGate, VarianceGate, WienerGate
+
+    model = fitted_planar_sp_model
+    state = (arm3_train.q[10], arm3_train.qd[10], arm3_train.qdd[10])
+    classes = {"innovation": InnovationGate, "wiener": WienerGate, "floor": FloorGate, "variance": VarianceGate}
+    assert set(classes) == set(GATE_RULES)
+    for name, cls in classes.items():
+        rule = cls()
+        assert isinstance(rule, GateRule) and rule.name == name and rule.suffix == GATE_SUFFIXES[name]
+        by_name, by_rule = (FeedforwardController(model, 0.0, 0.0, np.full(3, 1e6), fallback=arm3_rbd, gate=g)
+                            for g in (name, rule))
+        assert by_rule.gate == name and by_rule.gate_rule is rule and by_rule.name == by_name.name
+        for ctrl in (by_name, by_rule):
+            ctrl.start(None, {})
+        np.testing.assert_array_equal(by_rule(0.0, state[0], state[1], lambda t: state),
+                                      by_name(0.0, state[0], state[1], lambda t: state))
+        np.testing.assert_array_equal(by_rule.last_gate, by_name.last_gate)
+
+    class Half:
+        name, suffix, observes = "half", "-hgated", False
+
+        def bind(self, model, nominal, dof):
+            self.model = model
+
+        def start(self):
+            pass
+
+        def correction(self, q, qd, qdd, q_hist, nominal):
+            return self.model.predict_one(q, qd, qdd) - nominal, np.full(3, 0.5)
+
+        def observe(self, t, q, qd, qdd, tau):
+            raise AssertionError("not called: observes is False")
+
+    ctrl = FeedforwardController(model, 0.0, 0.0, np.full(3, 1e6), fallback=arm3_rbd, gate=Half())
+    assert ctrl.gate == "half" and ctrl.name == "sp-inward-hgated"
+    ctrl.start(None, {})
+    nominal, mean = arm3_rbd.inverse_dynamics(*state), model.predict_one(*state)
+    np.testing.assert_allclose(ctrl(0.0, state[0], state[1], lambda t: state), nominal + 0.5 * (mean - nominal))
+    ctrl.observe(state[0], state[1], nominal, 0.1)
+
+
 def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
     with pytest.raises(ValueError, match="gate: needs a nominal"):
         FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], gate=True)
