@@ -1,4 +1,4 @@
-"""cascgp_experiments: the paper's experiments as an importable package (the ``scripts/`` are its command lines).
+"""cascgp_experiments: the paper's experiments as an importable package, and the ``cascgp`` command (``cli``).
 
 It sits on top of both libraries (it imports ``cascgp`` and ``jaco_env``; neither imports it). Importing the
 package imports nothing else, so the light modules stay light:
@@ -6,8 +6,9 @@ package imports nothing else, so the light modules stay light:
 ===================  ============================================================================
 module               owns
 ===================  ============================================================================
-common               study names and labels, grids, Table I computation and numbers, repo paths,
-                     thread limits (numpy and ``cascgp.io`` only)
+cli                  the ``cascgp`` console script: fit / evaluate / predict and the experiments' commands
+common               study names and labels, grids, Table I computation and numbers, the shipped nominal
+                     URDF's path, the SARCOS default, thread limits (numpy and ``cascgp.io`` only)
 execution            the parallel job layer (local processes / Ray, job cache and resume, retry, progress)
 curves               the nRMSE-vs-seconds curve engine (one job per model and subset, fit audit)
 collect              the simulated Jaco data collection (sum-of-sinusoids, velocity mode; one job per motion)
@@ -21,8 +22,11 @@ urdf_export          a compiled MuJoCo arm model -> URDF + JSON sidecar (convers
 nominal_urdf         the Jaco 2 nominal URDF (uses :mod:`cascgp_experiments.urdf_export`)
 residual             what the nominal model misses on the simulated Jaco 2
 parallel_bench       wall time of the experiments with 1 vs N workers (``scripts.bench_parallel``)
-calibration          coverage of the cascade's predictive intervals on held-out episodes (issue 10)
-gate_eval            multi-seed, paired evaluation of the gated and online feedforward (issue 10)
+calibration          coverage of the cascade's predictive intervals on held-out episodes (a study)
+gate_eval            multi-seed, paired evaluation of the gated and online feedforward (a study)
+learner_divergence   how far gated and ungated learners drift apart, against a null (a study)
+lag_diagnosis        where the gated learner's lag comes from, per joint (a study)
+gate_rule            candidate gate rules tested as learners on new seeds (a study)
 soak                 the long-run reliability soak (episodes, resets, make/close, retrains; memory)
 video                MP4 videos of episodes: captioned recorder (runner callback), side by side
                      comparison of controllers (imageio + imageio-ffmpeg, extra ``video``)
