@@ -27,8 +27,6 @@ import os
 import re
 from pathlib import Path
 
-import numpy as np
-
 from cascgp.data import DynamicsData
 
 _EPISODE_FILE = re.compile(r"^episode_(\d{5,})\.npz$")
@@ -96,7 +94,4 @@ class DataBuffer:
         data = DynamicsData.concat([e.subsample(rate_hz) for e in self._episodes]) if self._episodes else None
         if data is None:
             raise ValueError("the buffer is empty")
-        if data.n_samples > max_samples:
-            idx = np.unique(np.linspace(0, data.n_samples - 1, max_samples).round().astype(np.int64))
-            data = data.take(idx)
-        return data
+        return data.thin(max_samples)

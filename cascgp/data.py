@@ -376,6 +376,15 @@ class DynamicsData:
         return DynamicsData(q=self.q[sel], qd=self.qd[sel], qdd=self.qdd[sel], tau=self.tau[sel],
                             t=self.t[sel], segment=self._ids[sel], meta=self.meta)
 
+    def thin(self, max_samples: int) -> "DynamicsData":
+        """At most ``max_samples`` rows, evenly spaced over all rows (first and last kept); ``self`` if it has no
+        more. Row ``round(k (T - 1) / (max_samples - 1))`` for ``k = 0 .. max_samples - 1``, duplicates dropped."""
+        if max_samples < 2:
+            raise ValueError(f"thin: max_samples: expected an integer >= 2, got {max_samples}")
+        if self.n_samples <= max_samples:
+            return self
+        return self.take(np.unique(np.linspace(0, self.n_samples - 1, max_samples).round().astype(np.int64)))
+
     def subsample(self, rate_hz: float) -> "DynamicsData":
         """Keep rows at (about) ``rate_hz`` within each segment: the first row of a segment,
         then every row at least ``1/rate_hz`` after the last kept one (with a tolerance of a

@@ -224,3 +224,15 @@ def test_from_measurements_per_segment_and_smoothing():
         DynamicsData.from_measurements(tt, v, bad, v)
     one = DynamicsData.from_measurements(tt[:1], v[:1], v[:1], v[:1])
     assert one.qdd[0, 0] == 0.0
+
+
+def test_thin_keeps_evenly_spaced_rows_with_both_ends() -> None:
+    T = 101
+    t = np.arange(T) * 0.01
+    q = np.c_[t, 2 * t]
+    d = DynamicsData(q=q, qd=q, qdd=q, tau=q, t=t)
+    thin = d.thin(11)
+    np.testing.assert_array_equal(thin.t, t[::10])
+    assert d.thin(T) is d and d.thin(500) is d
+    with pytest.raises(ValueError, match="thin: max_samples"):
+        d.thin(1)

@@ -25,7 +25,6 @@ import hashlib
 import sys
 import time
 import warnings
-from dataclasses import fields
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Callable
@@ -155,31 +154,18 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
         _note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
     if data.n_samples > a.max_samples:
         n0 = data.n_samples
-        data = data.take(np.unique(np.round(np.linspace(0, n0 - 1, a.max_samples)).astype(int)))
+        data = data.thin(a.max_samples)
         _note(prog, f"thinned evenly to {data.n_samples} of {n0} rows (--max-samples)")
     kw: dict[str, Any] = {"seed": a.seed}
     if a.restarts is not None:
         kw["n_restarts"] = a.restarts
-    has_threads = "threads" in {f.name for f in fields(GPFitConfig)}
-    if a.threads is not None and has_threads:
+    if a.threads is not None:
         kw["threads"] = a.threads
     cfg = GPFitConfig(**kw)
     model = make_model(a.model, data.dof, rbd, gp_config=cfg)
     _note(prog, f"fitting {a.model}: {data.dof} GPs on {data.n_samples} rows, {cfg.n_restarts} start(s) each ...")
     t0 = time.perf_counter()
-    prev = None
-    if a.threads is not None and not has_threads:  # a library without GPFitConfig.threads: set torch's pool
-        import torch
-
-        prev = torch.get_num_threads()
-        torch.set_num_threads(a.threads)
-    try:
-        model.fit(data)
-    finally:
-        if prev is not None:
-            import torch
-
-            torch.set_num_threads(prev)
+    model.fit(data)
     _note(prog, f"fitted in {time.perf_counter() - t0:.1f} s")
     model.save(a.out)
     print(f"saved {a.model} ({data.dof} joints, n_train={model.n_train}) to {a.out}")
@@ -222,6 +208,7 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     if model.rbd is not None:
         scores["nominal (rigid body)"] = nrmse(model.rbd.inverse_dynamics(data.q[rows], data.qd[rows],
                                                                           data.qdd[rows]), tau)
+    nominal = scores.get("nominal (rigid body)")
     names = list(scores)
     width = max(12, *map(len, names))
     print(f"nRMSE = RMSE / (max - min) of the test torques, {int(rows.sum())} rows of {a.data}")
@@ -242,10 +229,9 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
                      "qdd_source": data.meta.get("qdd_source"),
                      "derivative_filter": data.meta.get("derivative_filter")},
             "nrmse": {"model": scores[model.name].tolist(),
-                      "nominal": scores["nominal (rigid body)"].tolist() if model.rbd is not None else None},
+                      "nominal": None if nominal is None else nominal.tolist()},
             "mean_nrmse": {"model": float(scores[model.name].mean()),
-                           "nominal": float(scores["nominal (rigid body)"].mean()) if model.rbd is not None
-                           else None},
+                           "nominal": None if nominal is None else float(nominal.mean())},
         })
         _note(prog, f"wrote {a.json}")
     return 0
