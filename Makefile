@@ -7,7 +7,7 @@ comma := ,
 STAMP := $(VENV)/.installed-$(subst $(comma),-,$(EXTRAS))
 export MUJOCO_GL ?= egl
 
-.PHONY: setup demo test test-slow test-all bench wheel
+.PHONY: setup demo test test-slow test-all test-studies bench wheel
 
 setup: $(STAMP)
 
@@ -30,6 +30,10 @@ test: $(STAMP)
 # The long tests alone (full policy runs, multi-worker end-to-end runs, audits).
 test-slow: $(STAMP)
 	$(VENV)/bin/python -m pytest -m slow
+
+# The research studies' tests (studies/, not part of the installed distribution); `-m slow` adds their end-to-end runs.
+test-studies: $(STAMP)
+	$(VENV)/bin/python -m pytest studies/tests
 
 test-all: $(STAMP)
 	$(VENV)/bin/python -m pytest -m ''

@@ -18,9 +18,11 @@ controller, the measured episode joins a :class:`cascgp.buffer.DataBuffer` and a
 everything seen so far (subsampled to ``rate_hz``, at most ``cap`` rows), warm-started from the
 previous model's hyperparameters.
 
-Seeds: attempt ``i`` resets the env with seed ``seed * 1000 + i``; the refit after it uses the GP
-seed ``seed + fit_seed_offset + i`` (:class:`RetrainConfig`; the offset, 0 by default, changes only the random
-starts of the fits, e.g. to measure how far two learners that differ in nothing else drift apart).
+Seeds: attempt ``i`` resets the env with seed ``seed * 1000 + i``; the refit after it uses the GP seed
+``seed + i`` (:class:`RetrainConfig`; a model factory may change it).
+
+Extension: :class:`RunHooks` objects see every attempt (its context, the model it uses, its record) without
+changing the loop: progress bars, video recorders, extra evaluations on the same model.
 """
 
 from __future__ import annotations
@@ -40,27 +42,17 @@ from cascgp.gp import GPFitConfig
 from cascgp.models import MODEL_NAMES, make_model
 
 __all__ = ["PLAIN_CONTROLLERS", "ONLINE_WINDOW", "Attempt", "Feedback", "RetrainConfig", "ControllerRun",
-           "BeforeAttempt", "check_controller", "parse_controller", "make_controller", "attempt_plan",
+           "AttemptContext", "RunHooks", "check_controller", "parse_controller", "make_controller", "attempt_plan",
            "default_model_factory", "run_controller", "run_controllers"]
 
 #: Controllers that never learn.
 PLAIN_CONTROLLERS = ("pd", "rbd")
 #: Online samples a ``-online`` controller keeps per joint during an attempt (15 s at 10 Hz).
 ONLINE_WINDOW = 150
-#: ``episode_callback(controller_name, attempt_index, attempt)`` -> a runner callback for that episode or None
-#: (e.g. a video recorder).
-EpisodeCallback = Callable[[str, int, "Attempt"], Any]
-
 #: One attempt: (task, attempt index within the task, phase). Only ``"train"`` attempts feed the buffer.
 Attempt = tuple[str, int, str]
 #: ``factory(name, rbd, gp_config)`` -> an unfitted model with ``fit(data, init=previous)``.
 ModelFactory = Callable[[str, Any, GPFitConfig], Any]
-#: ``callback(controller_name, record)``, called after every attempt.
-AttemptCallback = Callable[[str, dict[str, Any]], None]
-#: ``before_attempt(controller_name, attempt_index, attempt, model)`` -> a JSON-ready dict or None, called before
-#: every attempt with the learned model that attempt uses (None before the first fit); a dict is stored in the
-#: attempt's record as ``"before"`` (e.g. the model's uncertainty along the task's reference).
-BeforeAttempt = Callable[[str, int, "Attempt", Any], "dict[str, Any] | None"]
 
 
 @dataclass(frozen=True)
@@ -80,7 +72,52 @@ class RetrainConfig:
     rate_hz: float = 10.0   # training data rate (Hz)
     cap: int = 500          # maximum training-set size
     restarts: int = 3       # GP optimiser restarts per refit
-    fit_seed_offset: int = 0  # added to the GP seed of every refit (only the random starts change)
+
+
+@dataclass(frozen=True)
+class AttemptContext:
+    """What a hook knows of one attempt: the controller, the attempt's index in the plan, the attempt itself, the
+    env seed of its episode and the env's reset options (the task included)."""
+
+    name: str
+    index: int
+    attempt: Attempt
+    seed: int
+    options: dict[str, Any]
+
+    @property
+    def meta(self) -> dict[str, Any]:
+        """The episode's metadata (:func:`cascgp.episodes.run_episode`)."""
+        return {"attempt": self.index, "phase": self.attempt[2]}
+
+
+class RunHooks:
+    """Callbacks of :func:`run_controller`; subclass and override the ones you need (each does nothing here).
+
+    Per attempt the order is: :meth:`episode_callback`, :meth:`before_episode`, the episode,
+    :meth:`after_episode`, the refit (training attempts of a learning controller), :meth:`after_attempt`.
+    A hook observes: it must leave the model and the run's data as it found them (it may add keys to the record).
+
+    Example:
+        >>> class Print(RunHooks):
+        ...     def after_attempt(self, ctx, record):
+        ...         print(ctx.name, record["task"], round(record["tracking_rmse"], 3))
+        >>> # run_controller("sp-inward", env, plan, rbd, feedback, hooks=[Print()])
+    """
+
+    def episode_callback(self, ctx: AttemptContext) -> Any | None:
+        """A per-step callback for this attempt's episode (:func:`cascgp.episodes.run_episode`), e.g. a video
+        recorder, or None."""
+        return None
+
+    def before_episode(self, ctx: AttemptContext, model: Any | None) -> None:
+        """Called before the episode with the learned model it uses (None before the first fit)."""
+
+    def after_episode(self, ctx: AttemptContext, model: Any | None, record: dict[str, Any]) -> None:
+        """Called after the episode, before any refit, with the same model and the attempt's record."""
+
+    def after_attempt(self, ctx: AttemptContext, record: dict[str, Any]) -> None:
+        """Called when the attempt is complete (after the refit, whose time is ``record["fit_seconds"]``)."""
 
 
 @dataclass
@@ -155,9 +192,7 @@ def default_model_factory(name: str, rbd: Any, gp_config: GPFitConfig) -> Any:
 def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedback: Feedback,
                    config: RetrainConfig = RetrainConfig(), *, reset_options: dict[str, Any] | None = None,
                    model_factory: ModelFactory = default_model_factory, buffer_dir: str | Path | None = None,
-                   on_attempt: AttemptCallback | None = None,
-                   episode_callback: EpisodeCallback | None = None,
-                   paired: Sequence[str] = (), before_attempt: BeforeAttempt | None = None) -> ControllerRun:
+                   hooks: Sequence[RunHooks] = ()) -> ControllerRun:
     """Run every attempt of ``plan`` with one controller; a learning controller is refitted after every
     ``"train"`` attempt on all data so far.
 
@@ -169,31 +204,22 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
         rbd: the nominal rigid-body model (RBD feedforward, SP models' mean, fallback).
         feedback: gains and torque limits.
         config: seeds and refit settings.
+        reset_options: env reset options besides the task (e.g. the payload).
+        model_factory: makes the unfitted model of each refit (:func:`default_model_factory`).
         buffer_dir: folder that persists the buffer (must be empty); ``None``: in memory.
-        on_attempt: called with ``(name, record)`` after every attempt (e.g. a progress bar).
-        episode_callback: ``episode_callback(name, i, attempt)`` may return a runner callback for attempt ``i``
-            (e.g. a video recorder, :mod:`cascgp_experiments.video`).
-        paired: controllers evaluated *on the same model* after every attempt, for paired comparisons
-            (e.g. ``("sp-inward-gated",)`` next to ``"sp-inward"``: the gate's own effect, free of the
-            differences in data and fits that separate two independent learners). Each must be ``name``'s
-            model with other suffixes; each runs one episode with the attempt's seed and task, adds nothing
-            to the buffer, and leaves the model as it found it (an online window it opens is closed).
-        before_attempt: called before every attempt with the model it uses (:data:`BeforeAttempt`); must not
-            change the model.
+        hooks: :class:`RunHooks` called in order around every attempt (progress, video, extra evaluations).
 
     Returns:
         The run; each record holds ``attempt``, ``task``, ``task_attempt``, ``phase``, ``n_train`` (rows the
-        controller's model was fitted on), the episode's :meth:`EpisodeResult.summary` and, after a refit,
-        ``fit_seconds``; with ``paired``, ``record["paired"][p]`` is controller ``p``'s episode summary; with
-        ``before_attempt``, ``record["before"]`` is what it returned (when not None).
+        controller's model was fitted on), the episode's :meth:`EpisodeResult.summary`, ``online_samples`` for an
+        online controller and, after a refit, ``fit_seconds``; hooks may add keys.
     """
     base, _, _ = parse_controller(name)
+    hooks = tuple(hooks)
+    for h in hooks:
+        if not isinstance(h, RunHooks):
+            raise ValueError(f"hooks: expected RunHooks objects, got {type(h).__name__}")
     learns = base not in PLAIN_CONTROLLERS
-    paired = tuple(paired)
-    for p in paired:
-        if parse_controller(p)[0] != base or base in PLAIN_CONTROLLERS:
-            raise ValueError(f"paired: {p!r} is not a variant of {name!r}'s model (expected {base!r} with "
-                             "other '-gated'/'-fgated'/'-vgated'/'-igated'/'-online' suffixes)")
     buffer = DataBuffer(buffer_dir) if learns else None
     if buffer is not None and len(buffer):
         raise ValueError(f"buffer folder {buffer_dir} already holds data; use an empty --out folder")
@@ -201,51 +227,47 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
     model = None
     run = ControllerRun(name)
     for i, (task, k, phase) in enumerate(plan):
-        before = before_attempt(name, i, (task, k, phase), model) if before_attempt is not None else None
+        ctx = AttemptContext(name, i, (task, k, phase), seed=config.seed * 1000 + i,
+                             options={"task": task, **options})
+        callbacks = [c for c in (h.episode_callback(ctx) for h in hooks) if c is not None]
+        for h in hooks:
+            h.before_episode(ctx, model)
         controller = make_controller(name, rbd, model, feedback)
-        callback = episode_callback(name, i, (task, k, phase)) if episode_callback is not None else None
-        result: EpisodeResult = run_episode(
-            env, controller, seed=config.seed * 1000 + i, options={"task": task, **options},
-            meta={"attempt": i, "phase": phase}, callback=callback)
+        result: EpisodeResult = run_episode(env, controller, seed=ctx.seed, options=ctx.options, meta=ctx.meta,
+                                            callback=_one_callback(callbacks))
         record = {"attempt": i, "task": task, "task_attempt": k, "phase": phase,
                   "n_train": 0 if model is None else int(model.n_train), **result.summary()}
         if controller.online:
             record["online_samples"] = controller.n_online_samples
-        if before is not None:
-            record["before"] = before
-        if paired:
-            record["paired"] = _paired_episodes(paired, env, model, rbd, feedback, seed=config.seed * 1000 + i,
-                                                options={"task": task, **options}, meta={"attempt": i, "phase": phase})
+        for h in hooks:
+            h.after_episode(ctx, model, record)
         if buffer is not None and phase == "train":  # buffer: a learning controller
             buffer.append(result.data)
             t0 = time.perf_counter()
-            new = model_factory(base, rbd, GPFitConfig(n_restarts=config.restarts,
-                                                       seed=config.seed + config.fit_seed_offset + i))
+            new = model_factory(base, rbd, GPFitConfig(n_restarts=config.restarts, seed=config.seed + i))
             model = new.fit(buffer.training_set(config.rate_hz, config.cap), init=model)
             record["fit_seconds"] = time.perf_counter() - t0
         run.attempts.append(record)
-        if on_attempt is not None:
-            on_attempt(name, record)
+        for h in hooks:
+            h.after_attempt(ctx, record)
     return run
 
 
-def _paired_episodes(names: Sequence[str], env: Any, model: Any | None, rbd: Any, feedback: Feedback, *,
-                     seed: int, options: dict[str, Any], meta: dict[str, Any]) -> dict[str, dict[str, Any]]:
-    """One episode of each controller in ``names`` on ``model`` (see :func:`run_controller`'s ``paired``)."""
-    out = {}
-    for p in names:  # each controller's start() opens its own window or closes one left open
-        controller = make_controller(p, rbd, model, feedback)
-        out[p] = run_episode(env, controller, seed=seed, options=options, meta=meta).summary()
-    if model is not None and hasattr(model, "stop_online"):
-        model.stop_online()  # leave the model as it was found
-    return out
+def _one_callback(callbacks: list[Any]) -> Any | None:
+    """The episode callbacks of several hooks as one (None when there are none)."""
+    if len(callbacks) <= 1:
+        return callbacks[0] if callbacks else None
+
+    def both(*args: Any, **kwargs: Any) -> None:
+        for c in callbacks:
+            c(*args, **kwargs)
+    return both
 
 
 def run_controllers(names: Sequence[str], make_env: Callable[[], Any], plan: Sequence[Attempt], rbd: Any,
                     feedback: Feedback, config: RetrainConfig = RetrainConfig(), *,
                     reset_options: dict[str, Any] | None = None, model_factory: ModelFactory = default_model_factory,
-                    buffer_root: str | Path | None = None,
-                    on_attempt: AttemptCallback | None = None) -> list[ControllerRun]:
+                    buffer_root: str | Path | None = None, hooks: Sequence[RunHooks] = ()) -> list[ControllerRun]:
     """:func:`run_controller` for each of ``names`` in turn on one env from ``make_env()`` (closed at the end);
     controller ``name``'s buffer goes to ``buffer_root / name`` when ``buffer_root`` is given."""
     for name in names:
@@ -255,7 +277,7 @@ def run_controllers(names: Sequence[str], make_env: Callable[[], Any], plan: Seq
         return [run_controller(name, env, plan, rbd, feedback, config, reset_options=reset_options,
                                model_factory=model_factory,
                                buffer_dir=None if buffer_root is None else Path(buffer_root) / name,
-                               on_attempt=on_attempt)
+                               hooks=hooks)
                 for name in names]
     finally:
         env.close()

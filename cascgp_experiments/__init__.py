@@ -22,13 +22,12 @@ urdf_export          a compiled MuJoCo arm model -> URDF + JSON sidecar (convers
 nominal_urdf         the Jaco 2 nominal URDF (uses :mod:`cascgp_experiments.urdf_export`)
 residual             what the nominal model misses on the simulated Jaco 2
 parallel_bench       wall time of the experiments with 1 vs N workers (``scripts.bench_parallel``)
-calibration          coverage of the cascade's predictive intervals on held-out episodes (a study)
-gate_eval            multi-seed, paired evaluation of the gated and online feedforward (a study)
-learner_divergence   how far gated and ungated learners drift apart, against a null (a study)
-lag_diagnosis        where the gated learner's lag comes from, per joint (a study)
-gate_rule            candidate gate rules tested as learners on new seeds (a study)
+run_hooks            retrain-loop hooks: paired controllers on one model, the GP seed offset
 soak                 the long-run reliability soak (episodes, resets, make/close, retrains; memory)
 video                MP4 videos of episodes: captioned recorder (runner callback), side by side
                      comparison of controllers (imageio + imageio-ffmpeg, extra ``video``)
 ===================  ============================================================================
+
+The research studies built on these (gate rules, calibration, learner divergence) live in the checkout's
+``studies/`` folder, not in the installed distribution.
 """

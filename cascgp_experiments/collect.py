@@ -38,8 +38,8 @@ it gains: on the 2-core machine (load average 0.1-0.8 from other work) the full 
 serially, 14 s as jobs on 2 processes and 46 s in a 2-env ``AsyncVectorEnv``
 (``python -m scripts.bench_parallel --cases collect-full``, ``docs/bench/parallel_collect_full.json``).
 
-Ablations (``docs/calibration.md``, not the study's data): ``sensor_noise="none"`` records noiseless measurements
-(the motions are the same: the command is open loop and the firmware acts on the simulator's state);
+Ablations (``docs/studies/calibration.md``, not the study's data): ``sensor_noise="none"`` records noiseless
+measurements (the motions are the same: the command is open loop and the firmware acts on the simulator's state);
 ``qdd_source="true"`` stores the simulator's true accelerations instead of the filtered ones.
 
 Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N]
@@ -76,7 +76,7 @@ class CollectConfig:
     savgol_window: int = 9
     savgol_polyorder: int = 2
     #: ``"default"``: the env's ``SensorNoise()``; ``"none"``: noiseless measurements (``SensorNoise.none()``),
-    #: the ablation of ``docs/calibration.md``. The motions do not depend on it (open-loop command, the
+    #: the ablation of ``docs/studies/calibration.md``. The motions do not depend on it (open-loop command, the
     #: firmware loop acts on the simulator's state); the random stream is the same (noise is always drawn).
     sensor_noise: str = "default"
     #: ``"savgol"``: q̈ from the measured q̇ by the Savitzky-Golay filter (the study's); ``"true"``: the
@@ -360,3 +360,23 @@ def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: boo
         data[split].save(paths[split])
     return data["train"], data["test"], {"reused": False, "wall_s": time.perf_counter() - t0}
 
+
+def study_data(folder: str | Path | None, out: str | Path, *, preset: str = "quick", sensor_noise: str = "default",
+               qdd_source: str = "savgol", workers: int | None = None) -> tuple[DynamicsData, DynamicsData]:
+    """The study's ``jaco_train.npz``/``jaco_test.npz`` from ``folder``; without one, the collection ``preset``
+    (:data:`PRESETS`) with ``sensor_noise`` and ``qdd_source`` (see
+    :class:`CollectConfig`) recorded into ``<out>/data`` on ``workers`` processes
+    (``None``: every core), or reused from there when present with the same settings.
+
+    The collection options only apply to a new collection: with ``folder``, anything but the defaults is a
+    ``ValueError`` (the files are used as they were recorded)."""
+    if folder:
+        if (sensor_noise, qdd_source) != ("default", "savgol"):
+            raise ValueError(f"sensor_noise={sensor_noise!r}/qdd_source={qdd_source!r} only apply to a new "
+                             f"collection, not to the files in {folder!s} (leave out the data folder)")
+        return tuple(DynamicsData.load(Path(folder) / f"jaco_{s}.npz") for s in ("train", "test"))
+    if preset not in PRESETS:
+        raise ValueError(f"preset: expected one of {tuple(PRESETS)}, got {preset!r}")
+    cfg = replace(PRESETS[preset], sensor_noise=sensor_noise, qdd_source=qdd_source)
+    train, test, _ = collect(Path(out) / "data", cfg, workers=workers)
+    return train, test

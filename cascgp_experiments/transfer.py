@@ -34,10 +34,11 @@ import gymnasium as gym
 
 import jaco_env  # registers the environments
 from cascgp.io import atomic_write_text, read_json, write_json
-from cascgp.learning import (PLAIN_CONTROLLERS, Attempt, ControllerRun, Feedback, RetrainConfig,
-                             attempt_plan, check_controller, run_controller)
+from cascgp.learning import (PLAIN_CONTROLLERS, Attempt, AttemptContext, ControllerRun, Feedback, ModelFactory,
+                             RetrainConfig, RunHooks, attempt_plan, check_controller, run_controller)
 from cascgp.rbd import load_nominal
 from cascgp_experiments.common import NOMINAL_URDF, save_figure
+from cascgp_experiments.run_hooks import PairedEpisodes, seed_offset_factory
 
 ENV_ID = "JacoPour-v0"
 FULL_CONTROLLERS = ("pd", "rbd", "sp-standard", "sp-inward", "sp-outward", "np-inward", "sp-inward-gated",
@@ -67,7 +68,7 @@ class TransferConfig:
     cap: int = 500
     restarts: int = 3
     n_marbles: int = 30
-    fit_seed_offset: int = 0
+    fit_seed_offset: int = 0  # added to every refit's GP seed (run_hooks.seed_offset_factory); 0 in the product
 
     def plan(self) -> list[Attempt]:
         """Every attempt, in order (:func:`cascgp.learning.attempt_plan`)."""
@@ -75,8 +76,11 @@ class TransferConfig:
 
     def retrain(self) -> RetrainConfig:
         """The seeds and refit settings of :mod:`cascgp.learning`."""
-        return RetrainConfig(seed=self.seed, rate_hz=self.rate_hz, cap=self.cap, restarts=self.restarts,
-                             fit_seed_offset=self.fit_seed_offset)
+        return RetrainConfig(seed=self.seed, rate_hz=self.rate_hz, cap=self.cap, restarts=self.restarts)
+
+    def model_factory(self) -> ModelFactory:
+        """The refits' model factory: the default one, its GP seeds offset by ``fit_seed_offset``."""
+        return seed_offset_factory(self.fit_seed_offset)
 
     def reset_options(self) -> dict[str, Any]:
         """Reset options besides the task: the unknown payload."""
@@ -126,10 +130,8 @@ def controller_job(config: dict[str, Any], name: str, buffer_dir: str | None,
     emptied first, so a retried or resumed job starts again from no data. ``video``: a
     :class:`VideoOptions` as a dict; the chosen attempts of this controller are written to
     ``<folder>/<controller>/<attempt>.mp4`` (rendering does not change the simulation). ``paired``: controllers
-    evaluated on this controller's model after every attempt (:func:`cascgp.learning.run_controller`). Returns
-    the attempt records."""
-    from cascgp_experiments.execution import report_progress
-
+    evaluated on this controller's model after every attempt (:class:`~cascgp_experiments.run_hooks.PairedEpisodes`).
+    Returns the attempt records."""
     cfg = TransferConfig.from_dict(config)
     if buffer_dir is not None:
         shutil.rmtree(buffer_dir, ignore_errors=True)
@@ -138,34 +140,50 @@ def controller_job(config: dict[str, Any], name: str, buffer_dir: str | None,
                            "attempts": tuple(video["attempts"])}) if video else None
     recording = opts is not None and name in opts.controllers
     if recording:
-        from cascgp_experiments.video import EpisodeRecorder, every_for_fps, make_video_env, write_mp4
+        from cascgp_experiments.video import make_video_env
 
         env = make_video_env(opts.width, opts.height, shadow_size=opts.shadow_size, n_marbles=cfg.n_marbles)
     else:
         env = cfg.make_env()
-    recorders: dict[int, Any] = {}
-
-    def episode_callback(name: str, i: int, attempt: Attempt) -> Any:
-        if not recording or i not in opts.attempts:
-            return None
-        recorders[i] = EpisodeRecorder(name, task=attempt[0], attempt=attempt[1] + 1,
-                                       every=every_for_fps(env.unwrapped.control_dt, opts.fps))
-        return recorders[i]
-
-    def progress(name: str, record: dict[str, Any]) -> None:
-        rec = recorders.pop(record["attempt"], None)
-        if rec is not None and rec.frames:
-            write_mp4(rec.frames, Path(opts.folder) / name / f"{record['attempt']:02d}.mp4", rec.fps)
-        report_progress(1, f"{name} {record['task']}#{record['task_attempt']} "
-                           f"rmse={record['tracking_rmse']:.3f} jar={record['in_jar']:.2f}")
-
     try:
+        hooks: list[RunHooks] = [_JobProgress(opts if recording else None, env)]
+        if paired:
+            hooks.append(PairedEpisodes(name, paired, env, rbd, jaco_feedback()))
         run = run_controller(name, env, cfg.plan(), rbd, jaco_feedback(), cfg.retrain(),
-                             reset_options=cfg.reset_options(), buffer_dir=buffer_dir, on_attempt=progress,
-                             episode_callback=episode_callback, paired=tuple(paired or ()))
+                             reset_options=cfg.reset_options(), buffer_dir=buffer_dir,
+                             model_factory=cfg.model_factory(), hooks=hooks)
     finally:
         env.close()
     return run.attempts
+
+
+class _JobProgress(RunHooks):
+    """A job's progress line after every attempt and, with ``opts``, its chosen attempts as MP4 files."""
+
+    def __init__(self, opts: VideoOptions | None, env: Any) -> None:
+        self.opts, self.env = opts, env
+        self.recorders: dict[int, Any] = {}
+
+    def episode_callback(self, ctx: AttemptContext) -> Any | None:
+        if self.opts is None or ctx.index not in self.opts.attempts:
+            return None
+        from cascgp_experiments.video import EpisodeRecorder, every_for_fps
+
+        self.recorders[ctx.index] = EpisodeRecorder(
+            ctx.name, task=ctx.attempt[0], attempt=ctx.attempt[1] + 1,
+            every=every_for_fps(self.env.unwrapped.control_dt, self.opts.fps))
+        return self.recorders[ctx.index]
+
+    def after_attempt(self, ctx: AttemptContext, record: dict[str, Any]) -> None:
+        from cascgp_experiments.execution import report_progress
+
+        rec = self.recorders.pop(ctx.index, None)
+        if self.opts is not None and rec is not None and rec.frames:
+            from cascgp_experiments.video import write_mp4
+
+            write_mp4(rec.frames, Path(self.opts.folder) / ctx.name / f"{ctx.index:02d}.mp4", rec.fps)
+        report_progress(1, f"{ctx.name} {record['task']}#{record['task_attempt']} "
+                           f"rmse={record['tracking_rmse']:.3f} jar={record['in_jar']:.2f}")
 
 
 def compose_videos(opts: VideoOptions, plan: list[Attempt]) -> list[Path]:

@@ -51,7 +51,7 @@ def main(argv: list[str] | None = None) -> None:
     from cascgp.io import write_json
     from cascgp.models import make_model
     from cascgp.rbd import load_nominal
-    from cascgp_experiments.calibration import study_data
+    from cascgp_experiments.collect import study_data
     from cascgp_experiments.common import NOMINAL_URDF
 
     out = Path(a.out)

@@ -23,9 +23,31 @@ print(len(names))
 """
 
 
-def test_importing_every_cascgp_module_loads_no_simulator() -> None:
+def _python(code: str) -> None:
+    """Runs ``code`` in a fresh interpreter (nothing imported yet) from the checkout; fails with its stderr."""
     env = dict(os.environ)
     env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    out = subprocess.run([sys.executable, "-c", _CODE], env=env, cwd=REPO, capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-c", code], env=env, cwd=REPO, capture_output=True, text=True,
                          timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]
+
+
+def test_importing_every_cascgp_module_loads_no_simulator() -> None:
+    _python(_CODE)
+
+
+_EXPERIMENTS = """
+import importlib, pkgutil, sys
+import cascgp_experiments
+names = sorted(m.name for m in pkgutil.walk_packages(cascgp_experiments.__path__, "cascgp_experiments."))
+for name in names:
+    importlib.import_module(name)
+bad = sorted(m for m in sys.modules if m.split(".")[0] == "studies")
+assert len(names) > 15, names
+assert not bad, bad
+"""
+
+
+def test_the_experiments_import_no_study() -> None:
+    """The product's experiments stand without the research studies (``studies/`` is not installed)."""
+    _python(_EXPERIMENTS)

@@ -17,13 +17,14 @@ import numpy as np
 import pytest
 
 from cascgp.learning import make_controller, run_controller
+from cascgp_experiments.run_hooks import PairedEpisodes
 from cascgp_experiments.transfer import TransferConfig, jaco_feedback
 
 TASK_A, TASK_B = "front", "left"
 #: Revisit tolerance: the first attempt back on task A may be at most this much worse (relative)
 #: than the last attempt there before, although the buffer now also holds task B and is thinned to the cap.
 REVISIT_TOLERANCE = 0.15
-#: The gate is the default rule, the innovation gate (docs/gate_rule.md).
+#: The gate is the default rule, the innovation gate (docs/studies/gate_rule.md).
 GATED = "sp-inward-igated"
 LEARNERS = ("sp-inward", GATED, GATED + "-online")
 
@@ -44,8 +45,8 @@ def runs():
     opts = cfg.reset_options()
     out = {name: run_controller(name, env, once, *args, reset_options=opts) for name in ("pd", "rbd")}
     for name in LEARNERS:  # the ungated learner also runs the gated controller on its own model (paired)
-        out[name] = run_controller(name, env, learn, *args, reset_options=opts,
-                                   paired=(GATED,) if name == "sp-inward" else ())
+        hooks = [PairedEpisodes(name, (GATED,), env, rbd, jaco_feedback())] if name == "sp-inward" else []
+        out[name] = run_controller(name, env, learn, *args, reset_options=opts, hooks=hooks)
     env.close()
     return {name: run.attempts for name, run in out.items()}
 
@@ -124,10 +125,10 @@ def test_gated_learner_within_ten_percent_of_the_ungated_after_three_attempts_on
     where this run meets it (task A: 0.142 vs 0.135 rad, 1.05). On task B this run misses it narrowly (0.0530 vs
     0.0476, 1.11; the Wiener rule missed it here by 1.35). Two learners that collect their own data drift apart:
     of two *ungated* learners that differ only in the random starts of their fits, one is more than 10 % slower
-    on about a third of (seed, task) pairs (docs/learner_divergence.md), so one seed cannot decide it. On new seeds
-    20-27 the innovation learner meets it in the median on task B (1.05; docs/gate_rule.md), where the Wiener learner
-    lagged (1.36 on seeds 12-19: the gate shrank the wrist correction on the first attempt, docs/lag_diagnosis.md).
-    The paired test below checks the gate's own effect on one model, on both tasks."""
+    on about a third of (seed, task) pairs (docs/studies/learner_divergence.md), so one seed cannot decide it. On new
+    seeds 20-27 the innovation learner meets it in the median on task B (1.05; docs/studies/gate_rule.md), where the
+    Wiener learner lagged (1.36 on seeds 12-19: the gate shrank the wrist correction on the first attempt,
+    docs/studies/lag_diagnosis.md). The paired test below checks the gate's own effect on one model, on both tasks."""
     assert _rmse(runs[GATED], TASK_A, k=3) <= 1.10 * _rmse(runs["sp-inward"], TASK_A, k=3)
 
 
@@ -137,7 +138,7 @@ def test_the_gate_on_the_same_model_costs_at_most_ten_percent_after_three_attemp
     """Issue 10's criterion on the gate's own effect: after three retrainings on a task, the gated controller on
     the ungated learner's model is within 10 % of that learner (measured in this run: 1.08 on task A, 1.06 on
     task B). Two learners that collect their own data drift apart as much without a gate as with one
-    (docs/learner_divergence.md); this paired form is free of that drift."""
+    (docs/studies/learner_divergence.md); this paired form is free of that drift."""
     ungated = [a for a in runs["sp-inward"] if a["task"] == task and a["task_attempt"] == 3][0]
     assert ungated["paired"][GATED]["tracking_rmse"] <= 1.10 * ungated["tracking_rmse"]
 

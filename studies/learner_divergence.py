@@ -1,14 +1,14 @@
 """Why does the gated learner lag the ungated one on some tasks? A null comparison, a decomposition and a test
 of the divergence hypothesis (issue 10, second criterion).
 
-:mod:`cascgp_experiments.gate_eval` found that on the same model the gate costs nothing in the median after
+:mod:`studies.gate_eval` found that on the same model the gate costs nothing in the median after
 three attempts (0.99), yet the gated *learner* was up to 1.70 x the ungated learner (10 of 16 (seed, task)
 pairs within the criterion's 10 %). It proposed, untested, that a gated learner tracks worse on a new task,
 collects data farther from the reference, stays less certain there, and so keeps shrinking. This experiment
 tests that and asks whether the criterion can be judged per task at all. The protocol was fixed and committed
 before any of its runs:
 
-* **Settings.** Those of the gate evaluation (:data:`~cascgp_experiments.gate_eval.GATE_EVAL_CONFIG`: the full
+* **Settings.** Those of the gate evaluation (:data:`~studies.gate_eval.GATE_EVAL_CONFIG`: the full
   transfer, 4 attempts per task, seeds 0-3).
 * **Learners per seed.**
 
@@ -20,7 +20,7 @@ before any of its runs:
     drift apart when nothing but a random start differs.
 
   GL's and UL's attempts are those of the gate evaluation (same seeds; paired episodes change nothing in a
-  learner's run), so they must reproduce ``docs/gate_eval.json``: checked and reported.
+  learner's run), so they must reproduce ``docs/studies/gate_eval.json``: checked and reported.
 * **Before every attempt**, along the task's reference (the first ``duration`` seconds at 10 Hz, the same
   inputs the feedforward is queried at) and with the model that attempt uses: per joint, the median of the
   propagated latent variance relative to the prior (``rel_var``), the mean Wiener weight of the gate
@@ -63,7 +63,7 @@ import numpy as np
 
 from cascgp.controller import gate_weights
 from cascgp.io import atomic_write_text, write_json
-from cascgp_experiments.gate_eval import (GATE_EVAL_CONFIG, GATE_EVAL_SEEDS, find_attempt, ratio_figure, ratio_stats,
+from studies.gate_eval import (GATE_EVAL_CONFIG, GATE_EVAL_SEEDS, find_attempt, ratio_figure, ratio_stats,
                                           scatter_ratios)
 from cascgp_experiments.transfer import TransferConfig
 
@@ -100,31 +100,29 @@ def reference_uncertainty(model: Any, nominal: Any, q: np.ndarray, qd: np.ndarra
 def divergence_job(config: dict[str, Any], label: str) -> list[dict[str, Any]]:
     """Every attempt of learner ``label`` (:data:`LEARNERS`) with the reference diagnostics in ``record["before"]``."""
     import jaco_env.tasks
-    from cascgp.learning import run_controller
+    from cascgp.learning import AttemptContext, run_controller
     from cascgp.rbd import load_nominal
     from cascgp_experiments.common import NOMINAL_URDF
-    from cascgp_experiments.execution import report_progress
+    from cascgp_experiments.run_hooks import PairedEpisodes
     from cascgp_experiments.transfer import jaco_feedback
+    from studies.hooks import BeforeEachAttempt, Progress
 
     name, paired, offset = LEARNERS[label]
     cfg = replace(TransferConfig.from_dict(config), fit_seed_offset=offset)
     rbd = load_nominal(NOMINAL_URDF)
     env = cfg.make_env()
 
-    def before(_name: str, _i: int, attempt: tuple[str, int, str], model: Any) -> dict[str, Any] | None:
+    def before(ctx: AttemptContext, model: Any) -> dict[str, Any] | None:
         if model is None:
             return None
-        task = jaco_env.tasks.get_task(attempt[0])
+        task = jaco_env.tasks.get_task(ctx.attempt[0])
         q, qd, qdd = task.reference(np.arange(0.0, task.duration, 1.0 / REFERENCE_RATE_HZ))
         return reference_uncertainty(model, rbd, q, qd, qdd)
 
-    def progress(_name: str, record: dict[str, Any]) -> None:
-        report_progress(1, f"{label} {record['task']}#{record['task_attempt']} rmse={record['tracking_rmse']:.3f}")
-
     try:
+        hooks = [BeforeEachAttempt(before), PairedEpisodes(name, paired, env, rbd, jaco_feedback()), Progress(label)]
         run = run_controller(name, env, cfg.plan(), rbd, jaco_feedback(), cfg.retrain(),
-                             reset_options=cfg.reset_options(), on_attempt=progress, paired=paired,
-                             before_attempt=before)
+                             reset_options=cfg.reset_options(), model_factory=cfg.model_factory(), hooks=hooks)
     finally:
         env.close()
     return run.attempts
@@ -139,7 +137,7 @@ def run_divergence(out: Path, cfg: TransferConfig = GATE_EVAL_CONFIG, seeds: tup
                    workers: int | None = None, ray_address: str | None = None, show_progress: bool = True,
                    reference: dict[str, Any] | None = None) -> dict[str, Any]:
     """Run every job (cached under ``out/cache``) and write ``learner_divergence.json``/``.md``/``.png`` into
-    ``out``. ``reference``: the gate evaluation's results (``docs/gate_eval.json``) to check GL's and UL's
+    ``out``. ``reference``: the gate evaluation's results (``docs/studies/gate_eval.json``) to check GL's and UL's
     attempts against (reported as ``reproduction``)."""
     from cascgp_experiments.execution import run_jobs
 
@@ -266,7 +264,7 @@ def joint_split_markdown(split: dict[str, list[dict[str, float]]]) -> str:
 
 def wrist_reading(split: dict[str, list[dict[str, float]]], trigger: float = 1.5, calm: float = 1.2,
                   lag: float = 1.3) -> dict[str, Any]:
-    """The pre-registered reading of the wrist hypothesis (``docs/lag_diagnosis.md``, "Replication of the wrist
+    """The pre-registered reading of the wrist hypothesis (``docs/studies/lag_diagnosis.md``, "Replication of the wrist
     pattern") on a :func:`joint_split`: per seed ``g0`` (the gate's effect at the task's first attempt), ``m0``
     (the model's there) and ``m13`` (the median model effect over the later attempts). A seed is
     *gate-triggered* if ``g0 > trigger``, *front-triggered* if not and ``m0 > lag``, else *calm* if
@@ -336,8 +334,9 @@ def summary_markdown(results: dict[str, Any]) -> str:
              f"{results['jobs']['job_seconds_sum']:.0f} s in all when they ran.", ""]
     if "reproduction" in results:
         r = results["reproduction"]
-        lines += [f"Reproduction of docs/gate_eval.json (GL, UL): {r['identical']} of {r['attempts_compared']} attempt "
-                  f"RMSEs identical (largest difference {r['max_abs_difference']:.2e} rad).", ""]
+        lines += [f"Reproduction of docs/studies/gate_eval.json (GL, UL): {r['identical']} of "
+                  f"{r['attempts_compared']} attempt RMSEs identical "
+                  f"(largest difference {r['max_abs_difference']:.2e} rad).", ""]
     lines += ["| ratio | n | median | IQR | min | worst | <= 1.10 (the criterion's count) |",
               "|---|---|---|---|---|---|---|"]
     for q, st in s.items():

@@ -1,11 +1,11 @@
-"""Compare calibration runs (the arms of ``docs/calibration.md``): decision statistics and per-joint tables.
+"""Compare calibration runs (the arms of ``docs/studies/calibration.md``): decision statistics and per-joint tables.
 
-    python -m scripts.calibration_compare noisy=out/cal/noisy noiseless=out/cal/noiseless [...] [--base noisy]
-    python -m scripts.calibration_compare base=out/floor/none floor=out/floor/sensor --floor-effect
+    python -m studies.commands.calibration_compare noisy=out/cal/noisy noiseless=out/cal/noiseless [...] [--base noisy]
+    python -m studies.commands.calibration_compare base=out/floor/none floor=out/floor/sensor --floor-effect
 
-Each ``NAME=DIR`` is a folder with a ``calibration.json`` of ``python -m scripts.calibration``; prints Markdown
-(:func:`cascgp_experiments.calibration.compare_arms` and :func:`~cascgp_experiments.calibration.combined_table`);
-with ``--floor-effect`` also :func:`~cascgp_experiments.calibration.floor_effect` of the second arm against the
+Each ``NAME=DIR`` is a folder with a ``calibration.json`` of ``python -m studies.commands.calibration``; prints Markdown
+(:func:`studies.calibration.compare_arms` and :func:`~studies.calibration.combined_table`);
+with ``--floor-effect`` also :func:`~studies.calibration.floor_effect` of the second arm against the
 first, and the per-joint held-out RMSE.
 """
 
@@ -23,7 +23,7 @@ def main(argv: list[str] | None = None) -> None:
                     help="also the noise-floor statistics of the second arm against the first (two arms)")
     a = ap.parse_args(argv)
     from cascgp.io import read_json
-    from cascgp_experiments.calibration import combined_table, compare_arms, floor_effect
+    from studies.calibration import combined_table, compare_arms, floor_effect
 
     arms = {}
     for spec in a.arms:

@@ -1,16 +1,20 @@
 """Per-joint look inside the gated and ungated learners' models on "left" (issue 10; protocol and reading
-rules in :mod:`cascgp_experiments.lag_diagnosis`).
+rules in :mod:`studies.lag_diagnosis`).
 
 Usage::
 
-    python -m scripts.lag_diagnosis --out out/lag_diagnosis \
-        --reference docs/gate_eval.json docs/learner_divergence_seeds4-7.json     # the protocol, seeds 0-7
-    python -m scripts.lag_diagnosis --out out/lag_diagnosis --seeds 0             # fewer seeds
+    # the protocol, seeds 0-7
+    python -m studies.commands.lag_diagnosis --out out/lag_diagnosis \
+        --reference docs/studies/gate_eval.json docs/studies/learner_divergence_seeds4-7.json
+    python -m studies.commands.lag_diagnosis --out out/lag_diagnosis --seeds 0  # fewer seeds
 
-    python -m scripts.lag_diagnosis --refit --out out/lag_refit \
-        --reference docs/learner_divergence.json docs/learner_divergence_seeds4-7.json  # step 2: data or fit?
-    python -m scripts.lag_diagnosis --factorial --out out/lag_factorial --reference docs/lag_refit.json  # step 3
-    python -m scripts.lag_diagnosis --episodes --out out/lag_episodes                                    # step 4
+    # step 2: data or fit?
+    python -m studies.commands.lag_diagnosis --refit --out out/lag_refit \
+        --reference docs/studies/learner_divergence.json docs/studies/learner_divergence_seeds4-7.json
+    # step 3
+    python -m studies.commands.lag_diagnosis --factorial --out out/lag_factorial \
+        --reference docs/studies/lag_refit.json
+    python -m studies.commands.lag_diagnosis --episodes --out out/lag_episodes  # step 4
 
 Writes ``lag_diagnosis.json`` (every attempt with the per-joint diagnostics, the GL / UL rows, the causes'
 counts) and ``lag_diagnosis.md`` (``--refit``: ``lag_refit.*``; ``--factorial``: ``lag_factorial.*``; ``--episodes``:
@@ -24,7 +28,8 @@ from pathlib import Path
 
 from cascgp.io import read_json
 from cascgp_experiments.execution import add_execution_args, check_args, session
-from cascgp_experiments.lag_diagnosis import LAG_SEEDS, run_diagnosis, run_episodes, run_factorial, run_refit
+from studies.lag_diagnosis import LAG_SEEDS, run_diagnosis
+from studies.lag_steps import run_episodes, run_factorial, run_refit
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,84 +1,19 @@
-"""The learner-divergence experiment's pieces: the gate's rule as a function, run_controller's before_attempt hook
-and fit_seed_offset (on a tiny two-joint env, no MuJoCo), the uncertainty along a reference, and the ratios and
-decision rules of cascgp_experiments.learner_divergence (on synthetic records)."""
+"""The learner-divergence experiment's pieces: the uncertainty along a reference, and the ratios and decision rules
+of studies.learner_divergence (on synthetic records)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from cascgp.controller import gate_weights
 from cascgp.gp import GPFitConfig
-from cascgp.learning import Feedback, RetrainConfig, default_model_factory, run_controller
+from cascgp.learning import Feedback, RetrainConfig
 from cascgp.models import make_model
-from cascgp_experiments import learner_divergence as ld
-from tests.test_episodes import ExactID, TwoJointEnv
+from studies import learner_divergence as ld
 
 PLAN = [("sine", 0, "train"), ("sine", 1, "train"), ("sine", 2, "train")]
 FEEDBACK = Feedback(np.full(2, 20.0), np.full(2, 5.0), np.full(2, 10.0))
 SMALL = RetrainConfig(seed=3, restarts=2, cap=60)
-
-
-def test_gate_weights_are_the_documented_rules() -> None:
-    rng = np.random.default_rng(0)
-    d, v = rng.normal(size=(5, 3)), rng.uniform(0.01, 2.0, size=(5, 3))
-    np.testing.assert_allclose(gate_weights(d, v), d**2 / (d**2 + v))
-    prior = np.array([1.0, 2.0, 4.0])
-    np.testing.assert_allclose(gate_weights(d, v, "variance", prior), np.clip(1 - v / prior, 0, 1))
-    power = np.maximum(d**2, prior)
-    np.testing.assert_allclose(gate_weights(d, v, "floor", prior), power / (power + v))
-    assert np.all(gate_weights(d, v, "floor", prior) >= gate_weights(d, v))  # never shrinks more than Wiener
-    # The floor rule keeps at least half a correction wherever v <= prior, whatever the correction's size.
-    assert np.all(gate_weights(1e-6 * d, prior * np.ones((5, 1)), "floor", prior) == 0.5)
-    assert gate_weights(np.zeros(2), np.zeros(2), "floor", np.zeros(2)).tolist() == [1.0, 1.0]
-    assert gate_weights(np.array([np.nan, np.inf]), np.ones(2), "floor", np.ones(2)).tolist() == [0.0, 0.0]
-    # No correction and no uncertainty: the model (1); a non-finite weight: the nominal torque (0).
-    assert gate_weights(np.zeros(2), np.zeros(2)).tolist() == [1.0, 1.0]
-    assert gate_weights(np.array([np.inf, 1.0]), np.array([1.0, np.inf])).tolist() == [0.0, 0.0]
-    for rule in ("variance", "floor"):
-        with pytest.raises(ValueError, match="prior"):
-            gate_weights(d, v, rule)
-    with pytest.raises(ValueError, match="rule"):
-        gate_weights(d, v, "median")
-
-
-def _run(name: str, config: RetrainConfig = SMALL, **kw):
-    return run_controller(name, TwoJointEnv(steps=60), PLAN, ExactID(), FEEDBACK, config, **kw)
-
-
-def test_before_attempt_sees_the_model_each_attempt_uses_and_changes_nothing() -> None:
-    seen = []
-
-    def before(name, i, attempt, model):
-        seen.append((name, i, attempt, model, None if model is None else model.n_train))
-        return None if model is None else {"n": int(model.n_train)}
-
-    hooked = _run("np-inward", before_attempt=before).attempts
-    plain = _run("np-inward").attempts
-    assert [(s[0], s[1], s[2]) for s in seen] == [("np-inward", i, a) for i, a in enumerate(PLAN)]
-    assert seen[0][3] is None and "before" not in hooked[0]
-    for rec, s in zip(hooked[1:], seen[1:]):
-        assert s[3].fitted and rec["before"] == {"n": s[4]} == {"n": rec["n_train"]}
-    assert seen[1][3] is not seen[2][3]  # a new model after every refit
-
-    def strip(a):  # repr: equal floats print equal, and NaN (no marbles here) equals NaN
-        return repr({k: v for k, v in a.items() if k not in ("before", "fit_seconds")})
-
-    assert [strip(a) for a in hooked] == [strip(a) for a in plain]
-
-
-def test_fit_seed_offset_changes_only_the_gp_seed_of_each_refit() -> None:
-    seeds = []
-
-    def factory(name, rbd, gp_config):
-        seeds.append(gp_config.seed)
-        return default_model_factory(name, rbd, gp_config)
-
-    _run("np-inward", RetrainConfig(seed=3, restarts=2, cap=60, fit_seed_offset=100), model_factory=factory)
-    assert seeds == [103, 104, 105]
-    seeds.clear()
-    _run("np-inward", model_factory=factory)
-    assert seeds == [3, 4, 5]
 
 
 def test_reference_uncertainty_is_the_models_propagated_variance_along_the_points(arm3_train, arm3_rbd) -> None:

@@ -1,10 +1,10 @@
 """Multi-seed, paired evaluation of the gated feedforward (issue 10; protocol in
-:mod:`cascgp_experiments.gate_eval`).
+:mod:`studies.gate_eval`).
 
 Usage::
 
-    python -m scripts.gate_eval --out out/gate_eval                  # the protocol: seeds 0-3, 4 tasks x 4 attempts
-    python -m scripts.gate_eval --out out/gate_eval --seeds 0,1      # fewer seeds (a stopped run resumes)
+    python -m studies.commands.gate_eval --out out/gate_eval              # the protocol: seeds 0-3, 4 tasks x 4
+    python -m studies.commands.gate_eval --out out/gate_eval --seeds 0,1  # fewer seeds (a stopped run resumes)
 
 Writes ``gate_eval.json`` (every attempt of every seed, the ratios and their summary), ``gate_eval.md``
 (the tables) and ``gate_eval.png`` (every ratio, medians and criteria) to ``--out``; finished jobs are
@@ -16,7 +16,7 @@ from __future__ import annotations
 import argparse
 
 from cascgp_experiments.execution import add_execution_args, check_args, session
-from cascgp_experiments.gate_eval import add_protocol_args, protocol_from_args, run_gate_eval
+from studies.gate_eval import add_protocol_args, protocol_from_args, run_gate_eval
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -1,4 +1,4 @@
-"""The gate-rule experiment's bookkeeping (cascgp_experiments.gate_rule) on synthetic runs: its ratios are those
+"""The gate-rule experiment's bookkeeping (studies.gate_rule) on synthetic runs: its ratios are those
 of the records, and its pre-registered decision follows the data."""
 
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cascgp_experiments import gate_rule as gr
+from studies import gate_rule as gr
 
 TASKS = ["front", "left"]
 

@@ -1,10 +1,11 @@
 """Gated vs ungated learners: a null comparison, a decomposition and a test of the divergence hypothesis
-(issue 10; protocol in :mod:`cascgp_experiments.learner_divergence`).
+(issue 10; protocol in :mod:`studies.learner_divergence`).
 
 Usage::
 
-    python -m scripts.learner_divergence --out out/divergence --reference docs/gate_eval.json   # the protocol
-    python -m scripts.learner_divergence --out out/divergence --seeds 0                         # fewer seeds
+    # the protocol
+    python -m studies.commands.learner_divergence --out out/divergence --reference docs/studies/gate_eval.json
+    python -m studies.commands.learner_divergence --out out/divergence --seeds 0  # fewer seeds
 
 Writes ``learner_divergence.json`` (every attempt of every learner with the uncertainty along the reference,
 the ratios, the tests), ``learner_divergence.md`` and ``learner_divergence.png`` to ``--out``; finished jobs are
@@ -18,15 +19,15 @@ from pathlib import Path
 
 from cascgp.io import read_json
 from cascgp_experiments.execution import add_execution_args, check_args, session
-from cascgp_experiments.gate_eval import add_protocol_args, protocol_from_args
-from cascgp_experiments.learner_divergence import run_divergence
+from studies.gate_eval import add_protocol_args, protocol_from_args
+from studies.learner_divergence import run_divergence
 
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     add_protocol_args(p)
     p.add_argument("--reference", type=Path, default=None,
-                   help="the gate evaluation's JSON (docs/gate_eval.json) to check the reproduction against")
+                   help="the gate evaluation's JSON (docs/studies/gate_eval.json) to check the reproduction against")
     add_execution_args(p)
     a = p.parse_args(argv)
     check_args(p, a)

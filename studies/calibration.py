@@ -10,7 +10,7 @@ With ``input_var`` (:func:`sensor_input_var`) the propagated variance plus the t
 (``predict(..., input_var=...)``) is scored too. Diagnostics per fit: the fitted noise std, the factor on the
 predictive std that 95 % coverage of the test torques would need, and the coverage on the rest of the training
 subset's own motion. :func:`compare_arms` and :func:`combined_table` compare runs (the noisy / noiseless /
-true-q̈ arms of ``docs/calibration.md``, collected with :attr:`CollectConfig.sensor_noise
+true-q̈ arms of ``docs/studies/calibration.md``, collected with :attr:`CollectConfig.sensor_noise
 <cascgp_experiments.collect.CollectConfig.sensor_noise>` and ``qdd_source``).
 """
 
@@ -30,38 +30,13 @@ from cascgp.rbd import load_nominal
 from cascgp_experiments.common import NOMINAL_URDF
 
 __all__ = ["CASCADES", "BAND", "calibration", "combined_table", "compare_arms", "floor_effect",
-           "recalibration_effect", "sensor_input_var", "sensor_torque_var", "study_data"]
+           "recalibration_effect", "sensor_input_var", "sensor_torque_var"]
 
 #: The issue's target band for the coverage of a 95 % interval.
 BAND = (0.90, 0.98)
 
 #: The cascades whose variance can be propagated (derivative-based states, as the controller uses).
 CASCADES = ("np-inward", "np-outward", "sp-inward", "sp-outward")
-
-
-def study_data(folder: str | Path | None, out: str | Path, *, preset: str = "quick", sensor_noise: str = "default",
-               qdd_source: str = "savgol", workers: int | None = None) -> tuple[DynamicsData, DynamicsData]:
-    """The study's ``jaco_train.npz``/``jaco_test.npz`` from ``folder``; without one, the collection ``preset``
-    (:data:`cascgp_experiments.collect.PRESETS`) with ``sensor_noise`` and ``qdd_source`` (see
-    :class:`~cascgp_experiments.collect.CollectConfig`) recorded into ``<out>/data`` on ``workers`` processes
-    (``None``: every core), or reused from there when present with the same settings.
-
-    The collection options only apply to a new collection: with ``folder``, anything but the defaults is a
-    ``ValueError`` (the files are used as they were recorded)."""
-    from dataclasses import replace
-
-    from cascgp_experiments.collect import PRESETS, collect
-
-    if folder:
-        if (sensor_noise, qdd_source) != ("default", "savgol"):
-            raise ValueError(f"sensor_noise={sensor_noise!r}/qdd_source={qdd_source!r} only apply to a new "
-                             f"collection, not to the files in {folder!s} (leave out the data folder)")
-        return tuple(DynamicsData.load(Path(folder) / f"jaco_{s}.npz") for s in ("train", "test"))
-    if preset not in PRESETS:
-        raise ValueError(f"preset: expected one of {tuple(PRESETS)}, got {preset!r}")
-    cfg = replace(PRESETS[preset], sensor_noise=sensor_noise, qdd_source=qdd_source)
-    train, test, _ = collect(Path(out) / "data", cfg, workers=workers)
-    return train, test
 
 
 def _sensor_model(collection: dict, sensor_std: dict | None) -> Any:
@@ -244,7 +219,7 @@ def _n_in_band(c: np.ndarray) -> int:
 
 
 def compare_arms(arms: dict[str, dict[str, Any]], field: str = "coverage_propagated", base: str | None = None) -> str:
-    """Markdown: the decision statistics of ``docs/calibration.md`` for each arm (a :func:`calibration` result):
+    """Markdown: the decision statistics of ``docs/studies/calibration.md`` for each arm (a :func:`calibration` result):
     over all cells (model @ seconds x joint, each the median over subsets) of ``field``, the median cell, the
     range, the number of cells in :data:`BAND`, and against the arm ``base`` (default: the first) the median of
     the paired change per cell."""
@@ -277,7 +252,7 @@ def combined_table(arms: dict[str, dict[str, Any]], field: str = "coverage_propa
 
 
 def recalibration_effect(res: dict[str, Any]) -> str:
-    """Markdown: the pre-registered statistics of the recalibration test in ``docs/calibration.md`` for one
+    """Markdown: the pre-registered statistics of the recalibration test in ``docs/studies/calibration.md`` for one
     :func:`calibration` result run with ``recalibrate=True``: over all cells (model @ seconds x joint, each the
     median over subsets), the propagated and the recalibrated coverage side by side: median cell, cells in
     :data:`BAND`, below and above it, and the median paired change with how many cells rose or fell."""
@@ -296,7 +271,7 @@ def recalibration_effect(res: dict[str, Any]) -> str:
 
 def floor_effect(base: dict[str, Any], floored: dict[str, Any], field: str = "coverage_propagated",
                  low_std: float = 0.05) -> str:
-    """Markdown: the pre-registered statistics of the noise-floor test in ``docs/calibration.md`` for two
+    """Markdown: the pre-registered statistics of the noise-floor test in ``docs/studies/calibration.md`` for two
     :func:`calibration` results on the same subsets, ``base`` (no floor) and ``floored``. Cells are model @ seconds
     x joint, each the median over subsets. A cell is *collapsed* when in ``base`` at least one of its subsets'
     fits has a noise std below ``low_std`` (N m). Reports, for all / collapsed / other cells: the count, the

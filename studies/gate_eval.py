@@ -54,8 +54,9 @@ CRITERIA = {"gate_learners_last": 1.10, "gated_first_vs_rbd": 1.02}
 
 
 def add_protocol_args(p: Any) -> None:
-    """The command-line options shared by the seed studies built on :data:`GATE_EVAL_CONFIG` (``scripts.gate_eval``,
-    ``scripts.learner_divergence``): ``--out --seeds --tasks --attempts --restarts --cap``."""
+    """The command-line options shared by the seed studies built on :data:`GATE_EVAL_CONFIG`
+    (``studies.commands.gate_eval``, ``studies.commands.learner_divergence``): ``--out --seeds --tasks --attempts
+    --restarts --cap``."""
     p.add_argument("--out", type=Path, required=True, help="output folder")
     p.add_argument("--seeds", type=str, default=",".join(map(str, GATE_EVAL_SEEDS)), help="comma-separated seeds")
     p.add_argument("--tasks", type=str, default=None, help="comma-separated tasks (default: the full transfer's)")

@@ -1,6 +1,6 @@
-"""Tests of the calibration ablations (``docs/calibration.md``): the collection's ``sensor_noise`` and
-``qdd_source`` options, the reuse check for files written before they existed, and the command line's
-error paths. The collections here are a few seconds of simulation (well under a second each)."""
+"""Tests of the calibration study (``docs/studies/calibration.md``): the input-noise and torque-floor terms, the
+calibration and recalibration scores, the comparison of arms, and the command lines' error paths. The collections
+here are a few seconds of simulation (well under a second each)."""
 
 from __future__ import annotations
 
@@ -12,114 +12,23 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cascgp.data import DynamicsData
-
-REPO = Path(__file__).resolve().parents[1]
+REPO = Path(__file__).resolve().parents[2]
 
 pytest.importorskip("jaco_env.excitation")
 
-from cascgp_experiments.collect import CollectConfig, collect, same_collection  # noqa: E402
-
-#: A tiny collection: 1 training and 1 test motion of 1.5 s after a 0.2 s warm-up.
-TINY = CollectConfig(n_subsets=1, subset_seconds=1.5, n_test=1, test_seconds=1.5, warmup_seconds=0.2)
-
-
-def test_collect_config_rejects_unknown_options() -> None:
-    with pytest.raises(ValueError, match="sensor_noise"):
-        CollectConfig(sensor_noise="low")
-    with pytest.raises(ValueError, match="qdd_source"):
-        CollectConfig(qdd_source="central")
-    from cascgp_experiments.collect import make_env
-
-    with pytest.raises(ValueError, match="sensor_noise"):
-        make_env(100.0, 0.8, "off")
-
-
-@pytest.mark.parametrize("noise", ["default", "none"])
-def test_the_stored_sensor_std_is_that_of_the_collection_env(noise) -> None:
-    from cascgp_experiments.collect import make_env, sensor_std
-
-    env = make_env(100.0, 0.8, noise)
-    try:
-        sn = env.unwrapped.sensor_noise
-        assert sensor_std(noise) == {"q_std": sn.q_std, "qd_std": sn.qd_std, "tau_std": sn.tau_std}
-    finally:
-        env.close()
-
-
-def test_same_collection_accepts_files_from_before_the_options() -> None:
-    old = {k: v for k, v in asdict(CollectConfig()).items() if k not in ("sensor_noise", "qdd_source")}
-    assert same_collection(old, CollectConfig())
-    assert not same_collection(old, CollectConfig(sensor_noise="none"))
-    assert not same_collection(old, CollectConfig(qdd_source="true"))
-    assert same_collection(asdict(CollectConfig(sensor_noise="none")), CollectConfig(sensor_noise="none"))
-    assert not same_collection(None, CollectConfig())
-
-
-@pytest.fixture(scope="module")
-def arms(tmp_path_factory) -> dict[str, tuple[DynamicsData, DynamicsData]]:
-    root = tmp_path_factory.mktemp("arms")
-    out = {}
-    for name, cfg in (("noisy", TINY), ("noiseless", replace(TINY, sensor_noise="none")),
-                      ("true", replace(TINY, sensor_noise="none", qdd_source="true"))):
-        train, test, info = collect(root / name, cfg, workers=1)
-        assert not info["reused"]
-        out[name] = (train, test)
-    return out
-
-
-def test_noiseless_arm_is_the_same_motion_without_the_noise(arms) -> None:
-    (n_tr, _), (z_tr, _) = arms["noisy"], arms["noiseless"]
-    assert z_tr.meta["collection"]["sensor_noise"] == "none"
-    assert n_tr.meta["collection"]["sensor_noise"] == "default"
-    # Same motion: the differences are the sensor noise (q 5e-4 rad, qd 5e-3 rad/s, tau 0.1 N m), no drift.
-    for key, std in (("q", 5e-4), ("qd", 5e-3), ("tau", 0.1)):
-        d = getattr(z_tr, key) - getattr(n_tr, key)
-        assert 0.5 * std < d.std() < 1.5 * std and np.abs(d).max() < 6 * std
-    np.testing.assert_array_equal(z_tr.t, n_tr.t)
-    # Each file stores the sensor standard deviations it was recorded with; they match the differences above.
-    assert n_tr.meta["sensor_std"] == {"q_std": 5e-4, "qd_std": 5e-3, "tau_std": 0.1}
-    assert z_tr.meta["sensor_std"] == {"q_std": 0.0, "qd_std": 0.0, "tau_std": 0.0}
-
-
-def test_true_qdd_arm_uses_the_simulator_accelerations(arms) -> None:
-    (z_tr, z_te), (t_tr, t_te) = arms["noiseless"], arms["true"]
-    for z, t in ((z_tr, t_tr), (z_te, t_te)):
-        for key in ("q", "qd", "tau", "t"):
-            np.testing.assert_array_equal(getattr(z, key), getattr(t, key))
-        assert "true joint accelerations" in t.meta["qdd_source"]
-        assert "Savitzky" in z.meta["qdd_source"]
-        # the filtered estimate differs from the truth by the RMSE recorded in the meta
-        rmse = np.sqrt(np.mean((z.qdd - t.qdd) ** 2, axis=0))
-        np.testing.assert_allclose(rmse, z.meta["qdd_error"]["est_rmse"], rtol=1e-9)
-
-
-def test_collect_reuses_files_written_before_the_options(arms, tmp_path: Path) -> None:
-    train, test = arms["noisy"]
-    for split, d in (("train", train), ("test", test)):
-        meta = dict(d.meta)
-        meta["collection"] = {k: v for k, v in meta["collection"].items() if k not in ("sensor_noise", "qdd_source")}
-        replace(d, meta=meta).save(tmp_path / f"jaco_{split}.npz")
-    assert collect(tmp_path, TINY, workers=1)[2]["reused"]
-
-
-def test_study_data_rejects_collection_options_with_a_folder(tmp_path: Path) -> None:
-    from cascgp_experiments.calibration import study_data
-
-    with pytest.raises(ValueError, match="new collection"):
-        study_data(tmp_path, tmp_path, sensor_noise="none")
-    with pytest.raises(ValueError, match="preset"):
-        study_data(None, tmp_path, preset="huge")
+from cascgp_experiments.collect import CollectConfig, collect  # noqa: E402
+from tests.test_collect_options import TINY  # noqa: E402  (its fixture ``arms``: studies/tests/conftest.py)
 
 
 def test_cli_rejects_data_with_collection_options(tmp_path: Path) -> None:
-    run = subprocess.run([sys.executable, "-m", "scripts.calibration", "--data", str(tmp_path), "--out", str(tmp_path),
-                          "--sensor-noise", "none"], cwd=REPO, capture_output=True, text=True, timeout=120)
+    run = subprocess.run([sys.executable, "-m", "studies.commands.calibration", "--data", str(tmp_path),
+                          "--out", str(tmp_path), "--sensor-noise", "none"], cwd=REPO, capture_output=True, text=True,
+                         timeout=120)
     assert run.returncode == 2 and "leave out --data" in run.stderr
 
 
 def test_sensor_input_var_from_the_sensor_model_and_the_filter() -> None:
-    from cascgp_experiments.calibration import sensor_input_var
+    from studies.calibration import sensor_input_var
 
     v = sensor_input_var(asdict(CollectConfig()), 6)
     assert v.shape == (6, 3)
@@ -141,7 +50,7 @@ def test_sensor_input_var_from_the_sensor_model_and_the_filter() -> None:
 
 
 def test_calibration_scores_the_input_noise_variance(arms) -> None:
-    from cascgp_experiments.calibration import calibration, sensor_input_var, summary_table
+    from studies.calibration import calibration, sensor_input_var, summary_table
 
     train, test = arms["noisy"]
     iv = sensor_input_var(train.meta["collection"], train.dof)
@@ -165,7 +74,7 @@ def _fake_result(cov: list[list[float]]) -> dict:
 
 
 def test_compare_arms_counts_cells_in_the_band_and_paired_changes() -> None:
-    from cascgp_experiments.calibration import combined_table, compare_arms
+    from studies.calibration import combined_table, compare_arms
 
     a = _fake_result([[0.80, 0.85], [0.90, 0.99]])
     b = _fake_result([[0.90, 0.95], [0.91, 0.97]])
@@ -179,7 +88,7 @@ def test_compare_arms_counts_cells_in_the_band_and_paired_changes() -> None:
 
 def test_compare_cli_errors(tmp_path: Path) -> None:
     for args, msg in ((["noequals"], "NAME=DIR"), ([f"a={tmp_path}"], "no "),):
-        run = subprocess.run([sys.executable, "-m", "scripts.calibration_compare", *args], cwd=REPO,
+        run = subprocess.run([sys.executable, "-m", "studies.commands.calibration_compare", *args], cwd=REPO,
                              capture_output=True, text=True, timeout=120)
         assert run.returncode == 2 and msg in run.stderr, run.stderr
 
@@ -187,7 +96,7 @@ def test_compare_cli_errors(tmp_path: Path) -> None:
 def test_sensor_torque_var_is_the_sensor_spec() -> None:
     from jaco_env import SensorNoise
 
-    from cascgp_experiments.calibration import sensor_torque_var
+    from studies.calibration import sensor_torque_var
 
     assert sensor_torque_var(asdict(CollectConfig())) == SensorNoise().tau_std ** 2 == pytest.approx(0.01)
     assert sensor_torque_var(asdict(CollectConfig()), {"q_std": 0.0, "qd_std": 0.0, "tau_std": 0.2}) == \
@@ -199,7 +108,7 @@ def test_sensor_torque_var_is_the_sensor_spec() -> None:
 
 
 def test_calibration_with_the_sensor_noise_floor(arms) -> None:
-    from cascgp_experiments.calibration import calibration, floor_effect, sensor_torque_var
+    from studies.calibration import calibration, floor_effect, sensor_torque_var
 
     train, test = arms["noisy"]
     kw = dict(seconds=(1.0,), n_subsets=1, models=("np-inward",), n_restarts=1)
@@ -218,7 +127,7 @@ def _fake_floor(cov: list[float], std: list[float], rmse: list[float]) -> dict:
 
 
 def test_floor_effect_splits_collapsed_and_other_cells() -> None:
-    from cascgp_experiments.calibration import floor_effect
+    from studies.calibration import floor_effect
 
     base = _fake_floor([0.80, 0.85, 0.90], [0.001, 0.1, 0.1], [1.0, 2.0, 1.0])
     fl = _fake_floor([0.92, 0.85, 0.89], [0.1, 0.1, 0.1], [0.9, 2.0, 1.1])
@@ -233,7 +142,7 @@ def test_floor_effect_splits_collapsed_and_other_cells() -> None:
 
 
 def test_calibration_recalibrates_on_an_unseen_training_motion(arms, tmp_path: Path) -> None:
-    from cascgp_experiments.calibration import calibration, recalibration_effect
+    from studies.calibration import calibration, recalibration_effect
 
     train, test, _ = collect(tmp_path, replace(TINY, n_subsets=10, subset_seconds=0.8), workers=1)
     res = calibration(train, test, seconds=(0.5,), n_subsets=2, models=("sp-inward",), n_restarts=1,
@@ -278,6 +187,6 @@ def test_calibration_recalibrates_on_an_unseen_training_motion(arms, tmp_path: P
 
 
 def test_cli_recalibrate_needs_unseen_motions(tmp_path: Path) -> None:
-    r = subprocess.run([sys.executable, "-m", "scripts.calibration", "--out", str(tmp_path), "--recalibrate",
+    r = subprocess.run([sys.executable, "-m", "studies.commands.calibration", "--out", str(tmp_path), "--recalibrate",
                         "--subsets", "6"], cwd=REPO, capture_output=True, text=True)
     assert r.returncode == 2 and "--recalibrate" in r.stderr

@@ -1,15 +1,15 @@
 """Calibration of the cascades' 95 % predictive intervals on held-out Jaco episodes (issue 10).
 
-    python -m scripts.calibration --data out/study/data --out out/calibration [--seconds 10 30] [--subsets 3]
-    python -m scripts.calibration --collect full --sensor-noise none --out out/cal/noiseless [...]
+    python -m studies.commands.calibration --data out/study/data --out out/calibration [--seconds 10 30] [--subsets 3]
+    python -m studies.commands.calibration --collect full --sensor-noise none --out out/cal/noiseless [...]
 
 ``--data`` is a folder with the study's ``jaco_train.npz``/``jaco_test.npz`` (``python -m
 scripts.collect_jaco_data``); without it the ``--collect`` preset (default ``quick``) is recorded into
 ``<out>/data`` (or reused from there), with ``--sensor-noise none`` noiseless and ``--qdd true`` with the
-simulator's true q̈ (the ablations of ``docs/calibration.md``). ``--noise-floor sensor`` bounds every joint GP's
-noise variance below by the torque sensor's (the noise-floor test of ``docs/calibration.md``); ``--recalibrate``
+simulator's true q̈ (the ablations of ``docs/studies/calibration.md``). ``--noise-floor sensor`` bounds every joint GP's
+noise variance below by the torque sensor's (the noise-floor test of ``docs/studies/calibration.md``); ``--recalibrate``
 scales each joint's std by a factor fitted on an unseen training motion (the recalibration test there).
-Writes ``calibration.json`` and ``calibration.md`` into ``--out`` (see :mod:`cascgp_experiments.calibration`).
+Writes ``calibration.json`` and ``calibration.md`` into ``--out`` (see :mod:`studies.calibration`).
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--recalibrate", action="store_true",
                     help="also fit a per-joint std factor on an unseen training motion (motion n_subsets + k for "
                          "subset k) and score the test coverage with it (the recalibration test of "
-                         "docs/calibration.md)")
+                         "docs/studies/calibration.md)")
     a = ap.parse_args(argv)
     if a.data and (a.sensor_noise != "default" or a.qdd != "savgol" or a.collect != "quick"):
         ap.error("--collect/--sensor-noise/--qdd apply to a new collection: leave out --data")
@@ -56,8 +56,9 @@ def main(argv: list[str] | None = None) -> None:
     import torch
     from tqdm import tqdm
 
-    from cascgp_experiments.calibration import (CASCADES, calibration, recalibration_effect, sensor_input_var,
-                                                 sensor_torque_var, study_data, summary_table, write)
+    from cascgp_experiments.collect import study_data
+    from studies.calibration import (CASCADES, calibration, recalibration_effect, sensor_input_var,
+                                     sensor_torque_var, summary_table, write)
 
     torch.set_num_threads(1)
     out = Path(a.out)
@@ -85,7 +86,7 @@ def main(argv: list[str] | None = None) -> None:
                       progress=lambda row: bar.update())
     bar.close()
     res["wall_s"] = time.perf_counter() - t0
-    res["command"] = "python -m scripts.calibration " + " ".join(argv if argv is not None
+    res["command"] = "python -m studies.commands.calibration " + " ".join(argv if argv is not None
                                                                   else __import__("sys").argv[1:])
     write(res, out)
     print(summary_table(res))

@@ -1,4 +1,4 @@
-"""The lag diagnosis' pieces (cascgp_experiments.lag_diagnosis): the per-joint diagnostics of a model along a
+"""The lag diagnosis' pieces (studies.lag_diagnosis): the per-joint diagnostics of a model along a
 reference (on the planar test arm), and the reading rules of both steps on synthetic records."""
 
 from __future__ import annotations
@@ -8,7 +8,8 @@ import pytest
 
 from cascgp.gp import GPFitConfig
 from cascgp.models import make_model
-from cascgp_experiments import lag_diagnosis as lag
+from studies import lag_diagnosis as lag
+from studies import lag_steps as steps
 
 
 def test_model_diagnostics_along_a_reference(arm3_train, arm3_rbd) -> None:
@@ -88,18 +89,18 @@ def _step2_runs(fresh_gl: float) -> dict:
 
 def test_step2_reading_rules_and_reproduction() -> None:
     ref = {"runs": {"0": {"GL": [{}] * 7 + [{"paired": {lag.UNGATED_NAME: {"tracking_rmse": 0.15}}}]}}}
-    s = lag.summarise_refit(_step2_runs(1.0), (ref,))
+    s = steps.summarise_refit(_step2_runs(1.0), (ref,))
     assert s["reading"]["tracking"]["verdict"] == "fit" and s["reading"]["ff"]["verdict"] == "fit"
     row0, row1 = s["rows"][0], s["rows"][1]
     assert row0["reproduced"] == {"GL": True, "UL": True} and row1["reproduced"]["GL"] is None
     np.testing.assert_allclose([row0["tracking"]["loop"], row0["tracking"]["fresh"]], [1.5, 1.0])
     np.testing.assert_allclose(row0["tracking"]["gl_fresh_vs_loop"], 0.1 / 0.15)
-    assert lag.summarise_refit(_step2_runs(1.5))["reading"]["tracking"]["verdict"] == "data"
+    assert steps.summarise_refit(_step2_runs(1.5))["reading"]["tracking"]["verdict"] == "data"
     mixed = _step2_runs(1.0)
     for seed in ("0", "1", "2"):  # half the lag seeds' data give worse models, half not
         mixed[seed]["GL"] = _step2_runs(1.5)[seed]["GL"]
-    assert lag.summarise_refit(mixed)["reading"]["tracking"]["verdict"] == "mixed"
-    md = lag.refit_markdown({"summary": s})
+    assert steps.summarise_refit(mixed)["reading"]["tracking"]["verdict"] == "mixed"
+    md = steps.refit_markdown({"summary": s})
     assert "fit" in md.splitlines()[-1] and md.count("(contrast)") == 2
 
 
@@ -119,21 +120,21 @@ def test_step3_effects_reading_and_reproduction() -> None:
     runs = _step3_runs(front=1.0, left=1.5)
     ref = {"runs": {"0": {lab: {"fresh": [{"seed": r["seed"], "tracking_rmse": r["tracking_rmse"]}
                                           for r in runs["0"][f"{lab}/{lab}"]]} for lab in lag.LAG_LEARNERS}}}
-    s = lag.summarise_factorial(runs, (ref,))
+    s = steps.summarise_factorial(runs, (ref,))
     np.testing.assert_allclose([s["rows"][0][k] for k in ("front_effect", "left_effect", "both")], [1.0, 1.5, 1.5])
     assert s["rows"][0]["reproduced"] is True and s["rows"][1]["reproduced"] is None
     assert s["reading"]["left_effect"]["cause"] and not s["reading"]["front_effect"]["cause"]
     ref["runs"]["0"]["GL"]["fresh"][0]["tracking_rmse"] += 1e-9  # one fit that does not reproduce
-    assert lag.summarise_factorial(runs, (ref,))["rows"][0]["reproduced"] is False
-    s = lag.summarise_factorial(_step3_runs(front=1.3, left=1.0))
+    assert steps.summarise_factorial(runs, (ref,))["rows"][0]["reproduced"] is False
+    s = steps.summarise_factorial(_step3_runs(front=1.3, left=1.0))
     assert s["reading"]["front_effect"]["cause"] and not s["reading"]["left_effect"]["cause"]
-    md = lag.factorial_markdown({"summary": s})
+    md = steps.factorial_markdown({"summary": s})
     assert md.count("(contrast)") == 2 and "front_effect: above 1.1 on 6 of 6" in md
 
 
 def test_cli_errors(tmp_path, capsys) -> None:
     """Argument errors exit with status 2 and a message naming the option (in-process: no work starts)."""
-    from scripts.lag_diagnosis import main
+    from studies.commands.lag_diagnosis import main
 
     for args, msg in ((["--refit", "--factorial"], "one step at a time"),
                       (["--episodes", "--refit"], "one step at a time"), (["--seeds", "a,b"], "--seeds"),
@@ -154,11 +155,11 @@ def test_link_side_model_is_the_true_scene_without_the_drive() -> None:
 
     rng = np.random.default_rng(0)
     q, qd, qdd = rng.uniform(-1, 1, (5, 6)), rng.uniform(-0.5, 0.5, (5, 6)), rng.uniform(-1, 1, (5, 6))
-    link = lag.link_side_model(1.2, 30)
+    link = steps.link_side_model(1.2, 30)
     full = rigid_scene_model(1.2, 30)
     assert not link.dof_armature[:6].any() and not link.dof_frictionloss[:6].any() and full.dof_armature[:6].all()
     full.dof_frictionloss[:6] = 0.0
-    diff = lag._link_side_torque(full, q, qd, qdd) - lag._link_side_torque(link, q, qd, qdd)
+    diff = steps._link_side_torque(full, q, qd, qdd) - steps._link_side_torque(link, q, qd, qdd)
     np.testing.assert_allclose(diff, robot.ARMATURE * qdd + robot.DAMPING * qd, atol=1e-8)
 
 
@@ -168,12 +169,12 @@ def test_step4_ratios_and_reading() -> None:
 
     runs = {str(s): {"GL": episodes(1.5, 0.8) if s in lag.LAG_SEEDS_WITH_LAG else episodes(1.0, 1.0),
                      "UL": episodes(1.0, 1.0)} for s in lag.LAG_SEEDS}
-    s = lag.summarise_episodes(runs)
+    s = steps.summarise_episodes(runs)
     np.testing.assert_allclose(s["rows"][0]["resid_rms"], 1.5)
     np.testing.assert_allclose(s["rows"][0]["resid_rms_ul"], 0.1)
     r = s["reading"]
     assert r["J4 inconsistent data"]["supported"] and r["J6 less excitation"]["supported"]
     assert not r["J6 more excitation"]["supported"] and r["J4 inconsistent data"]["contrast_seeds"] == 0
     runs["3"]["GL"] = runs["4"]["GL"] = episodes(1.5, 0.8)  # the contrast seeds show it too: not supported
-    assert not lag.summarise_episodes(runs)["reading"]["J4 inconsistent data"]["supported"]
-    assert "lag seeds 6 of 6" in lag.episodes_markdown({"summary": s})
+    assert not steps.summarise_episodes(runs)["reading"]["J4 inconsistent data"]["supported"]
+    assert "lag seeds 6 of 6" in steps.episodes_markdown({"summary": s})

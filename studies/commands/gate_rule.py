@@ -1,11 +1,11 @@
 """Gate rules as learners on new seeds: the floor rule against the Wiener rule, and the innovation rule (issue 10;
-protocols in :mod:`cascgp_experiments.gate_rule` and ``docs/gate_rule.md``).
+protocols in :mod:`studies.gate_rule` and ``docs/studies/gate_rule.md``).
 
 Usage::
 
-    python -m scripts.gate_rule --out out/gate_rule --workers 2                          # floor rule, seeds 12-19
-    python -m scripts.gate_rule --rule innovation --out out/gate_rule_innovation --workers 2   # seeds 20-27
-    python -m scripts.gate_rule --out out/gate_rule_small --seeds 12                     # fewer seeds
+    python -m studies.commands.gate_rule --out out/gate_rule --workers 2        # floor rule, seeds 12-19
+    python -m studies.commands.gate_rule --rule innovation --out out/gate_rule_innovation --workers 2  # 20-27
+    python -m studies.commands.gate_rule --out out/gate_rule_small --seeds 12   # fewer seeds
 
 Writes ``gate_rule.json`` (every attempt of every learner, the ratios, the J4 split and the decision),
 ``gate_rule.md`` and ``gate_rule.png`` to ``--out``; finished jobs are cached under ``--out/cache`` (a stopped
@@ -17,8 +17,8 @@ from __future__ import annotations
 import argparse
 
 from cascgp_experiments.execution import add_execution_args, check_args, session
-from cascgp_experiments.gate_eval import add_protocol_args, protocol_from_args
-from cascgp_experiments.gate_rule import GATE_RULE_CONFIG, PROTOCOLS, run_gate_rule
+from studies.gate_eval import add_protocol_args, protocol_from_args
+from studies.gate_rule import GATE_RULE_CONFIG, PROTOCOLS, run_gate_rule
 
 
 def main(argv: list[str] | None = None) -> int:

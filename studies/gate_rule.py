@@ -1,7 +1,7 @@
 r"""Does the ``"floor"`` gate rule remove the gated learner's lag on a new task? A pre-registered test on new
-seeds (issue 10, second criterion; ``docs/gate_rule.md``).
+seeds (issue 10, second criterion; ``docs/studies/gate_rule.md``).
 
-Background (``docs/lag_diagnosis.md``, seeds 0-11): with the Wiener rule :math:`w = d^2 / (d^2 + v)` the gated
+Background (``docs/studies/lag_diagnosis.md``, seeds 0-11): with the Wiener rule :math:`w = d^2 / (d^2 + v)` the gated
 learner ends about 1.3 x the ungated one on "left". On the first attempt there the gate shrinks the wrist (J4)
 correction, J4 tracks 1.6-2.5 x worse than the same model run ungated, and the models fitted with that episode are
 worse at the wrist afterwards. The Wiener rule plugs the correction's own square in as its power, so a correction
@@ -9,10 +9,10 @@ smaller than its standard deviation is removed almost entirely (:math:`w d \appr
 :math:`w = P / (P + v)`, :math:`P = \max(d^2, p)` with :math:`p` the GP's signal variance, floors that power at what
 the GP learned corrections are: it keeps at least half a correction where :math:`v \le p` and never shrinks more
 than the Wiener rule (:class:`cascgp.controller.FeedforwardController`). It was written down from that diagnosis (a
-first form, :math:`p / (p + v)`, was dropped after a smoke run on seed 99, see ``docs/gate_rule.md``). The protocol
-below was committed before the run:
+first form, :math:`p / (p + v)`, was dropped after a smoke run on seed 99, see ``docs/studies/gate_rule.md``). The
+protocol below was committed before the run:
 
-* **Settings.** Those of the wrist replication on seeds 8-11: :data:`~cascgp_experiments.gate_eval.GATE_EVAL_CONFIG`
+* **Settings.** Those of the wrist replication on seeds 8-11: :data:`~studies.gate_eval.GATE_EVAL_CONFIG`
   cut to the tasks front and left (4 attempts each, then the revisit of front; 1.2 kg unknown payload; cap 500;
   3 restarts). **Seeds 12-19**, never run before by any experiment.
 * **Jobs per seed** (:data:`LEARNERS`): ``rbd``; ``UL`` (``sp-inward``, ungated); ``UL'`` (the same with the
@@ -26,7 +26,7 @@ below was committed before the run:
   - ``first_left_vs_rbd_GLf`` / ``_GLw`` / ``_UL``: the learner's first attempt on "left" / RBD's (same env seed;
     the issue's criterion 1, <= 1.02);
   - ``rules_last_left``: GLf / GLw at the last "left" attempt (the paired comparison of the two rules);
-  - per rule, the J4 split of :func:`cascgp_experiments.learner_divergence.joint_split` on "left": ``g0`` (the
+  - per rule, the J4 split of :func:`studies.learner_divergence.joint_split` on "left": ``g0`` (the
     gate's effect on J4 at the first attempt) and ``m13`` (the median model effect over attempts 1-3).
 
 * **Decision rules (fixed in advance, :func:`decide`).**
@@ -64,8 +64,8 @@ from typing import Any
 import numpy as np
 
 from cascgp.io import atomic_write_text, write_json
-from cascgp_experiments.gate_eval import GATE_EVAL_CONFIG, find_attempt, ratio_figure, ratio_stats, scatter_ratios
-from cascgp_experiments.learner_divergence import NULL_FIT_SEED_OFFSET, UNGATED, joint_split
+from studies.gate_eval import GATE_EVAL_CONFIG, find_attempt, ratio_figure, ratio_stats, scatter_ratios
+from studies.learner_divergence import NULL_FIT_SEED_OFFSET, UNGATED, joint_split
 from cascgp_experiments.transfer import TransferConfig, controller_job
 
 __all__ = ["GATE_RULE_CONFIG", "GATE_RULE_SEEDS", "LEARNERS", "INNOVATION_LEARNERS", "INNOVATION_SEEDS", "PROTOCOLS",
@@ -83,7 +83,8 @@ LEARNERS: dict[str, tuple[str, tuple[str, ...], int]] = {
     "GLw": ("sp-inward-gated", (UNGATED,), 0),
     "GLf": ("sp-inward-fgated", (UNGATED,), 0),
 }
-#: The second protocol (``docs/gate_rule.md``, "The innovation rule"): the innovation gate as a learner, seeds 20-27.
+#: The second protocol (``docs/studies/gate_rule.md``, "The innovation rule"): the innovation gate as a learner,
+#: seeds 20-27.
 INNOVATION_LEARNERS: dict[str, tuple[str, tuple[str, ...], int]] = {
     "rbd": LEARNERS["rbd"], "UL": LEARNERS["UL"], "UL'": LEARNERS["UL'"],
     "GLi": ("sp-inward-igated", (UNGATED,), 0),

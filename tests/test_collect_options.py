@@ -1,0 +1,109 @@
+"""The data collection's options: ``sensor_noise`` and ``qdd_source``, the sensor standard deviations stored with
+the data, the reuse check for files written before the options existed, and :func:`study_data`'s error paths. The
+collections here are a few seconds of simulation (well under a second each)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cascgp.data import DynamicsData
+
+
+pytest.importorskip("jaco_env.excitation")
+
+from cascgp_experiments.collect import CollectConfig, collect, same_collection
+
+#: A tiny collection: 1 training and 1 test motion of 1.5 s after a 0.2 s warm-up.
+TINY = CollectConfig(n_subsets=1, subset_seconds=1.5, n_test=1, test_seconds=1.5, warmup_seconds=0.2)
+
+
+def test_collect_config_rejects_unknown_options() -> None:
+    with pytest.raises(ValueError, match="sensor_noise"):
+        CollectConfig(sensor_noise="low")
+    with pytest.raises(ValueError, match="qdd_source"):
+        CollectConfig(qdd_source="central")
+    from cascgp_experiments.collect import make_env
+
+    with pytest.raises(ValueError, match="sensor_noise"):
+        make_env(100.0, 0.8, "off")
+
+
+@pytest.mark.parametrize("noise", ["default", "none"])
+def test_the_stored_sensor_std_is_that_of_the_collection_env(noise) -> None:
+    from cascgp_experiments.collect import make_env, sensor_std
+
+    env = make_env(100.0, 0.8, noise)
+    try:
+        sn = env.unwrapped.sensor_noise
+        assert sensor_std(noise) == {"q_std": sn.q_std, "qd_std": sn.qd_std, "tau_std": sn.tau_std}
+    finally:
+        env.close()
+
+
+def test_same_collection_accepts_files_from_before_the_options() -> None:
+    old = {k: v for k, v in asdict(CollectConfig()).items() if k not in ("sensor_noise", "qdd_source")}
+    assert same_collection(old, CollectConfig())
+    assert not same_collection(old, CollectConfig(sensor_noise="none"))
+    assert not same_collection(old, CollectConfig(qdd_source="true"))
+    assert same_collection(asdict(CollectConfig(sensor_noise="none")), CollectConfig(sensor_noise="none"))
+    assert not same_collection(None, CollectConfig())
+
+
+@pytest.fixture(scope="module")
+def arms(tmp_path_factory) -> dict[str, tuple[DynamicsData, DynamicsData]]:
+    root = tmp_path_factory.mktemp("arms")
+    out = {}
+    for name, cfg in (("noisy", TINY), ("noiseless", replace(TINY, sensor_noise="none")),
+                      ("true", replace(TINY, sensor_noise="none", qdd_source="true"))):
+        train, test, info = collect(root / name, cfg, workers=1)
+        assert not info["reused"]
+        out[name] = (train, test)
+    return out
+
+
+def test_noiseless_arm_is_the_same_motion_without_the_noise(arms) -> None:
+    (n_tr, _), (z_tr, _) = arms["noisy"], arms["noiseless"]
+    assert z_tr.meta["collection"]["sensor_noise"] == "none"
+    assert n_tr.meta["collection"]["sensor_noise"] == "default"
+    # Same motion: the differences are the sensor noise (q 5e-4 rad, qd 5e-3 rad/s, tau 0.1 N m), no drift.
+    for key, std in (("q", 5e-4), ("qd", 5e-3), ("tau", 0.1)):
+        d = getattr(z_tr, key) - getattr(n_tr, key)
+        assert 0.5 * std < d.std() < 1.5 * std and np.abs(d).max() < 6 * std
+    np.testing.assert_array_equal(z_tr.t, n_tr.t)
+    # Each file stores the sensor standard deviations it was recorded with; they match the differences above.
+    assert n_tr.meta["sensor_std"] == {"q_std": 5e-4, "qd_std": 5e-3, "tau_std": 0.1}
+    assert z_tr.meta["sensor_std"] == {"q_std": 0.0, "qd_std": 0.0, "tau_std": 0.0}
+
+
+def test_true_qdd_arm_uses_the_simulator_accelerations(arms) -> None:
+    (z_tr, z_te), (t_tr, t_te) = arms["noiseless"], arms["true"]
+    for z, t in ((z_tr, t_tr), (z_te, t_te)):
+        for key in ("q", "qd", "tau", "t"):
+            np.testing.assert_array_equal(getattr(z, key), getattr(t, key))
+        assert "true joint accelerations" in t.meta["qdd_source"]
+        assert "Savitzky" in z.meta["qdd_source"]
+        # the filtered estimate differs from the truth by the RMSE recorded in the meta
+        rmse = np.sqrt(np.mean((z.qdd - t.qdd) ** 2, axis=0))
+        np.testing.assert_allclose(rmse, z.meta["qdd_error"]["est_rmse"], rtol=1e-9)
+
+
+def test_collect_reuses_files_written_before_the_options(arms, tmp_path: Path) -> None:
+    train, test = arms["noisy"]
+    for split, d in (("train", train), ("test", test)):
+        meta = dict(d.meta)
+        meta["collection"] = {k: v for k, v in meta["collection"].items() if k not in ("sensor_noise", "qdd_source")}
+        replace(d, meta=meta).save(tmp_path / f"jaco_{split}.npz")
+    assert collect(tmp_path, TINY, workers=1)[2]["reused"]
+
+
+def test_study_data_rejects_collection_options_with_a_folder(tmp_path: Path) -> None:
+    from cascgp_experiments.collect import study_data
+
+    with pytest.raises(ValueError, match="new collection"):
+        study_data(tmp_path, tmp_path, sensor_noise="none")
+    with pytest.raises(ValueError, match="preset"):
+        study_data(None, tmp_path, preset="huge")
