@@ -9,7 +9,9 @@ module               owns
 cli                  the ``cascgp`` console script: fit / evaluate / predict and the experiments' commands
 common               study names and labels, grids, Table I computation and numbers, the shipped nominal
                      URDF's path, the SARCOS default, thread limits (numpy and ``cascgp.io`` only)
-execution            the parallel job layer (local processes / Ray, job cache and resume, retry, progress)
+execution            the parallel job layer (local processes / Ray, resume, retry, progress)
+job_cache            the job layer's cache: one JSON file per finished job, keyed by function and inputs
+ray_backend          the job layer's Ray backend (connection, token authentication, Ray tasks)
 curves               the nRMSE-vs-seconds curve engine (one job per model and subset, fit audit)
 collect              the simulated Jaco data collection (sum-of-sinusoids, velocity mode; one job per motion)
 analyses             optimiser iteration counts per joint, Spearman correlation of states and torques

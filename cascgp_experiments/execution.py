@@ -20,16 +20,7 @@ Backends (the same jobs, the same results):
   cluster, every node needs the project installed and the jobs' input files (and the transfer's buffer
   folders) at the same paths, e.g. on a shared file system; only this process writes the cache.
 
-Ray token authentication (as in Ray 2.60, the version the extra pins): ``ray start --head`` turns it on when a
-token exists (``~/.ray/auth_token``, which Ray also writes the first time a local instance starts, e.g.
-``--ray local``), and ``ray.init`` sends the token only when ``RAY_AUTH_MODE=token`` or for
-``address="auto"``, never on its own for an explicit ``HOST:PORT``. So that ``--ray HOST:PORT`` works
-like ``--ray auto`` for a cluster on this machine, :func:`run_jobs` (and :func:`check_args`) set
-``RAY_AUTH_MODE=token`` in this process when the address is one of this machine's, ``RAY_AUTH_MODE`` is
-unset and Ray finds a token (``RAY_AUTH_TOKEN``, ``RAY_AUTH_TOKEN_PATH`` or ``~/.ray/auth_token``). The
-token is never sent on its own to another machine's address (as Ray, which leaves that to the user):
-there a cluster that wants a token is a :class:`RayAuthenticationError` that says what to set, not
-Ray's traceback.
+Ray token authentication: see :mod:`cascgp_experiments.ray_backend`.
 
 Progress: one tqdm bar for the whole run, counted in *units* (one per job by default). A long job
 reports units as it goes with :func:`report_progress` (a no-op outside :func:`run_jobs`), e.g. one
@@ -43,18 +34,12 @@ this process (Ctrl-C, a cache write that fails) cancels the jobs not yet started
 dies (a crash in native code, the out-of-memory killer) ends the run with a ``RuntimeError`` naming a
 job it was running; the finished jobs are in the cache, so running the command again resumes.
 
-Cache: with ``cache_dir``, every finished job's result is written atomically
-(:func:`cascgp.io.write_json`) to ``cache_dir/<fn>-<hash>.json``, the hash being the SHA-256 of the
-function's name and its inputs (canonical JSON). A run that is killed and started again with the
-same inputs skips the jobs already in the cache. Results then go through JSON (numpy values become
-lists and Python scalars, NaN becomes ``None``) whether they were cached or computed, so the two are
-identical; job inputs and results must be JSON-serialisable (:func:`cascgp.io.json_safe`).
+Cache: with ``cache_dir``, every finished job's result is kept (:mod:`cascgp_experiments.job_cache`), and a run
+started again with the same inputs skips the jobs already there.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import multiprocessing as mp
 import os
 import queue as queue_mod
@@ -70,15 +55,14 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from tqdm import tqdm
 
-from cascgp.io import json_safe, read_json, write_json
+from cascgp_experiments.job_cache import canonical_json, job_key, read_cached, write_cached
+from cascgp_experiments.ray_backend import RayAuthenticationError, import_ray, ray_connect, run_ray
 
 __all__ = ["run_jobs", "report_progress", "session", "default_workers", "check_workers", "job_key", "JobError",
            "JobResults", "RayAuthenticationError", "add_execution_args", "check_args", "THREAD_ENV"]
 
 #: Environment of every worker process: one thread for OpenMP / OpenBLAS / MKL.
 THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-CACHE_FORMAT = "cascgp-job-result"
-CACHE_VERSION = 1
 
 
 class JobError(RuntimeError):
@@ -89,18 +73,6 @@ class JobError(RuntimeError):
         super().__init__(message)
         self.inputs = dict(inputs)
         self.error = error
-
-
-class RayAuthenticationError(RuntimeError):
-    """The Ray cluster at ``address`` refused this process: it wants a token (Ray's token authentication) that
-    this process did not send, or not the one it sent. The message says which and what to set; ``auth_mode``
-    is ``RAY_AUTH_MODE`` as this process had it (``None``: unset), ``ray_error`` Ray's own message."""
-
-    def __init__(self, message: str, address: str, auth_mode: str | None, ray_error: str) -> None:
-        super().__init__(message)
-        self.address = address
-        self.auth_mode = auth_mode
-        self.ray_error = ray_error
 
 
 class JobResults(list):
@@ -162,7 +134,7 @@ def check_args(parser: Any, args: Any) -> None:
             parser.error("--ray needs Ray, an optional extra: pip install -e '.[ray]'")
         if args.ray != "local":
             try:
-                _ray_connect(args.ray, check_workers(args.workers))
+                ray_connect(args.ray, check_workers(args.workers))
             except RayAuthenticationError as exc:
                 parser.error(str(exc))
             except ConnectionError as exc:
@@ -179,45 +151,6 @@ def check_workers(workers: int | None) -> int:
 
 
 # --------------------------------------------------------------------------- keys and cache
-def _fn_name(fn: Callable) -> str:
-    return f"{fn.__module__}:{fn.__qualname__}"
-
-
-def _canonical(inputs: Mapping[str, Any]) -> str:
-    try:
-        return json.dumps(json_safe(dict(inputs)), sort_keys=True, separators=(",", ":"), allow_nan=False)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"job inputs must be JSON-serialisable to be cached: {inputs!r} ({exc})") from exc
-
-
-def job_key(fn: Callable, inputs: Mapping[str, Any]) -> str:
-    """SHA-256 (hex) of the function's name and the job's inputs (canonical JSON)."""
-    return hashlib.sha256(f"{_fn_name(fn)}\n{_canonical(inputs)}".encode()).hexdigest()
-
-
-def _cache_path(cache_dir: Path, fn: Callable, inputs: Mapping[str, Any]) -> Path:
-    return cache_dir / f"{fn.__name__}-{job_key(fn, inputs)[:32]}.json"
-
-
-def _read_cached(path: Path, fn: Callable, inputs: Mapping[str, Any]) -> dict | None:
-    if not path.exists():
-        return None
-    try:
-        rec = read_json(path)
-    except (OSError, ValueError):
-        return None
-    if (not isinstance(rec, dict) or rec.get("format") != CACHE_FORMAT or rec.get("version") != CACHE_VERSION
-            or rec.get("fn") != _fn_name(fn) or rec.get("inputs") != json.loads(_canonical(inputs))
-            or "result" not in rec):
-        return None  # not ours, another version of the record, or other inputs: the job runs again
-    return rec
-
-
-def _normalise(result: Any) -> Any:
-    """What a result becomes after a trip through the cache (JSON)."""
-    return json.loads(json.dumps(json_safe(result)))
-
-
 # --------------------------------------------------------------------------- inside a worker
 _CHANNEL: Any = None          # where report_progress sends (a queue, or a callable in-process)
 _CURRENT: tuple[int, int] | None = None  # (job index, attempt) of the job running in this process
@@ -415,7 +348,7 @@ def run_jobs(fn: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], *, worke
     if cache is not None:
         cache.mkdir(parents=True, exist_ok=True)
     for i, job in enumerate(jobs):
-        rec = _read_cached(_cache_path(cache, fn, job), fn, job) if cache is not None else None
+        rec = read_cached(cache, fn, job) if cache is not None else None
         if rec is None:
             todo.append(i)
         else:
@@ -440,10 +373,7 @@ def run_jobs(fn: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], *, worke
         status, value, secs = out
         if status == "ok":
             if cache is not None:
-                value = _normalise(value)
-                write_json(_cache_path(cache, fn, jobs[i]),
-                           {"format": CACHE_FORMAT, "version": CACHE_VERSION, "fn": _fn_name(fn),
-                            "inputs": jobs[i], "wall_s": secs, "result": value})
+                value = write_cached(cache, fn, jobs[i], value, secs)
             results[i] = value
             results.job_seconds[i] = secs
             progress.finish(i, f"{label(jobs[i])} done in {secs:.0f} s")
@@ -463,7 +393,7 @@ def run_jobs(fn: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], *, worke
         if todo:
             if ray_address is not None:
                 backend, used = "ray", workers
-                _run_ray(fn, jobs, todo, workers, ray_address, progress, finished)
+                run_ray(fn, jobs, todo, workers, ray_address, progress, finished)
             elif min(workers, len(todo)) <= 1:
                 _run_here(fn, jobs, todo, progress, finished)
             else:
@@ -479,7 +409,7 @@ def run_jobs(fn: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], *, worke
 def _short(job: Mapping[str, Any], limit: int = 600) -> str:
     """The job's inputs for a message (JSON where it can be, else ``repr``), cut at ``limit`` characters."""
     try:
-        s = _canonical(job)
+        s = canonical_json(job)
     except TypeError:
         s = repr(dict(job))
     return s if len(s) <= limit else s[:limit] + "..."
@@ -553,155 +483,6 @@ def _drive_pool(pool: ProcessPoolExecutor, fn, jobs, todo, progress, finished) -
         raise error
 
 
-def _import_ray():
-    try:
-        import ray
-    except ImportError as exc:
-        raise ImportError("--ray needs Ray, an optional extra: pip install -e '.[ray]'") from exc
-    return ray
-
-
-#: Ray's variable for its authentication mode: ``token`` makes this process send its token.
-RAY_AUTH_MODE_VAR = "RAY_AUTH_MODE"
-#: Where Ray looks for a token, in its order (for messages).
-RAY_TOKEN_PLACES = "RAY_AUTH_TOKEN, the file named by RAY_AUTH_TOKEN_PATH, or ~/.ray/auth_token"
-
-
-def _address_host(address: str) -> str | None:
-    """The host of a Ray address ``[scheme://]HOST[:PORT]`` (``[...]`` around an IPv6 host); ``None`` if empty."""
-    rest = address.split("://", 1)[-1].strip()
-    if rest.startswith("["):
-        return rest[1:rest.index("]")] if "]" in rest else None
-    host = rest.rsplit(":", 1)[0] if rest.count(":") == 1 else rest
-    return host or None
-
-
-def _is_this_machine(host: str) -> bool:
-    """True when ``host`` names an address of this machine (loopback or one of its interfaces): a socket can
-    be bound to it. A name that does not resolve is not this machine."""
-    import socket
-
-    try:
-        infos = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
-    except (OSError, UnicodeError):
-        return False
-    for family, _, _, _, sockaddr in infos:
-        try:
-            with socket.socket(family, socket.SOCK_STREAM) as s:
-                s.bind((sockaddr[0], 0))
-            return True
-        except OSError:
-            continue
-    return False
-
-
-def _ray_has_token() -> bool | None:
-    """Whether Ray finds an authentication token (:data:`RAY_TOKEN_PLACES`), asked to Ray's own loader;
-    ``None`` for a Ray without token authentication (older versions)."""
-    try:
-        from ray._raylet import AuthenticationTokenLoader
-    except ImportError:
-        return None
-    return bool(AuthenticationTokenLoader.instance().has_token(ignore_auth_mode=True))
-
-
-def _use_local_token(address: str) -> str | None:
-    """For an explicit address of this machine, with ``RAY_AUTH_MODE`` unset and a token at hand: set
-    ``RAY_AUTH_MODE=token`` in this process (and for its children), as ``ray.init(address="auto")`` and
-    ``ray start`` do for a cluster they find here. Return a note saying so, or ``None`` when nothing changed.
-
-    Another machine's address is left alone: the local token is not sent there unasked."""
-    if address in ("local", "auto") or os.environ.get(RAY_AUTH_MODE_VAR) is not None:
-        return None
-    host = _address_host(address)
-    if host is None or not _is_this_machine(host) or not _ray_has_token():
-        return None
-    from ray._raylet import Config
-
-    os.environ[RAY_AUTH_MODE_VAR] = "token"
-    Config.initialize("")  # Ray reads its configuration once: make it see the new mode (as Ray's own code does)
-    return (f"--ray {address} is on this machine and Ray finds a token here ({RAY_TOKEN_PLACES}): connecting "
-            f"with {RAY_AUTH_MODE_VAR}=token, as --ray auto does")
-
-
-def _auth_failure(exc: BaseException) -> str | None:
-    """Ray's message when ``exc`` (or an exception it was raised from) is a refused or missing token, else
-    ``None``. ``ray.init`` reports a refused token as a ``ConnectionError`` whose cause holds the
-    ``AuthenticationError`` as text (Ray's traceback of its last attempt), hence the text match."""
-    markers = ("AuthenticationError", "InvalidAuthToken", "Token authentication is enabled but")
-    seen: set[int] = set()
-    e: BaseException | None = exc
-    while e is not None and id(e) not in seen:
-        seen.add(id(e))
-        lines = str(e).splitlines()
-        if type(e).__name__ == "AuthenticationError":
-            return _first_sentence(lines[0]) if lines else type(e).__name__
-        for line in lines:
-            if any(m in line for m in markers):
-                return _first_sentence(line.split("AuthenticationError: ", 1)[-1])
-        e = e.__cause__ or e.__context__
-    return None
-
-
-def _first_sentence(text: str) -> str:
-    """Ray's error without the help it appends (" Note: ...", " Ensure that ...") and the final full stop."""
-    for cut in (" Note: ", " Ensure that "):
-        text = text.split(cut, 1)[0]
-    return text.strip().rstrip(".")
-
-
-def _auth_message(address: str, ray_error: str) -> str:
-    """What went wrong with the token at ``address`` and what to set, for the mode this process ran in."""
-    mode = os.environ.get(RAY_AUTH_MODE_VAR)
-    has_token = _ray_has_token()
-    head = f"--ray {address}: the Ray cluster refused this process (Ray: {ray_error}). "
-    if mode is None or mode.lower() != "token":
-        why = ("RAY_AUTH_MODE is unset, so no token was sent: the cluster has token authentication on "
-               "(`ray start --head` turns it on when ~/.ray/auth_token exists), and Ray sends the token to an "
-               "explicit HOST:PORT only with RAY_AUTH_MODE=token"
-               if mode is None else
-               f"RAY_AUTH_MODE={mode} is set, so no token was sent, but the cluster has token authentication on")
-        local = _address_host(address) is not None and _is_this_machine(_address_host(address) or "")
-        fix = ("Fix: run with RAY_AUTH_MODE=token (and the head node's token in "
-               f"{RAY_TOKEN_PLACES}; `ray get-auth-token` on the head prints it), or use --ray auto on the head node")
-        if mode is not None and local and has_token:
-            fix = "Fix: unset RAY_AUTH_MODE (a cluster on this machine then gets the local token), or set it to token"
-        return f"{head}{why}. {fix}."
-    what = ("RAY_AUTH_MODE=token, but the token sent is not this cluster's" if has_token else
-            f"RAY_AUTH_MODE=token, but no token was found ({RAY_TOKEN_PLACES})")
-    return (f"{head}{what}. Fix: use the head node's token (`ray get-auth-token` on the head prints it): put it "
-            f"in ~/.ray/auth_token here, or set RAY_AUTH_TOKEN / RAY_AUTH_TOKEN_PATH.")
-
-
-def _ray_connect(address: str, workers: int) -> bool:
-    """Connect to (``"local"``: start) Ray unless connected already; True when this call connected.
-
-    ``"local"`` is passed to Ray as ``address="local"``: always a new instance, never a cluster that
-    ``ray start`` left running on this machine (which ``ray.init()`` without an address would join, and
-    refuse ``num_cpus`` for). For a cluster address, :func:`_use_local_token` first; a refused or missing
-    token raises :class:`RayAuthenticationError` (Ray's traceback left out, its message kept)."""
-    import logging
-
-    ray = _import_ray()
-    if ray.is_initialized():
-        return False
-    if address == "local":
-        ray.init(address="local", num_cpus=workers, include_dashboard=False, logging_level=logging.WARNING)
-        return True
-    note = _use_local_token(address)
-    if note:
-        tqdm.write(note, file=sys.stderr)
-    try:
-        ray.init(address=address, logging_level=logging.WARNING)
-    except Exception as exc:  # only a refused token is translated; anything else goes on as it is
-        ray_error = _auth_failure(exc)
-        if ray_error is None:
-            raise
-        mode = os.environ.get(RAY_AUTH_MODE_VAR)
-        raise RayAuthenticationError(_auth_message(address, ray_error), address, mode, ray_error) from None
-    return True
-
-
 @contextmanager
 def session(ray_address: str | None, workers: int | None = None) -> Iterator[None]:
     """Keep one Ray connection (``"local"``: one local instance) for several :func:`run_jobs` calls, e.g. the
@@ -709,62 +490,9 @@ def session(ray_address: str | None, workers: int | None = None) -> Iterator[Non
     if ray_address is None:
         yield
         return
-    started = _ray_connect(ray_address, check_workers(workers))
+    started = ray_connect(ray_address, check_workers(workers))
     try:
         yield
     finally:
         if started:
-            _import_ray().shutdown()
-
-
-def _run_ray(fn, jobs, todo, workers, address, progress, finished) -> None:
-    ray = _import_ray()
-    from ray.util.queue import Queue as RayQueue
-
-    started = _ray_connect(address, workers)
-    error: BaseException | None = None
-    channel = RayQueue()
-    drain = _Drain(channel, progress, lambda: channel.get(block=True, timeout=0.2))
-    drain.start()
-    try:
-        remote = ray.remote(num_cpus=1, max_retries=0)(_call)
-        running = {remote.remote(fn, jobs[i], i, 0, channel): i for i in todo}
-        while running:
-            done, _ = ray.wait(list(running), num_returns=1)
-            for ref in done:
-                i = running.pop(ref)
-                try:
-                    out = ray.get(ref)
-                except Exception as exc:  # noqa: BLE001 - the worker died (not an error raised by the job)
-                    out = ("error", f"{type(exc).__name__}: {exc}", 0.0)
-                try:
-                    again = finished(i, out)
-                except JobError as exc:
-                    if error is None:
-                        error = exc
-                        for r in running:
-                            ray.cancel(r)
-                    continue
-                if again and error is None:
-                    running[remote.remote(fn, jobs[i], i, progress.attempt[i], channel)] = i
-            if error is not None:
-                # cancelled tasks raise on get (ray.cancel interrupts the running ones too); any that had
-                # finished in the meantime are cached
-                for ref in list(running):
-                    i = running.pop(ref)
-                    try:
-                        out = ray.get(ref)
-                        if out[0] == "ok":
-                            finished(i, out)
-                    except Exception:  # noqa: BLE001
-                        pass
-    finally:
-        drain.stop()
-        try:
-            channel.shutdown()
-        except Exception:  # noqa: BLE001
-            pass
-        if started:
-            ray.shutdown()
-    if error is not None:
-        raise error
+            import_ray().shutdown()

@@ -476,7 +476,7 @@ def test_ray_option_without_ray_is_a_clear_error(tmp_path: Path) -> None:
 
 # --------------------------------------------------------------------------- Ray token authentication
 def test_ray_address_host_and_this_machine() -> None:
-    from cascgp_experiments.execution import _address_host, _is_this_machine
+    from cascgp_experiments.ray_backend import _address_host, _is_this_machine
 
     assert _address_host("127.0.0.1:6379") == "127.0.0.1"
     assert _address_host("ray://head.example:10001") == "head.example"
@@ -490,7 +490,7 @@ def test_ray_address_host_and_this_machine() -> None:
 def test_the_local_token_is_never_sent_unasked(monkeypatch) -> None:
     """RAY_AUTH_MODE is set to token only for an explicit address of this machine with the mode unset: not for
     another machine's address, not over a mode the user set, not for 'auto'/'local' (Ray's own business)."""
-    import cascgp_experiments.execution as ex
+    import cascgp_experiments.ray_backend as ex
 
     monkeypatch.setattr(ex, "_ray_has_token", lambda: True)
     monkeypatch.delenv("RAY_AUTH_MODE", raising=False)
@@ -522,7 +522,7 @@ def _ray_style_error(text: str) -> ConnectionError:
 
 
 def test_refused_token_is_recognised_and_the_message_names_the_fix(monkeypatch) -> None:
-    import cascgp_experiments.execution as ex
+    import cascgp_experiments.ray_backend as ex
 
     err = ex._auth_failure(_ray_style_error(_RAY_REFUSED))
     assert err == "RPC error: InvalidAuthToken: Authentication token is missing or incorrect"
@@ -600,9 +600,10 @@ def ray_head() -> Iterator[dict[str, Any]]:
 _RAY_DRIVER = """
 import json, os, sys
 import cascgp_experiments.execution as ex
+import cascgp_experiments.ray_backend as rb
 from test_execution import seeded_job
 if sys.argv[2] == "elsewhere":
-    ex._is_this_machine = lambda host: False  # stands for a cluster on another machine
+    rb._is_this_machine = lambda host: False  # stands for a cluster on another machine
 try:
     res = ex.run_jobs(seeded_job, [{"x": x, "seed": 100 + x} for x in range(3)], ray_address=sys.argv[1],
                       show_progress=False)
