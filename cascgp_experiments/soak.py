@@ -1,4 +1,4 @@
-"""Soak test (issue 12): a bounded-duration run of everything a long experiment does, checking for NaN, crashes
+"""Soak test: a bounded-duration run of everything a long experiment does, checking for NaN, crashes
 and memory growth. The thin CLI is ``scripts/soak.py``.
 
 One **cycle** (repeated until the time budget is spent, at least once):
@@ -19,7 +19,7 @@ One **cycle** (repeated until the time budget is spent, at least once):
 reward or a prediction, on any exception, or when the resident memory grows by more than ``rss_bound_mib``
 (default :data:`RSS_BOUND_MIB` = 150 MiB) over its level after the warm-up (``warmup_cycles`` cycles, default 2:
 MuJoCo's mesh cache, torch's and glibc's pools fill during the first makes and fits). The bound is about
-40 times what a flat run shows (a few MiB) and well below what the mesh-cache leak of issue 12 produced
+40 times what a flat run shows (a few MiB) and well below what the mesh-cache leak of an earlier version produced
 (~4 MiB per ``gym.make``, 2 makes per cycle: over 150 MiB within 20 cycles).
 
 Reported (``SoakResult.to_json``): steps, episodes (and how many ended unstable or terminated), resets, makes,

@@ -44,7 +44,7 @@ ENV_ID = "JacoPour-v0"
 FULL_CONTROLLERS = ("pd", "rbd", "sp-standard", "sp-inward", "sp-outward", "np-inward", "sp-inward-gated",
                     "sp-inward-gated-online")
 FULL_TASKS = ("front", "left", "right", "far")
-#: The README demo: PD, RBD and the best of the uncertainty-aware controllers (issue 10; README table).
+#: The README demo: PD, RBD and the best of the uncertainty-aware controllers (README table).
 QUICK_CONTROLLERS = ("pd", "rbd", "sp-inward-igated-online")
 QUICK_TASKS = ("front", "left")
 
