@@ -38,6 +38,16 @@ class DataBuffer:
     Args:
         folder: where episodes are saved (created if missing); ``None`` keeps the buffer
             in memory only. Opening an existing folder loads the episodes already in it.
+
+    Example:
+        >>> import numpy as np
+        >>> from cascgp.data import DynamicsData
+        >>> t = np.arange(0.0, 10.0, 0.01)                      # one 10 s episode at 100 Hz
+        >>> q = np.sin(t)[:, None]
+        >>> buffer = DataBuffer()                               # in memory; DataBuffer("runs/buffer") persists
+        >>> buffer.append(DynamicsData(q=q, qd=q, qdd=q, tau=q, t=t))
+        >>> buffer.training_set(rate_hz=10.0, max_samples=50).n_samples  # 10 Hz, thinned to 50 rows
+        50
     """
 
     def __init__(self, folder: str | os.PathLike[str] | None = None) -> None:

@@ -155,6 +155,16 @@ class DynamicsData:
     """Samples of an N-DOF arm's inverse dynamics (see the module docstring for the table).
 
     Arrays are stored as C-contiguous float64 (``segment`` as int64) copies.
+
+    Example:
+        >>> import numpy as np
+        >>> t = np.arange(0.0, 2.0, 0.01)                      # 2 s at 100 Hz, one 2-joint motion
+        >>> q = np.stack([np.sin(t), np.cos(t)], axis=1)
+        >>> data = DynamicsData(q=q, qd=np.gradient(q, t, axis=0), qdd=-q, tau=-q, t=t)
+        >>> data.n_samples, data.dof, round(data.duration, 2)
+        (200, 2, 2.0)
+        >>> data.first_seconds(1.0).subsample(10.0).n_samples   # the first second, thinned to 10 Hz
+        10
     """
 
     q: np.ndarray

@@ -242,6 +242,16 @@ def read_log(path: str | os.PathLike, *, smoothing: SavGol | int | None = DEFAUL
     Raises:
         FileNotFoundError: no such file.
         LogFormatError: anything else (message names the file, the row and the column).
+
+    Example:
+        >>> import numpy as np, pathlib, tempfile
+        >>> t = np.arange(0.0, 1.0, 0.01)                       # a 1-joint log at 100 Hz: time, angle, torque
+        >>> csv = pathlib.Path(tempfile.mkdtemp()) / "arm.csv"
+        >>> np.savetxt(csv, np.column_stack([t, np.sin(t), 0.5 * np.sin(t)]), delimiter=",", header="t,q1,tau1",
+        ...            comments="")
+        >>> log = read_log(csv)                                 # qd and qdd are differentiated
+        >>> log.n_samples, log.meta["qd_source"], bool(abs(log.qd[50, 0] - np.cos(0.5)) < 1e-3)
+        (100, 'computed', True)
     """
     path = Path(path)
     if isinstance(smoothing, (int, np.integer)) and not isinstance(smoothing, bool):

@@ -39,7 +39,14 @@ def nrmse(pred: np.ndarray, target: np.ndarray) -> np.ndarray:
     """Normalised RMSE per joint: ``rmse / (max(target) - min(target))`` over the test rows.
 
     A joint whose test targets are constant (zero range) raises ``ValueError`` (the
-    normalisation is undefined)."""
+    normalisation is undefined).
+
+    Example:
+        >>> import numpy as np
+        >>> target = np.array([[0.0, 10.0], [1.0, 20.0], [2.0, 30.0]])
+        >>> nrmse(target + [[0.2, 0.0]], target).round(3)       # 0.2 on a range of 2; exact on joint 2
+        array([0.1, 0. ])
+    """
     p, y = _pair(pred, target)
     rng = y.max(axis=0) - y.min(axis=0)
     if (rng <= 0).any():

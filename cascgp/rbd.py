@@ -296,6 +296,15 @@ def _without_sidecar(urdf_path: Path, js: Path, dof: int | None) -> RigidBodyMod
 def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> RigidBodyModel:
     """Load a nominal model: the URDF plus, when present, its JSON sidecar (same name, ``.json``).
 
+    Example:
+        >>> import numpy as np, jaco_env
+        >>> rbd = load_nominal(jaco_env.NOMINAL_URDF)           # the Jaco 2's nominal URDF and its sidecar
+        >>> rbd.dof
+        6
+        >>> q = np.zeros((1, 6))
+        >>> np.allclose(rbd.inverse_dynamics(q, q, q), rbd.gravity_torque(q))   # at rest: gravity alone
+        True
+
     The sidecar (written by :func:`cascgp_experiments.urdf_export.write_urdf`) holds ``armature``,
     ``torque_limits``, ``velocity_limits``, ``gravity``, ``calibration_error``,
     ``seed``, ``joint_names``, ``dof`` and provenance; the whole dict is kept as

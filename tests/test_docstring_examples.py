@@ -1,0 +1,17 @@
+"""The ``Example:`` blocks of the public docstrings run and print what they say (doctest)."""
+
+from __future__ import annotations
+
+import doctest
+import importlib
+
+import pytest
+
+MODULES = ["cascgp.data", "cascgp.buffer", "cascgp.metrics", "cascgp.logs", "cascgp.rbd", "cascgp.learning"]
+
+
+@pytest.mark.parametrize("name", MODULES)
+def test_docstring_examples_run(name: str) -> None:
+    result = doctest.testmod(importlib.import_module(name), optionflags=doctest.NORMALIZE_WHITESPACE, verbose=False)
+    assert result.attempted > 0, f"{name}: no example"
+    assert result.failed == 0, f"{name}: {result.failed} of {result.attempted} example lines failed (see above)"
