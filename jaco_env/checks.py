@@ -31,7 +31,7 @@ def real_array(value, shape: tuple[int, ...], what: str, *, finite: bool = True)
     if a.shape != shape:
         raise ValueError(f"{what} must have shape {shape}, got shape {a.shape}")
     a = a.astype(np.float64)
-    if finite and not np.all(np.isfinite(a)):
+    if finite and not np.isfinite(a).all():
         bad = np.flatnonzero(~np.isfinite(a)).tolist()
         raise ValueError(f"{what} must be finite; entries {bad} are NaN or inf: {a.tolist()}")
     return a

@@ -19,6 +19,7 @@ indices. (:mod:`cascgp.episodes`, which may not import ``jaco_env``, splits the 
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -75,6 +76,11 @@ class SensorNoise:
             if not np.isfinite(v) or v < 0:
                 raise ValueError(f"SensorNoise.{name} must be a finite number >= 0, got {v!r}")
 
+    @functools.cached_property
+    def _std(self) -> np.ndarray:
+        """(3, 1) column of the three deviations, for :meth:`measurement` (not a field)."""
+        return np.array([[self.q_std], [self.qd_std], [self.tau_std]], dtype=np.float64)
+
     @classmethod
     def none(cls) -> "SensorNoise":
         return cls(0.0, 0.0, 0.0)
@@ -88,5 +94,13 @@ class SensorNoise:
     def measurement(self, rng: np.random.Generator, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
                     t: float) -> np.ndarray:
         """The measured part of an observation, ``[q, qd, tau, t]`` with noise (layout above)."""
-        qm, qdm, taum = self.apply(rng, q, qd, tau)
-        return np.concatenate([qm, qdm, taum, [t]])
+        # The arithmetic of apply() (the same draws; x + std * e, entry by entry) written into one array.
+        n = len(q)
+        e = rng.standard_normal((3, n))
+        e *= self._std
+        out = np.empty(3 * n + 1)
+        x = out[:3 * n].reshape(3, n)
+        x[0], x[1], x[2] = q, qd, tau
+        x += e
+        out[3 * n] = t
+        return out

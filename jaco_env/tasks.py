@@ -177,7 +177,7 @@ class PouringTask:
     @property
     def duration(self) -> float:
         """Total duration of the reference (s)."""
-        return self.phase_times["end"]
+        return float(self._plan()[1][-1])  # phase_times["end"]
 
     @property
     def pour_window(self) -> tuple[float, float]:
@@ -213,6 +213,16 @@ class PouringTask:
         if scalar:
             return q[0], qd[0], qdd[0]
         return q, qd, qdd
+
+
+    def reference_position(self, t: float) -> np.ndarray:
+        """``reference(t)[0]`` for one finite real time ``t`` (s), without the derivatives: q_d (N_JOINTS,)
+        (the same arithmetic, bit for bit; the environment's step needs only q_d)."""
+        segments, bounds = self._plan()
+        tt = np.array([t], dtype=float)
+        k = min(max(int(np.searchsorted(bounds, tt[0], side="right")) - 1, 0), len(segments) - 1)
+        seg = segments[k]
+        return seg.position(np.clip(tt - bounds[k], 0.0, seg.duration))[0]
 
 
 def _task(name: str, x: float, y: float, **kw) -> PouringTask:

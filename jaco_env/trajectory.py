@@ -30,10 +30,15 @@ Path = Callable[[np.ndarray, int], np.ndarray]
 _N = robot.N_JOINTS
 
 
+def _quintic_s(tau: np.ndarray) -> np.ndarray:
+    """s of :func:`quintic` at ``tau`` already in [0, 1]."""
+    return tau**3 * (10 - 15 * tau + 6 * tau**2)
+
+
 def quintic(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """s, ds/dtau, d2s/dtau2 of the quintic 10 tau^3 - 15 tau^4 + 6 tau^5 on [0, 1]."""
     tau = np.clip(tau, 0.0, 1.0)
-    s = tau**3 * (10 - 15 * tau + 6 * tau**2)
+    s = _quintic_s(tau)
     ds = 30 * tau**2 * (1 - tau) ** 2
     dds = 60 * tau * (1 - tau) * (1 - 2 * tau)
     return s, ds, dds
@@ -45,6 +50,12 @@ class Segment:
     def __init__(self, path: Path, duration: float):
         self.path = path
         self.duration = float(duration)
+
+    def position(self, t_local: np.ndarray) -> np.ndarray:
+        """q (T, N_JOINTS) of :meth:`evaluate` alone (the same arithmetic)."""
+        if self.duration <= 0:
+            return self.path(np.zeros_like(t_local), 0)
+        return self.path(_quintic_s(np.clip(t_local / self.duration, 0.0, 1.0)), 0)
 
     def evaluate(self, t_local: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(q, qd, qdd), each (T, N_JOINTS), at the local times ``t_local`` (T,) in [0, duration]."""

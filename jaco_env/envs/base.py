@@ -217,6 +217,13 @@ def _no_display_message(reason: str) -> str:
             "DISPLAY (or WAYLAND_DISPLAY), or start a virtual one (xvfb-run -a python ...).")
 
 
+def _index(adr: np.ndarray) -> slice | np.ndarray:
+    """``adr`` as a slice where it is a contiguous ascending run (a view, not a gather), else itself."""
+    if len(adr) and np.array_equal(adr, np.arange(adr[0], adr[0] + len(adr))):
+        return slice(int(adr[0]), int(adr[0]) + len(adr))
+    return adr
+
+
 def check_options(options: dict | None, allowed: tuple[str, ...]) -> dict:
     """The reset options as a dict (``{}`` for None); unknown keys raise ``ValueError``."""
     if options is None:
@@ -291,6 +298,16 @@ class JacoMujocoEnv(MujocoEnv):
         self._bottle_body = m.body(scene.BOTTLE_BODY).id
         self._tau_sensor = np.array([m.sensor_adr[m.sensor(scene.ARM_PREFIX + n).id] + 2
                                      for n in robot.TORQUE_SENSOR_NAMES])
+        # Hot path (step): views of the data arrays fetched once (each attribute read of MjData builds a
+        # new array object; ``data.warning.number`` is a live view of the warning counters), index
+        # arrays as slices where contiguous, the action bounds as float64 (exact: they are float32).
+        d = self.data
+        self._qpos, self._qvel, self._ctrl = d.qpos, d.qvel, d.ctrl
+        self._arm_q, self._arm_qd = _index(self.arm_qpos_adr), _index(self.arm_dof_adr)
+        self._warn_number = d.warning.number
+        self._act_low = self.action_space.low.astype(np.float64)
+        self._act_high = self.action_space.high.astype(np.float64)
+        self._marble_vel: np.ndarray | None = None  # (n_marbles, 3) indices of the marbles' linear velocities
         self._warn_counts = np.zeros(len(self.data.warning), dtype=np.int64)
         self._step_count = 0
         self._unstable = False
@@ -321,7 +338,7 @@ class JacoMujocoEnv(MujocoEnv):
 
     def arm_state(self) -> tuple[np.ndarray, np.ndarray]:
         """True (noiseless) joint positions and velocities (copies), for analysis only."""
-        return self.data.qpos[self.arm_qpos_adr].copy(), self.data.qvel[self.arm_dof_adr].copy()
+        return self._qpos[self._arm_q].copy(), self._qvel[self._arm_qd].copy()
 
     def _set_payload(self, total: float, fixed_mass: float) -> None:
         extra = total - fixed_mass
@@ -333,34 +350,37 @@ class JacoMujocoEnv(MujocoEnv):
         """The action as float64, clipped to the bounds; TypeError (not real numbers: str, bool, complex,
         ...) or ValueError (shape, NaN/inf) naming ``action`` otherwise, before anything changes."""
         a = real_array(action, (_N,), "action")
-        return np.clip(a, self.action_space.low, self.action_space.high)
+        # np.clip(a, low, high) for finite a, without np.clip's Python wrapper
+        return np.minimum(np.maximum(a, self._act_low, out=a), self._act_high, out=a)
 
     def _simulate(self, a: np.ndarray) -> bool:
         """Advance one control period; return True when the simulation went unstable."""
         m, d = self.model, self.data
-        d.ctrl[:_N] = a
+        ctrl = self._ctrl
+        ctrl[:_N] = a
         if self.control_mode == "velocity":
-            d.ctrl[_N:2 * _N] = a
+            ctrl[_N:2 * _N] = a
         mujoco.mj_step(m, d, nstep=self.frame_skip)
         # The joint torque sensors sample at the same instant as q and qd (the end of the period),
         # with the command of the period just ended still in effect: mj_step left the sensors of
         # the *start* of its last physics step, so evaluate the model at the current state.
         mujoco.mj_forward(m, d)
-        self._tau_meas_true = d.sensordata[self._tau_sensor].copy()
-        warn = np.array([w.number for w in d.warning], dtype=np.int64)
-        new_warning = bool(np.any(warn > self._warn_counts))
-        self._warn_counts = warn
-        unstable = new_warning or not (np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel)))
+        self._tau_meas_true = d.sensordata[self._tau_sensor]
+        warn = self._warn_number
+        new_warning = bool((warn > self._warn_counts).any())
+        self._warn_counts = warn.copy()
+        qvel = self._qvel
+        unstable = new_warning or not (np.isfinite(self._qpos).all() and np.isfinite(qvel).all())
         if not unstable:
-            unstable = bool(np.max(np.abs(d.qvel[self.arm_dof_adr])) > MAX_JOINT_SPEED)
-        if not unstable and self.n_marbles:
-            lin = d.qvel[self.marble_dof_adr[:, None] + np.arange(3)]
-            unstable = bool(np.max(np.linalg.norm(lin, axis=1)) > MAX_MARBLE_SPEED)
+            unstable = bool(np.abs(qvel[self._arm_qd]).max() > MAX_JOINT_SPEED)
+        if not unstable and self._marble_vel is not None:
+            lin = qvel[self._marble_vel]
+            unstable = bool(np.sqrt(np.add.reduce(lin * lin, axis=1)).max() > MAX_MARBLE_SPEED)  # norm(axis=1)
         return unstable
 
     def _measure(self) -> np.ndarray:
-        q, qd = self.arm_state()
-        return self.sensor_noise.measurement(self.np_random, q, qd, self._tau_meas_true, self.time)
+        return self.sensor_noise.measurement(self.np_random, self._qpos[self._arm_q], self._qvel[self._arm_qd],
+                                             self._tau_meas_true, self.time)
 
     def _reset_arm(self, q0: np.ndarray) -> None:
         d = self.data

@@ -8,6 +8,7 @@ simulation machinery is :class:`jaco_env.envs.base.JacoMujocoEnv`.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import mujoco
@@ -188,14 +189,15 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         self._jar_body = m.body("jar").id
         self.marble_qpos_adr = np.array([m.jnt_qposadr[m.joint(f"marble{k}").id] for k in range(n_marbles)])
         self.marble_dof_adr = np.array([m.jnt_dofadr[m.joint(f"marble{k}").id] for k in range(n_marbles)])
+        self._marble_pos = self.marble_qpos_adr[:, None] + np.arange(3)
+        self._marble_vel = self.marble_dof_adr[:, None] + np.arange(3)
         self.task: PouringTask = self.default_task or DEFAULT_TASKS["front"]
         self._in_jar = 0
 
     # ------------------------------------------------------------------ marbles
     def marble_positions(self) -> np.ndarray:
         """(n_marbles, 3) world positions of the marbles."""
-        idx = self.marble_qpos_adr[:, None] + np.arange(3)
-        return self.data.qpos[idx].copy()
+        return self._qpos[self._marble_pos]  # a gather: a copy
 
     def marbles_in_bottle_frame(self) -> tuple[np.ndarray, np.ndarray]:
         """Marble positions in the bottle frame (n_marbles, 3) and which are inside the bottle (bool)."""
@@ -298,8 +300,9 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         r_pour = self._pour_reward_weight * (in_jar - self._in_jar) / self.n_marbles
         return r_track + r_pour, {"reward_tracking": r_track, "reward_pour": r_pour}
 
-    def _info(self, reward_info: dict[str, float], tracking_error: float) -> dict[str, Any]:
-        in_jar, in_bottle, spilled = self.marble_counts()
+    def _info(self, reward_info: dict[str, float], tracking_error: float,
+              counts: tuple[int, int, int] | None = None) -> dict[str, Any]:
+        in_jar, in_bottle, spilled = self.marble_counts() if counts is None else counts
         return {
             "time": self.time,
             "task": self.task.name,
@@ -327,15 +330,15 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         if unstable:
             self._unstable = True
             return self._last_obs.copy(), 0.0, False, True, self._info(no_reward, 0.0)
-        q_d, _, _ = self.task.reference(self.time)
-        err = float(np.linalg.norm(q_d - self.data.qpos[self.arm_qpos_adr]))
-        in_jar, _, _ = self.marble_counts()
-        reward, reward_info = self._get_rew(err, in_jar)
-        self._in_jar = in_jar
+        e = self.task.reference_position(self.time) - self._qpos[self._arm_q]
+        err = math.sqrt(e.dot(e))  # float(np.linalg.norm(e)), as numpy computes it
+        counts = self.marble_counts()
+        reward, reward_info = self._get_rew(err, counts[0])
+        self._in_jar = counts[0]
         obs = self._get_obs()
         self._last_obs = obs
         terminated = self.time >= self.task.duration - 1e-9
         self._terminated = self._terminated or terminated
         if self.render_mode == "human":
             self.render()
-        return obs, reward, terminated, False, self._info(reward_info, err)
+        return obs, reward, terminated, False, self._info(reward_info, err, counts)
