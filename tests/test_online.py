@@ -160,7 +160,7 @@ def test_a_sample_refused_by_one_joint_changes_no_joint(monkeypatch) -> None:
         model.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
     twin = copy.deepcopy(model)
     mean0, var0 = model.predict_one_var(*query)
-    real, calls = online.cholesky, {"n": 0}
+    real, calls = online.dpotrf, {"n": 0}
 
     def failing(a, **kw):
         calls["n"] += 1
@@ -168,7 +168,7 @@ def test_a_sample_refused_by_one_joint_changes_no_joint(monkeypatch) -> None:
             raise np.linalg.LinAlgError("forced: not positive definite")
         return real(a, **kw)
 
-    monkeypatch.setattr(online, "cholesky", failing)
+    monkeypatch.setattr(online, "dpotrf", failing)
     with pytest.raises(np.linalg.LinAlgError, match="forced"):
         model.add_sample(new.q[5], new.qd[5], new.qdd[5], new.tau[5])
     monkeypatch.undo()
@@ -183,7 +183,7 @@ def test_a_sample_refused_by_one_joint_changes_no_joint(monkeypatch) -> None:
 
 
 def test_the_variance_path_is_built_once_per_fit_and_shared_by_online_windows() -> None:
-    """prepare_variance builds the fitted sets' inverse factors once; opening and closing windows reuses them
+    """prepare_variance builds the fitted sets' variance path once; opening and closing windows reuses them
     (no rebuild at the first gated tick of each episode), and the values equal a fresh build's."""
     arm = make_arm(3, friction=0.3)
     model = make_model("sp-inward", 3, make_arm(3), gp_config=GPFitConfig(n_restarts=1, max_iter=30)).fit(
@@ -194,7 +194,7 @@ def test_the_variance_path_is_built_once_per_fit_and_shared_by_online_windows() 
     assert model.prepare_variance() is base
     v_off = model.predict_one_var(*query)[1]
     model.start_online(4)
-    assert model.prepare_variance().B is base.B
+    assert model.prepare_variance().L is base.L
     model.add_sample(new.q[0], new.qd[0], new.qdd[0], new.tau[0])
     v_on = model.predict_one_var(*query)[1]
     fresh = copy.deepcopy(model)

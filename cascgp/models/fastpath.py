@@ -24,9 +24,11 @@ from dataclasses import dataclass
 from typing import Any, Sequence
 
 import numpy as np
+from scipy.linalg.blas import dtrsv
 
 from cascgp.gp.kernels import Kernel, get_kernel
 from cascgp.gp.posterior import GPPosterior
+from cascgp.models.fastkernel import jit_args, jit_mean
 
 __all__ = ["FastPath", "FastVariance", "ZCLIP"]
 
@@ -51,6 +53,8 @@ class FastPath:
         y_mean: per joint target mean.
         zclip: clip bound of the scaled inputs.
         buf: ``(D + 1,)`` work buffer for the state vector (last entry stays 0).
+        jit: the compiled mean's arguments (:mod:`cascgp.models.fastkernel`; its ``[4]`` is ``W`` transposed,
+            ``(N, D, n)``, a copy that :meth:`set_rows` keeps equal), None when it is not used.
     """
 
     kernel: Kernel
@@ -68,6 +72,7 @@ class FastPath:
     y_mean: tuple[float, ...]
     zclip: float
     buf: np.ndarray
+    jit: tuple | None = None
 
     @classmethod
     def build(cls, posts: Sequence[GPPosterior], specs: Sequence[tuple[tuple[int, ...], int | None]],
@@ -103,10 +108,25 @@ class FastPath:
                 Zt[j, :n0] = c * P.Z[:, ds]
             a[j, :n0] = P.y_std * P.signal_var * P.alpha
             y_mean[j] = P.y_mean
-        return cls(kernel=kernel, order=tuple(order), idx=idx, x_mean=xm, x_inv_scale=xs_inv, W=W,
-                   W2=np.einsum("jnd,jnd->jn", W, W), torque_from=tuple(s[1] for s in specs),
-                   t_mean=tuple(tm.tolist()), t_inv_scale=tuple(ts_inv.tolist()), Zt=Zt, alpha=a,
-                   y_mean=tuple(y_mean.tolist()), zclip=ZCLIP * c, buf=np.zeros(D + 1))
+        W2 = np.einsum("jnd,jnd->jn", W, W)
+        tfrom = np.array([-1 if s[1] is None else s[1] for s in specs], dtype=np.intp)
+        ncol = np.array([3 * len(s[0]) for s in specs], dtype=np.intp)
+        WT = np.ascontiguousarray(W.transpose(0, 2, 1))
+        jit = jit_args(kernel.name, (idx, ncol, xm, xs_inv, WT, W2, tfrom, np.asarray(order, dtype=np.intp), tm,
+                                     ts_inv, Zt, a, y_mean, ZCLIP * c))
+        return cls(kernel=kernel, order=tuple(order), idx=idx, x_mean=xm, x_inv_scale=xs_inv, W=W, W2=W2,
+                   torque_from=tuple(s[1] for s in specs), t_mean=tuple(tm.tolist()),
+                   t_inv_scale=tuple(ts_inv.tolist()), Zt=Zt, alpha=a, y_mean=tuple(y_mean.tolist()),
+                   zclip=ZCLIP * c, buf=np.zeros(D + 1), jit=jit)
+
+    def set_rows(self, j: int, lo: int, W: np.ndarray) -> None:
+        """Write scaled training states ``W`` ``(m, D)`` into joint ``j``'s rows ``lo:lo + m`` (online samples),
+        with their squared norms and the compiled path's transposed copy."""
+        hi = lo + W.shape[0]
+        self.W[j, lo:hi] = W
+        self.W2[j, lo:hi] = np.einsum("nd,nd->n", W, W)
+        if self.jit is not None:
+            self.jit[4][j, :, lo:hi] = W.T
 
     def state_r2(self) -> np.ndarray:
         """Scaled squared distances ``(N, n)`` of the state part of every joint's input (from ``buf``) to its
@@ -126,7 +146,16 @@ class FastPath:
     def mean(self, tau_mean: np.ndarray | None) -> np.ndarray:
         """Predicted torques ``(N,)`` for the state already written into ``buf[:3N]`` as
         ``(q_1, s_1', s_1'', q_2, ...)``; ``tau_mean`` (SP models) is added to each joint's GP mean before the
-        torque is passed along the cascade."""
+        torque is passed along the cascade. The compiled loop (:mod:`cascgp.models.fastkernel`) when it is
+        available, else :meth:`mean_numpy` (equal to round-off)."""
+        if self.jit is not None:
+            out = np.empty(len(self.order))
+            jit_mean(self.jit, self.buf, tau_mean, out)
+            return out
+        return self.mean_numpy(tau_mean)
+
+    def mean_numpy(self, tau_mean: np.ndarray | None) -> np.ndarray:
+        """:meth:`mean` in NumPy: the reference of the compiled loop."""
         zc = self.zclip
         r2s = self.state_r2()
         out = np.empty(len(self.order))
@@ -150,12 +179,12 @@ class FastPath:
 
 @dataclass(frozen=True)
 class FastVariance:
-    r"""What the single-query path needs for the *propagated* latent variance (build with :meth:`build`;
-    built on first use, since it holds one ``(n, n)`` matrix per joint).
+    r"""What the single-query path needs for the *propagated* latent variance (build with :meth:`build`).
 
-    With :math:`\kappa` the kernel row of the query (scaled as in :class:`FastPath`) and
-    :math:`B_j = y_{std}\, s_f^2\, L_j^{-1}`, joint j's latent variance given its inputs is
-    :math:`p_j - \|B_j \kappa\|^2` (:math:`p_j = y_{std}^2 s_f^2`, the prior variance), and the cascade adds
+    With :math:`\kappa` the kernel row of the query (scaled as in :class:`FastPath`), :math:`L_j` joint j's
+    Cholesky factor and :math:`c_j = y_{std}\, s_f^2`, joint j's latent variance given its inputs is
+    :math:`p_j - \|u_j\|^2` with :math:`u_j = L_j^{-1} c_j \kappa` (one triangular solve, BLAS ``dtrsv``;
+    :math:`p_j = y_{std}^2 s_f^2`, the prior variance), and the cascade adds
     :math:`(\partial\mu_j/\partial\tau)^2 v_{t(j)}` (see :meth:`cascgp.models.CascadedGPModel.predict`), with
 
     .. math::
@@ -164,28 +193,56 @@ class FastVariance:
             2\,(z^\tau_j - z^\tau_{jk})\, \frac{c}{\ell_\tau} \cdot \frac{1}{c^2} \cdot s
         = \sum_k \tilde\alpha_{jk}\, \kappa'(a_{jk})\, 2\,(z^\tau_j - z^\tau_{jk})\, t_j
 
-    in the fast path's scaled coordinates (:math:`c = \sqrt s`, :math:`t_j` = ``t_inv_scale``).
+    in the fast path's scaled coordinates (:math:`c = \sqrt s`, :math:`t_j` = ``t_inv_scale``). The solve reads
+    half of an ``(n, n)`` matrix per joint (it was a product with the explicit inverse :math:`c_j L_j^{-1}`, which
+    reads all of it and had to be built first); at n = 500 that memory traffic is most of the query's time.
 
     Attributes:
-        B: ``(N, n, n)`` scaled inverse Cholesky factors; prior: ``(N,)`` prior variances (N m^2).
+        L: per joint, :math:`L_j^\top` (a Fortran-ordered view of the factor, as BLAS reads it); scale: ``(N,)``
+            :math:`c_j`; prior: ``(N,)`` prior variances (N m^2).
         window: online samples (:class:`cascgp.models.online.OnlineWindow`) whose variance term is added.
     """
 
-    B: np.ndarray
+    L: tuple[np.ndarray, ...]
+    scale: np.ndarray
     prior: np.ndarray
     window: Any = None
 
     @classmethod
     def build(cls, posts: Sequence[GPPosterior]) -> FastVariance:
-        from scipy.linalg import solve_triangular
+        return cls(L=tuple(np.ascontiguousarray(P.L).T for P in posts),
+                   scale=np.array([P.y_std * P.signal_var for P in posts]),
+                   prior=np.array([P.y_std**2 * P.signal_var for P in posts]))
 
-        n = posts[0].Z.shape[0]
-        B = np.stack([solve_triangular(P.L, np.eye(n), lower=True) * (P.y_std * P.signal_var) for P in posts])
-        return cls(B=B, prior=np.array([P.y_std**2 * P.signal_var for P in posts]))
+    def solve(self, j: int, b: np.ndarray) -> np.ndarray:
+        """:math:`L_j^{-1} b` (a new array)."""
+        return dtrsv(self.L[j], b, lower=0, trans=1)
 
     def mean_var(self, fast: FastPath, tau_mean: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Predicted torques and their propagated latent variances ``(N,)``, ``(N,)`` for the state in
-        ``fast.buf`` (as :meth:`FastPath.mean`)."""
+        ``fast.buf`` (as :meth:`FastPath.mean`). The kernel rows come from the compiled loop when the fast path
+        has it (:mod:`cascgp.models.fastkernel`), else from :meth:`mean_var_numpy` (equal to round-off)."""
+        if fast.jit is None:
+            return self.mean_var_numpy(fast, tau_mean)
+        N = len(fast.order)
+        mean, var = np.empty(N), np.empty(N)
+        K, G = np.empty(fast.alpha.shape), np.zeros(N)
+        jit_mean(fast.jit, fast.buf, tau_mean, mean, (K, G))
+        for j in fast.order:
+            tj = fast.torque_from[j]
+            var[j] = self._var(j, K[j], G[j] * G[j] * var[tj] if tj is not None else None)
+        return mean, var
+
+    def _var(self, j: int, kap: np.ndarray, propagated: float | None) -> float:
+        """Joint ``j``'s latent variance for its kernel row ``kap`` plus the neighbour's propagated term."""
+        n0 = self.L[j].shape[0]
+        u = self.solve(j, self.scale[j] * kap[:n0])
+        q = float(u @ u) + (self.window.extra_var(j, kap, u) if self.window is not None else 0.0)
+        v = max(self.prior[j] - q, 0.0)
+        return v if propagated is None else v + propagated
+
+    def mean_var_numpy(self, fast: FastPath, tau_mean: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`mean_var` in NumPy: the reference of the compiled kernel rows."""
         zc = fast.zclip
         r2s = fast.state_r2()
         N = len(fast.order)
@@ -204,12 +261,6 @@ class FastVariance:
             if tau_mean is not None:
                 m += float(tau_mean[j])
             mean[j] = m
-            n0 = self.B.shape[1]
-            u = self.B[j] @ kap[:n0]
-            q = float(u @ u) + (self.window.extra_var(j, kap, u) if self.window is not None else 0.0)
-            v = max(self.prior[j] - q, 0.0)
-            if tj is not None:
-                g = 2.0 * fast.t_inv_scale[j] * float((dkap * diff) @ a)
-                v += g * g * var[tj]
-            var[j] = v
+            g = 2.0 * fast.t_inv_scale[j] * float((dkap * diff) @ a) if tj is not None else 0.0
+            var[j] = self._var(j, kap, g * g * var[tj] if tj is not None else None)
         return mean, var

@@ -31,7 +31,9 @@ import math
 from typing import Any
 
 import numpy as np
-from scipy.linalg import cholesky, solve_triangular
+from scipy.linalg import solve_triangular
+from scipy.linalg.blas import dtrsv
+from scipy.linalg.lapack import dpotrf
 
 from cascgp.gp.checks import check_scale
 from cascgp.gp.kernels import get_kernel
@@ -51,6 +53,7 @@ class _JointWindow:
         self.kernel = get_kernel(P.kernel)
         self.noise = P.noise_var + P.jitter
         self.L00 = P.L
+        self.U00 = np.ascontiguousarray(P.L).T  # L00^T, Fortran-ordered: what BLAS reads without a copy
         # u0 = L00^-1 y0 with y0 = K alpha the normalised targets; algebraically L00^T alpha, but kept as the
         # solve it always was: the documented online runs (README, docs/) reproduce bit for bit with it.
         y0 = P.L @ (P.L.T @ P.alpha)
@@ -73,7 +76,7 @@ class _JointWindow:
         drop = self.m == W  # the oldest (row 0) leaves
         keep = slice(1, self.m) if drop else slice(0, self.m)
         k0 = P.signal_var * self.kernel.value(((z - P.Z) ** 2).sum(1))
-        row = solve_triangular(self.L00, k0, lower=True, check_finite=False)
+        row = dtrsv(self.U00, k0, lower=0, trans=1)  # L00^-1 k0 (BLAS directly: the wrapper cost more)
         kw = P.signal_var * self.kernel.value(((z - self.Zw[keep]) ** 2).sum(1))
         s_new = kw - self.Lw0[keep] @ row  # S = K_ww + noise I - L_w0 L_w0^T, one new row and column
         i = s_new.size
@@ -81,7 +84,9 @@ class _JointWindow:
         S[:i, :i] = self.S[keep, keep]
         S[i, :i] = S[:i, i] = s_new
         S[i, i] = P.signal_var + self.noise - float(row @ row)
-        Lww = cholesky(S, lower=True, check_finite=False)
+        Lww, info = dpotrf(S, lower=1, clean=1)  # scipy.linalg.cholesky's routine, without its wrapper
+        if info != 0:
+            raise np.linalg.LinAlgError(f"the window block is not positive definite (dpotrf info {info})")
         if not (np.all(np.isfinite(Lww)) and np.all(np.isfinite(row))):
             raise np.linalg.LinAlgError("the window block's factor is not finite")
         return drop, z, float(y), row, S, Lww
@@ -98,19 +103,17 @@ class _JointWindow:
         self.S[:m, :m] = S
         self.Lww = Lww
         Lw0 = self.Lw0[:m]
-        uw = solve_triangular(self.Lww, self.yw[:m] - Lw0 @ self.u0, lower=True, check_finite=False)
-        self.alphaw = solve_triangular(self.Lww, uw, lower=True, trans="T", check_finite=False)
-        self.alpha0 = solve_triangular(self.L00, self.u0 - Lw0.T @ self.alphaw, lower=True, trans="T",
-                                       check_finite=False)
+        uw = dtrsv(self.Lww, self.yw[:m] - Lw0 @ self.u0, lower=1)  # Lww: Fortran-ordered (dpotrf)
+        self.alphaw = dtrsv(self.Lww, uw, lower=1, trans=1)
+        self.alpha0 = dtrsv(self.U00, self.u0 - Lw0.T @ self.alphaw, lower=0)  # L00^-T (...)
 
     def extra_var(self, kap_w: np.ndarray, u: np.ndarray) -> float:
-        """Window term of the latent variance (torque units) given the fitted set's ``u = B kappa_0``."""
+        """Window term of the latent variance (torque units) given the fitted set's ``u = c L_00^{-1} kappa_0``."""
         if self.m == 0:
             return 0.0
         P = self.P
         r = self.Lww.shape[0]
-        a = solve_triangular(self.Lww, P.y_std * P.signal_var * kap_w[:r] - self.Lw0[:r] @ u, lower=True,
-                             check_finite=False)
+        a = dtrsv(self.Lww, P.y_std * P.signal_var * kap_w[:r] - self.Lw0[:r] @ u, lower=1)
         return float(a @ a)
 
 
@@ -152,7 +155,7 @@ class OnlineWindow:
         so that opening a window does not rebuild it."""
         if self._var is None:
             base = base if base is not None else FastVariance.build(self.model.posteriors())
-            self._var = FastVariance(B=base.B, prior=base.prior, window=self)
+            self._var = FastVariance(L=base.L, scale=base.scale, prior=base.prior, window=self)
         return self._var
 
     def extra_var(self, j: int, kap: np.ndarray, u: np.ndarray) -> float:
@@ -202,9 +205,9 @@ class OnlineWindow:
             J.commit(proposal)
             m = J.m
             ds = proposal[1].size - (fast.torque_from[j] is not None)
-            Wj = fast.W[j, n0:n0 + m]
+            Wj = np.zeros((m, fast.W.shape[2]))
             Wj[:, :ds] = c * J.Zw[:m, :ds]
-            fast.W2[j, n0:n0 + m] = np.einsum("nd,nd->n", Wj, Wj)
+            fast.set_rows(j, n0, Wj)
             if fast.torque_from[j] is not None:
                 fast.Zt[j, n0:n0 + m] = c * J.Zw[:m, ds]
             scale = P.y_std * P.signal_var
