@@ -145,6 +145,7 @@ class FeedforwardController:
                 not np.all(np.isfinite(limits)) or not np.all(limits > 0):
             raise ValueError(f"torque_limits must be a 1-D array of finite positive values, got {torque_limits!r}")
         self.torque_limits = limits.astype(float)
+        self._neg_limits = -self.torque_limits
         self.dof = int(self.torque_limits.shape[0])
         self.kp = _as_gain(kp, self.dof, "kp")
         self.kd = _as_gain(kd, self.dof, "kd")
@@ -256,6 +257,17 @@ class FeedforwardController:
             raise TypeError(f"t: expected a real number (s), got {type(t).__name__}")
         q, qd = self._measured("q", q), self._measured("qd", qd)
         q_d, qd_d, qdd_d = self._reference(reference, t)  # once per tick; shared with the feedforward
+        with np.errstate(over="ignore", invalid="ignore"):
+            feedback = self.kp * (q_d - q) + self.kd * (qd_d - qd)
+        if not np.isfinite(feedback).all():
+            # A finite feedback needs all four inputs finite and no overflow: then it equals the general form
+            # below, which this tick needs only for a non-finite measurement or an absurd error.
+            feedback = self._feedback_nonfinite(q, qd, q_d, qd_d)
+        tau = self._feedforward(t, q_d, qd_d, qdd_d, reference) + feedback
+        return np.minimum(np.maximum(tau, self._neg_limits), self.torque_limits)  # np.clip, without its wrapper
+
+    def _feedback_nonfinite(self, q: np.ndarray, qd: np.ndarray, q_d: np.ndarray, qd_d: np.ndarray) -> np.ndarray:
+        """The feedback torque when a measurement is not finite or an error overflows."""
         bad = ~(np.isfinite(q) & np.isfinite(qd) & np.isfinite(q_d) & np.isfinite(qd_d))
         self.n_bad_measurements += bool(np.any(bad))
         with np.errstate(over="ignore", invalid="ignore"):
@@ -263,9 +275,7 @@ class FeedforwardController:
             # before the sum so that P and D terms of opposite sign cannot make inf - inf).
             terms = np.nan_to_num(np.stack([self.kp * (q_d - q), self.kd * (qd_d - qd)]), nan=0.0,
                                   posinf=_BIG, neginf=-_BIG)
-        feedback = np.where(bad, 0.0, terms.sum(axis=0))
-        tau = self._feedforward(t, q_d, qd_d, qdd_d, reference) + feedback
-        return np.clip(tau, -self.torque_limits, self.torque_limits)
+        return np.where(bad, 0.0, terms.sum(axis=0))
 
     def _measured(self, name: str, x: Any) -> np.ndarray:
         try:

@@ -89,6 +89,18 @@ def _check_bound(model: Any, nominal: Any, needs: str) -> None:
                          "(an SP model's own rbd is used when there is none)")
 
 
+def _shares_rbd(model: Any, nominal: Any) -> bool:
+    """Whether ``model`` is a cascgp SP model whose own rigid-body model is ``nominal``: then the nominal torque
+    the controller computed is the model's RBD torque, passed as ``rbd_torque`` instead of computed again."""
+    from cascgp.models import CascadedGPModel
+
+    return isinstance(model, CascadedGPModel) and model.parametric == "sp" and model.rbd is nominal
+
+
+def _rbd_kw(share: bool, nominal: np.ndarray) -> dict[str, Any]:
+    return {"rbd_torque": nominal} if share else {}
+
+
 def innovation_weights(err_nominal: np.ndarray, err_model: np.ndarray) -> np.ndarray:
     r"""The innovation gate's weights on the learned correction: :math:`w = S_0 / (S_0 + S_m)`, with :math:`S_0`
     and :math:`S_m` the discounted sums of the squared errors of the nominal and the learned model
@@ -142,6 +154,7 @@ class InnovationGate:
         self.model: Any = None
         self.nominal: Any = None
         self.dof = 0
+        self._share = False
         self._reset()
 
     def _reset(self) -> None:
@@ -158,6 +171,7 @@ class InnovationGate:
                              f"q, qd and q̈), got {getattr(model, 'name', type(model).__name__)}")
         _check_bound(model, nominal, "predict_one")
         self.model, self.nominal, self.dof = model, nominal, int(dof)
+        self._share = _shares_rbd(model, nominal)
         self._reset()
 
     def start(self) -> None:
@@ -165,7 +179,8 @@ class InnovationGate:
 
     def correction(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, q_hist: np.ndarray | None,
                    nominal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        d = np.asarray(self.model.predict_one(q, qd, qdd, q_hist=q_hist), dtype=float) - nominal
+        d = np.asarray(self.model.predict_one(q, qd, qdd, q_hist=q_hist, **_rbd_kw(self._share, nominal)),
+                       dtype=float) - nominal
         return d, self._w.copy()  # the copy is the caller's
 
     @property
@@ -175,8 +190,10 @@ class InnovationGate:
 
     def observe(self, t: float, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, tau: np.ndarray) -> None:
         with np.errstate(all="ignore"):
-            e_model = (tau - np.asarray(self.model.predict_one(q, qd, qdd), dtype=float)) ** 2
-            e_nominal = (tau - np.asarray(self.nominal.inverse_dynamics(q, qd, qdd), dtype=float)) ** 2
+            nominal = np.asarray(self.nominal.inverse_dynamics(q, qd, qdd), dtype=float)
+            e_model = (tau - np.asarray(self.model.predict_one(q, qd, qdd, **_rbd_kw(self._share, nominal)),
+                                        dtype=float)) ** 2
+            e_nominal = (tau - nominal) ** 2
         if not (e_model.shape == e_nominal.shape == (self.dof,) and np.all(np.isfinite(e_model))
                 and np.all(np.isfinite(e_nominal)) and np.isfinite(t)):
             return
@@ -199,6 +216,7 @@ class _VarianceRule:
     def __init__(self) -> None:
         self.model: Any = None
         self.nominal: Any = None
+        self._share = False
         self.prior: np.ndarray | None = None
 
     def _check(self, model: Any) -> None:
@@ -208,6 +226,7 @@ class _VarianceRule:
         self._check(model)
         _check_bound(model, nominal, "predict_one_var")
         self.model, self.nominal = model, nominal
+        self._share = _shares_rbd(model, nominal)
         self.prior = np.asarray(model.signal_var, dtype=float)
 
     def start(self) -> None:
@@ -215,7 +234,7 @@ class _VarianceRule:
 
     def correction(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, q_hist: np.ndarray | None,
                    nominal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        mean, var = self.model.predict_one_var(q, qd, qdd, q_hist=q_hist)
+        mean, var = self.model.predict_one_var(q, qd, qdd, q_hist=q_hist, **_rbd_kw(self._share, nominal))
         d = mean - nominal
         return d, self.weights(d, var, self.prior)
 

@@ -382,21 +382,25 @@ class CascadedGPModel:
         q_hist = history_from_data(data, self.df_delta)[0] if self.feature_kind == "df" else None
         return self._predict_arrays(data.q, data.qd, data.qdd, q_hist, return_var=True)
 
-    def predict_one(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None) -> np.ndarray:
-        """Mean torque (N,) for ONE query: the lean NumPy path for a controller (no torch, no variance;
-        :mod:`cascgp.models.fastpath`). Equals :meth:`predict` to round-off (~1e-12), except while an online
-        window is open (:meth:`start_online`): then it includes the online samples, which :meth:`predict` does
-        not. Inputs are checked for shape and finiteness (``ValueError``)."""
-        f, tau_rbd = load_query(self, q, qd, qdd, q_hist)
+    def predict_one(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None, *,
+                    rbd_torque: Any = None) -> np.ndarray:
+        """Mean torque (N,) for ONE query: the lean path for a controller (no torch, no variance;
+        :mod:`cascgp.models.fastpath`, compiled when Numba is installed). Equals :meth:`predict` to round-off
+        (~1e-12), except while an online window is open (:meth:`start_online`): then it includes the online
+        samples, which :meth:`predict` does not. Inputs are checked for shape and finiteness (``ValueError``).
+        ``rbd_torque`` (SP models, optional): ``self.rbd.inverse_dynamics(q, qd, qdd)`` when the caller has it
+        already (a gated controller's nominal torque), so that it is not computed twice."""
+        f, tau_rbd = load_query(self, q, qd, qdd, q_hist, rbd_torque)
         return f.mean(tau_rbd)
 
-    def predict_one_var(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None
-                        ) -> tuple[np.ndarray, np.ndarray]:
+    def predict_one_var(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None, *,
+                        rbd_torque: Any = None) -> tuple[np.ndarray, np.ndarray]:
         """Mean torque and *propagated* latent variance (N,), (N,) for ONE query: the single-query form of
         ``predict(..., propagate=True)`` (equal to round-off; with an online window open, of the enlarged
         sets). The first call builds one ``(n, n)`` matrix per joint (:meth:`prepare_variance`); a query then
-        costs one ``(n, n)`` product per joint on top of :meth:`predict_one`."""
-        f, tau_rbd = load_query(self, q, qd, qdd, q_hist)
+        costs one ``(n, n)`` product per joint on top of :meth:`predict_one`. ``rbd_torque``: as for
+        :meth:`predict_one`."""
+        f, tau_rbd = load_query(self, q, qd, qdd, q_hist, rbd_torque)
         return self.prepare_variance().mean_var(f, tau_rbd)
 
     def prepare_variance(self) -> FastVariance:

@@ -77,9 +77,11 @@ def check_queries(model: "CascadedGPModel", q: Any, qd: Any, qdd: Any, q_hist: A
     return single, q, qd, qdd, q_hist
 
 
-def load_query(model: "CascadedGPModel", q: Any, qd: Any, qdd: Any, q_hist: Any
+def load_query(model: "CascadedGPModel", q: Any, qd: Any, qdd: Any, q_hist: Any, rbd_torque: Any = None
                ) -> tuple[FastPath, np.ndarray | None]:
-    """Check one query and write its state into the fast path's buffer; returns it and the RBD torque (NP: None)."""
+    """Check one query and write its state into the fast path's buffer; returns it and the RBD torque (NP: None),
+    ``rbd_torque`` when given (SP: ``model.rbd``'s torque at this state, computed by the caller; checked as the
+    model checks its own)."""
     f = model._require_fitted()
     N = model.dof
     q = one_real("q", q)
@@ -109,7 +111,16 @@ def load_query(model: "CascadedGPModel", q: Any, qd: Any, qdd: Any, q_hist: Any
         buf[2:3 * N:3] = h[1]
     if not np.isfinite(buf).all():
         raise ValueError("q/qd/qdd/q_hist: non-finite value (NaN or inf) in the query")
-    return f, (model._rbd_torque(q, qd, qdd) if model.parametric == "sp" else None)
+    if model.parametric != "sp":
+        return f, None
+    if rbd_torque is None:
+        return f, model._rbd_torque(q, qd, qdd)
+    tau = one_real("rbd_torque", rbd_torque)
+    if tau.shape != (N,):
+        raise ValueError(f"rbd_torque: expected shape ({N},), got {tau.shape}")
+    if not np.isfinite(tau).all():
+        raise ValueError("rbd: the rigid-body model returned non-finite torques")
+    return f, tau
 
 
 def state_cols(sflat: np.ndarray, state_joints: tuple[int, ...]) -> np.ndarray:
