@@ -164,3 +164,20 @@ def test_the_feedback_shortcut_equals_the_general_form() -> None:
     tau = ctrl(0.0, np.array([np.nan, 0.0, 1e308]), np.zeros(3), lambda t: (np.zeros(3),) * 3)
     assert np.all(np.isfinite(tau)) and np.all(np.abs(tau) <= 30.0) and tau[0] == 0.0
     assert ctrl.n_bad_measurements == 1
+
+
+def test_a_compiled_loop_that_fails_to_build_leaves_the_numpy_path(models, monkeypatch) -> None:
+    import cascgp.models.fastkernel as fk
+
+    def broken(*a):
+        raise RuntimeError("no cache location")
+
+    monkeypatch.setattr(fk, "_compiled", {"mean": broken})
+    monkeypatch.delenv("CASCGP_JIT", raising=False)
+    model = make_model("np-inward", 3, gp_config=CFG)
+    with pytest.warns(RuntimeWarning, match="NumPy path runs"):
+        model.adopt_banks(models["np-inward"].banks, models["np-inward"].where, models["np-inward"].n_train)
+    assert model._fast.jit is None and not fk.jit_enabled()
+    q, qd, qdd, _, _ = _queries(1)[0]
+    np.testing.assert_allclose(model.predict_one(q, qd, qdd), models["np-inward"].predict_one(q, qd, qdd),
+                               rtol=1e-12, atol=1e-12)

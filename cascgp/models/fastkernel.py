@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import importlib
 import os
+import warnings
 from typing import Any, Callable
 
 import numpy as np
@@ -131,21 +132,30 @@ def jit_args(kernel: str, arrays: tuple) -> tuple | None:
     args = (*arrays, kid)
     N, D = arrays[0].shape
     out = np.zeros(N)
-    jit_mean(args, np.zeros(D + 1), None, out)
+    try:
+        jit_mean(args, np.zeros(D + 1), None, out)
+    except Exception as exc:  # noqa: BLE001 - e.g. no writable cache location: the NumPy path still works
+        warnings.warn(f"cascgp: the compiled single-query loop is not used ({type(exc).__name__}: {exc}); "
+                      "the NumPy path runs", RuntimeWarning, stacklevel=3)
+        _compiled["mean"] = None
+        return None
     return args
 
 
 def jit_mean(args: tuple, buf: np.ndarray, tau: np.ndarray | None, out: np.ndarray,
-             var_out: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+             var_out: tuple[np.ndarray, np.ndarray] | None = None) -> bool:
     """Run the compiled mean with :func:`jit_args`' ``args`` for the state in ``buf`` into ``out`` (``tau``: the
-    SP models' RBD torque added to each joint's GP mean); ``var_out``: ``(K, G)`` to fill as in :func:`_source`."""
-    fn = _kernel()
-    assert fn is not None  # jit_args returned args
+    SP models' RBD torque added to each joint's GP mean); ``var_out``: ``(K, G)`` to fill as in :func:`_source`.
+    False (nothing written) if the compiled loop has been dropped since (a later build failed)."""
+    fn = _compiled.get("mean")
+    if fn is None:
+        return False
     t = out if tau is None else np.ascontiguousarray(tau, dtype=np.float64)
     if var_out is None:
         fn(*args, buf, t, tau is not None, out, False, _NO_K, out)
     else:
         fn(*args, buf, t, tau is not None, out, True, var_out[0], var_out[1])
+    return True
 
 
 _NO_K = np.zeros((1, 1))

@@ -150,8 +150,8 @@ class FastPath:
         available, else :meth:`mean_numpy` (equal to round-off)."""
         if self.jit is not None:
             out = np.empty(len(self.order))
-            jit_mean(self.jit, self.buf, tau_mean, out)
-            return out
+            if jit_mean(self.jit, self.buf, tau_mean, out):
+                return out
         return self.mean_numpy(tau_mean)
 
     def mean_numpy(self, tau_mean: np.ndarray | None) -> np.ndarray:
@@ -222,12 +222,11 @@ class FastVariance:
         """Predicted torques and their propagated latent variances ``(N,)``, ``(N,)`` for the state in
         ``fast.buf`` (as :meth:`FastPath.mean`). The kernel rows come from the compiled loop when the fast path
         has it (:mod:`cascgp.models.fastkernel`), else from :meth:`mean_var_numpy` (equal to round-off)."""
-        if fast.jit is None:
-            return self.mean_var_numpy(fast, tau_mean)
         N = len(fast.order)
         mean, var = np.empty(N), np.empty(N)
         K, G = np.empty(fast.alpha.shape), np.zeros(N)
-        jit_mean(fast.jit, fast.buf, tau_mean, mean, (K, G))
+        if fast.jit is None or not jit_mean(fast.jit, fast.buf, tau_mean, mean, (K, G)):
+            return self.mean_var_numpy(fast, tau_mean)
         for j in fast.order:
             tj = fast.torque_from[j]
             var[j] = self._var(j, K[j], G[j] * G[j] * var[tj] if tj is not None else None)
