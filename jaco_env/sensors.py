@@ -94,13 +94,10 @@ class SensorNoise:
     def measurement(self, rng: np.random.Generator, q: np.ndarray, qd: np.ndarray, tau: np.ndarray,
                     t: float) -> np.ndarray:
         """The measured part of an observation, ``[q, qd, tau, t]`` with noise (layout above)."""
-        # The arithmetic of apply() (the same draws; x + std * e, entry by entry) written into one array.
+        # The arithmetic of apply() (the same draws; x + std * e, entry by entry) in one array.
         n = len(q)
         e = rng.standard_normal((3, n))
         e *= self._std
-        out = np.empty(3 * n + 1)
-        x = out[:3 * n].reshape(3, n)
-        x[0], x[1], x[2] = q, qd, tau
-        x += e
-        out[3 * n] = t
+        out = np.concatenate((q, qd, tau, (t,)))
+        out[:3 * n] += e.ravel()
         return out

@@ -61,13 +61,11 @@ from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
 
 from jaco_env import robot, scene
 from jaco_env.checks import is_real_number, real_array
+from jaco_env.envs.stepping import MAX_JOINT_SPEED, MAX_MARBLE_SPEED, ControlPeriod, as_index  # noqa: F401
 from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
 
 #: Largest physics step (s); the step is control_dt / ceil(control_dt / MAX_PHYSICS_STEP).
 MAX_PHYSICS_STEP = 0.002
-#: A joint speed (rad/s) or marble speed (m/s) above these marks the simulation unstable.
-MAX_JOINT_SPEED = 50.0
-MAX_MARBLE_SPEED = 20.0
 
 # dict[str, Any]: MuJoCo's viewer takes lookat as an array (gymnasium annotates the values as numbers only)
 DEFAULT_CAMERA: dict[str, Any] = {"distance": 2.0, "azimuth": 150.0, "elevation": -25.0,
@@ -217,13 +215,6 @@ def _no_display_message(reason: str) -> str:
             "DISPLAY (or WAYLAND_DISPLAY), or start a virtual one (xvfb-run -a python ...).")
 
 
-def _index(adr: np.ndarray) -> slice | np.ndarray:
-    """``adr`` as a slice where it is a contiguous ascending run (a view, not a gather), else itself."""
-    if len(adr) and np.array_equal(adr, np.arange(adr[0], adr[0] + len(adr))):
-        return slice(int(adr[0]), int(adr[0]) + len(adr))
-    return adr
-
-
 def check_options(options: dict | None, allowed: tuple[str, ...]) -> dict:
     """The reset options as a dict (``{}`` for None); unknown keys raise ``ValueError``."""
     if options is None:
@@ -299,19 +290,17 @@ class JacoMujocoEnv(MujocoEnv):
         self._tau_sensor = np.array([m.sensor_adr[m.sensor(scene.ARM_PREFIX + n).id] + 2
                                      for n in robot.TORQUE_SENSOR_NAMES])
         # Hot path (step): views of the data arrays fetched once (each attribute read of MjData builds a
-        # new array object; ``data.warning.number`` is a live view of the warning counters), index
-        # arrays as slices where contiguous, the action bounds as float64 (exact: they are float32).
+        # new array object), index arrays as slices where regular, the action bounds as float64 (exact:
+        # they are float32); one control period of physics and its checks: ControlPeriod (stepping.py).
         d = self.data
-        self._qpos, self._qvel, self._ctrl = d.qpos, d.qvel, d.ctrl
-        self._arm_q, self._arm_qd = _index(self.arm_qpos_adr), _index(self.arm_dof_adr)
-        self._warn_number = d.warning.number
+        self._qpos, self._qvel, self._qacc = d.qpos, d.qvel, d.qacc
+        self._arm_q, self._arm_qd = as_index(self.arm_qpos_adr), as_index(self.arm_dof_adr)
         self._act_low = self.action_space.low.astype(np.float64)
         self._act_high = self.action_space.high.astype(np.float64)
-        self._marble_vel: np.ndarray | None = None  # (n_marbles, 3) indices of the marbles' linear velocities
-        self._warn_counts = np.zeros(len(self.data.warning), dtype=np.int64)
+        slots = [slice(0, _N)] + ([slice(_N, 2 * _N)] if control_mode == "velocity" else [])
+        self._period = ControlPeriod(m, d, self.frame_skip, slots, self._tau_sensor, self.arm_dof_adr)
         self._step_count = 0
         self._unstable = False
-        self._tau_meas_true = np.zeros(_N)
         self._last_obs: np.ndarray | None = None
         self._terminated = False
         self._warned_terminated = False
@@ -349,38 +338,23 @@ class JacoMujocoEnv(MujocoEnv):
     def _validate_action(self, action) -> np.ndarray:
         """The action as float64, clipped to the bounds; TypeError (not real numbers: str, bool, complex,
         ...) or ValueError (shape, NaN/inf) naming ``action`` otherwise, before anything changes."""
-        a = real_array(action, (_N,), "action")
-        # np.clip(a, low, high) for finite a, without np.clip's Python wrapper
-        return np.minimum(np.maximum(a, self._act_low, out=a), self._act_high, out=a)
+        # np.clip(a, low, high) for finite a, without np.clip's Python wrapper; the usual action (a float32 or
+        # float64 array of the right shape, a.a finite) skips real_array, whose result it would be
+        if (type(action) is np.ndarray and action.shape == (_N,) and action.dtype.char in "fd"
+                and math.isfinite(action.dot(action))):
+            a = np.maximum(action, self._act_low)  # float64 (float32 entries are converted exactly)
+        else:
+            a = np.maximum(real_array(action, (_N,), "action"), self._act_low)
+        return np.minimum(a, self._act_high, out=a)
 
     def _simulate(self, a: np.ndarray) -> bool:
-        """Advance one control period; return True when the simulation went unstable."""
-        m, d = self.model, self.data
-        ctrl = self._ctrl
-        ctrl[:_N] = a
-        if self.control_mode == "velocity":
-            ctrl[_N:2 * _N] = a
-        mujoco.mj_step(m, d, nstep=self.frame_skip)
-        # The joint torque sensors sample at the same instant as q and qd (the end of the period),
-        # with the command of the period just ended still in effect: mj_step left the sensors of
-        # the *start* of its last physics step, so evaluate the model at the current state.
-        mujoco.mj_forward(m, d)
-        self._tau_meas_true = d.sensordata[self._tau_sensor]
-        warn = self._warn_number
-        new_warning = bool((warn > self._warn_counts).any())
-        self._warn_counts = warn.copy()
-        qvel = self._qvel
-        unstable = new_warning or not (np.isfinite(self._qpos).all() and np.isfinite(qvel).all())
-        if not unstable:
-            unstable = bool(np.abs(qvel[self._arm_qd]).max() > MAX_JOINT_SPEED)
-        if not unstable and self._marble_vel is not None:
-            lin = qvel[self._marble_vel]
-            unstable = bool(np.sqrt(np.add.reduce(lin * lin, axis=1)).max() > MAX_MARBLE_SPEED)  # norm(axis=1)
-        return unstable
+        """Advance one control period (:class:`~jaco_env.envs.stepping.ControlPeriod`: the command, the
+        physics, the torque sample at the end state); return True when the simulation went unstable."""
+        return self._period.run(a)
 
     def _measure(self) -> np.ndarray:
         return self.sensor_noise.measurement(self.np_random, self._qpos[self._arm_q], self._qvel[self._arm_qd],
-                                             self._tau_meas_true, self.time)
+                                             self._period.tau, self.time)
 
     def _reset_arm(self, q0: np.ndarray) -> None:
         d = self.data
@@ -390,8 +364,8 @@ class JacoMujocoEnv(MujocoEnv):
             d.act[self.velocity_ref_act_adr] = q0
         self._step_count = 0
         self._unstable = False
-        self._tau_meas_true = np.zeros(_N)
-        self._warn_counts = np.zeros(len(d.warning), dtype=np.int64)
+        self._period.tau = np.zeros(_N)
+        self._period.forget()
 
     # ------------------------------------------------------------------ reset flow
     def _parse_options(self, options: dict | None) -> dict:

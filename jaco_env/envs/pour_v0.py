@@ -190,7 +190,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         self.marble_qpos_adr = np.array([m.jnt_qposadr[m.joint(f"marble{k}").id] for k in range(n_marbles)])
         self.marble_dof_adr = np.array([m.jnt_dofadr[m.joint(f"marble{k}").id] for k in range(n_marbles)])
         self._marble_pos = self.marble_qpos_adr[:, None] + np.arange(3)
-        self._marble_vel = self.marble_dof_adr[:, None] + np.arange(3)
+        self._period.watch_marbles(self.marble_dof_adr)
         self.task: PouringTask = self.default_task or DEFAULT_TASKS["front"]
         self._in_jar = 0
 
