@@ -1,13 +1,20 @@
 """Benchmark: env steps per second vs raw MuJoCo stepping of the same model.
 
-    python -m scripts.bench_env --out out/bench_env [--steps 400] [--env JacoPour-v0]
+    python -m scripts.bench_env --out out/bench_env [--steps 400] [--rounds 5] [--env JacoPour-v0]
 
 Both run the same compiled model from the same state for the same number of control
 periods (``frame_skip`` physics steps each) with the same torque: the raw loop only calls
-``mujoco.mj_step(model, data, nstep=frame_skip)``; the env loop calls ``env.step`` (action
-checks, sensors, reference, marble bookkeeping, info). Also compares raw stepping with the
-env's CG solver against MuJoCo's default Newton solver (speed, and the largest difference of
-the arm joints and marble positions after the same steps). One run; BLAS/OpenMP limited to
+``mujoco.mj_step(model, data, nstep=frame_skip)``; the env loop calls ``env.step`` of the
+``gym.make`` env (action checks, sensors, reference, marble bookkeeping, info). Measured side by
+side in one run: ``--rounds`` rounds, each stepping the env ``--steps`` times from ``reset(seed=0)``
+and the raw loop as many periods from the same state, timed in alternating chunks of 10 control
+steps (the same physics, so a change of the machine's load falls on both). The cost ratio (env
+time / raw time) is the median over all chunk pairs (a chunk slowed by another process is an
+outlier); each round's ratio of totals is kept, and the ratio of the thread's CPU time
+(``time.thread_time``: time the core was taken by another process is not counted) is reported
+beside it. Steps per second are those of the best round. Also compares raw
+stepping with the env's CG solver against MuJoCo's default Newton solver (speed, and the largest
+difference of the arm joints and marble positions after the same steps). BLAS/OpenMP limited to
 one thread. Prints a table and writes ``bench_env.json`` into ``--out``.
 """
 
@@ -30,11 +37,16 @@ import numpy as np  # noqa: E402
 import jaco_env  # noqa: E402
 from jaco_env.oracle import OracleController  # noqa: E402
 
+#: Control steps per timed chunk: env and raw chunks alternate, so that a change of the machine's load
+#: (other processes on the shared cores) falls on both.
+CHUNK = 10
 
-def bench(env_id: str, steps: int) -> dict:
+
+def bench(env_id: str, steps: int, rounds: int = 5) -> dict:
     kwargs = {} if env_id == "JacoPayload-v0" else {"task": "front"}
     env = gym.make(env_id, **kwargs)
-    env.reset(seed=0, options={"payload_mass": 1.0})
+    options = {"payload_mass": 1.0}
+    env.reset(seed=0, options=options)
     u = env.unwrapped
     # A gravity-holding torque keeps both runs in the same regime (arm still, marbles in the bottle):
     # the oracle's rigid inverse dynamics (marbles lumped at rest) at the current pose, at rest.
@@ -43,21 +55,40 @@ def bench(env_id: str, steps: int) -> dict:
     tau = OracleController(u.payload_mass, u.n_marbles, follow_marbles=False).feedforward(q, zero, zero)
     tau = np.clip(tau, -u.torque_limits, u.torque_limits).astype(np.float32)
 
-    state0 = np.empty(mujoco.mj_stateSize(u.model, mujoco.mjtState.mjSTATE_FULLPHYSICS))
-    mujoco.mj_getState(u.model, u.data, state0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
-
-    t0 = time.perf_counter()
-    for _ in range(steps):
-        env.step(tau)
-    t_env = time.perf_counter() - t0
-
+    spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
+    state0 = np.empty(mujoco.mj_stateSize(u.model, spec))
+    mujoco.mj_getState(u.model, u.data, state0, spec)
     d = mujoco.MjData(u.model)
-    mujoco.mj_setState(u.model, d, state0, mujoco.mjtState.mjSTATE_FULLPHYSICS)
-    d.ctrl[:jaco_env.robot.N_JOINTS] = tau
-    t0 = time.perf_counter()
-    for _ in range(steps):
-        mujoco.mj_step(u.model, d, nstep=u.frame_skip)
-    t_raw = time.perf_counter() - t0
+
+    def one_round(first_env: bool) -> np.ndarray:
+        """Wall and CPU time (s) of each chunk of the ``steps`` control steps, env and raw, timed in
+        alternation: (chunks, env/raw, wall/cpu)."""
+        env.reset(seed=0, options=options)  # the same state0 (seeded)
+        mujoco.mj_setState(u.model, d, state0, spec)
+        d.ctrl[:jaco_env.robot.N_JOINTS] = tau
+        starts = range(0, steps, CHUNK)
+        t = np.zeros((len(starts), 2, 2))
+        for c, start in enumerate(starts):
+            n = min(CHUNK, steps - start)
+            for which in ((0, 1) if first_env else (1, 0)):
+                w0, c0 = time.perf_counter(), time.thread_time()
+                if which == 0:
+                    for _ in range(n):
+                        env.step(tau)
+                else:
+                    for _ in range(n):
+                        mujoco.mj_step(u.model, d, nstep=u.frame_skip)
+                t[c, which] = time.perf_counter() - w0, time.thread_time() - c0
+            first_env = not first_env
+        return t
+
+    chunks = np.array([one_round(r % 2 == 0) for r in range(rounds)])  # (rounds, chunks, env/raw, wall/cpu)
+    times = chunks.sum(axis=1)  # (rounds, env/raw, wall/cpu)
+    t_env, t_raw = times[:, 0, 0].min(), times[:, 1, 0].min()
+    costs = times[:, 0, 0] / times[:, 1, 0]
+    costs_cpu = times[:, 0, 1] / times[:, 1, 1]
+    # the median over all chunk pairs (the same physics each): a chunk slowed by another process is an outlier
+    cost_chunks = float(np.median(chunks[:, :, 0, 0] / chunks[:, :, 1, 0]))
 
     # The env uses MuJoCo's CG solver (scene.py); compare with the default Newton solver: time,
     # and how far the arm and the marbles drift apart over the same steps (physics unchanged
@@ -88,9 +119,14 @@ def bench(env_id: str, steps: int) -> dict:
         "control_steps": steps,
         "physics_steps_per_control_step": u.frame_skip,
         "physics_timestep_s": float(u.model.opt.timestep),
+        "rounds": rounds,
         "env_steps_per_s": steps / t_env,
         "raw_steps_per_s": steps / t_raw,
-        "ratio_env_over_raw": t_raw / t_env,
+        "ratio_env_over_raw": 1.0 / cost_chunks,
+        "env_cost_over_raw": cost_chunks,
+        "env_cost_over_raw_per_round": costs.tolist(),
+        "env_cost_over_raw_cpu": float(np.median(costs_cpu)),
+        "env_cost_over_raw_cpu_per_round": costs_cpu.tolist(),
     }
 
 
@@ -98,21 +134,28 @@ def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, help="output folder for bench_env.json")
     p.add_argument("--steps", type=int, default=400, help="control steps per measurement")
+    p.add_argument("--rounds", type=int, default=5, help="timing rounds (median ratio reported)")
     p.add_argument("--env", nargs="+", default=["JacoPour-v0", "JacoPayload-v0"])
     args = p.parse_args(argv)
-    if args.steps < 1:
-        p.error("--steps must be >= 1")
-    rows = [bench(e, args.steps) for e in args.env]
-    print(f"{'env':16s} {'env steps/s':>12s} {'raw steps/s':>12s} {'ratio':>7s} {'raw Newton':>11s} "
-          f"{'raw CG':>8s} {'CG-Newton arm rad / marbles m':>30s}")
+    if args.steps < 1 or args.rounds < 1:
+        p.error("--steps and --rounds must be >= 1")
+    rows = [bench(e, args.steps, args.rounds) for e in args.env]
+    print(f"{'env':16s} {'env steps/s':>12s} {'raw steps/s':>12s} {'cost':>6s} {'cost per round':>24s} "
+          f"{'cpu cost':>8s} {'raw Newton':>11s} {'raw CG':>8s} {'CG-Newton arm rad / marbles m':>30s}")
     for r in rows:
+        per_round = " ".join(f"{c:.2f}" for c in r["env_cost_over_raw_per_round"])
         print(f"{r['env_id']:16s} {r['env_steps_per_s']:12.1f} {r['raw_steps_per_s']:12.1f} "
-              f"{r['ratio_env_over_raw']:7.3f} {r['newton_raw_steps_per_s']:11.1f} {r['cg_raw_steps_per_s']:8.1f} "
+              f"{r['env_cost_over_raw']:6.3f} {per_round:>24s} {r['env_cost_over_raw_cpu']:8.3f} "
+              f"{r['newton_raw_steps_per_s']:11.1f} {r['cg_raw_steps_per_s']:8.1f} "
               f"{r['cg_vs_newton_arm_max_diff_rad']:15.2e} / {r['cg_vs_newton_marble_max_diff_m']:.2e}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     meta = {"mujoco": mujoco.__version__, "python": platform.python_version(), "machine": platform.machine(),
-            "note": "one run; ratio = raw time / env time for the same control steps (1 = no overhead)"}
+            "note": "one run; env and raw timed in alternating chunks of 10 control steps, in --rounds rounds; "
+                    "env_cost_over_raw = env wall time / raw wall time of the same chunk, median over all chunks "
+                    "(1 = no overhead), ratio_env_over_raw = its inverse, per_round = the ratio of each round's "
+                    "totals; env_cost_over_raw_cpu = the median over rounds of the ratio of the thread's CPU time "
+                    "(time the core was taken by other processes not counted); steps/s of the best round"}
     (out / "bench_env.json").write_text(json.dumps({"meta": meta, "results": rows}, indent=2))
     print(f"wrote {out / 'bench_env.json'}")
 
