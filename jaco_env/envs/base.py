@@ -61,7 +61,7 @@ from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
 
 from jaco_env import robot, scene
 from jaco_env.checks import is_real_number, real_array
-from jaco_env.envs.stepping import MAX_JOINT_SPEED, MAX_MARBLE_SPEED, ControlPeriod, as_index  # noqa: F401
+from jaco_env.envs.stepping import MAX_JOINT_SPEED, MAX_MARBLE_SPEED, ControlPeriod, live_view  # noqa: F401
 from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
 
 #: Largest physics step (s); the step is control_dt / ceil(control_dt / MAX_PHYSICS_STEP).
@@ -290,11 +290,12 @@ class JacoMujocoEnv(MujocoEnv):
         self._tau_sensor = np.array([m.sensor_adr[m.sensor(scene.ARM_PREFIX + n).id] + 2
                                      for n in robot.TORQUE_SENSOR_NAMES])
         # Hot path (step): views of the data arrays fetched once (each attribute read of MjData builds a
-        # new array object), index arrays as slices where regular, the action bounds as float64 (exact:
-        # they are float32); one control period of physics and its checks: ControlPeriod (stepping.py).
+        # new array object; the arm's entries are live views), the action bounds as float64 (exact: they
+        # are float32); one control period of physics and its checks: ControlPeriod (stepping.py).
         d = self.data
-        self._qpos, self._qvel, self._qacc = d.qpos, d.qvel, d.qacc
-        self._arm_q, self._arm_qd = as_index(self.arm_qpos_adr), as_index(self.arm_dof_adr)
+        self._qpos = d.qpos
+        self._q_arm, self._qd_arm = live_view(d.qpos, self.arm_qpos_adr), live_view(d.qvel, self.arm_dof_adr)
+        self._qacc_arm = live_view(d.qacc, self.arm_dof_adr)
         self._act_low = self.action_space.low.astype(np.float64)
         self._act_high = self.action_space.high.astype(np.float64)
         slots = [slice(0, _N)] + ([slice(_N, 2 * _N)] if control_mode == "velocity" else [])
@@ -327,7 +328,7 @@ class JacoMujocoEnv(MujocoEnv):
 
     def arm_state(self) -> tuple[np.ndarray, np.ndarray]:
         """True (noiseless) joint positions and velocities (copies), for analysis only."""
-        return self._qpos[self._arm_q].copy(), self._qvel[self._arm_qd].copy()
+        return self._q_arm.copy(), self._qd_arm.copy()
 
     def _set_payload(self, total: float, fixed_mass: float) -> None:
         extra = total - fixed_mass
@@ -353,8 +354,8 @@ class JacoMujocoEnv(MujocoEnv):
         return self._period.run(a)
 
     def _measure(self) -> np.ndarray:
-        return self.sensor_noise.measurement(self.np_random, self._qpos[self._arm_q], self._qvel[self._arm_qd],
-                                             self._period.tau, self.time)
+        return self.sensor_noise.measurement(self.np_random, self._q_arm, self._qd_arm, self._period.tau,
+                                             self._step_count * self.control_dt)  # self.time
 
     def _reset_arm(self, q0: np.ndarray) -> None:
         d = self.data

@@ -114,7 +114,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
 
     def _info(self) -> dict[str, Any]:
         return {"time": self.time, "payload_mass": self.payload_mass, "unstable": self._unstable,
-                "qacc": self._qacc[self._arm_qd].copy()}
+                "qacc": self._qacc_arm.copy()}
 
     def step(self, action):
         a = self._validate_action(action)

@@ -330,7 +330,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         if unstable:
             self._unstable = True
             return self._last_obs.copy(), 0.0, False, True, self._info(no_reward, 0.0)
-        e = self.task.reference_position(self.time) - self._qpos[self._arm_q]
+        e = self.task.reference_position(self.time) - self._q_arm
         err = math.sqrt(e.dot(e))  # float(np.linalg.norm(e)), as numpy computes it
         counts = self.marble_counts()
         reward, reward_info = self._get_rew(err, counts[0])

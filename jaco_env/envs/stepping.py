@@ -54,6 +54,15 @@ def as_index(adr: np.ndarray) -> slice | np.ndarray:
     return adr
 
 
+def live_view(arr: np.ndarray, adr: np.ndarray) -> np.ndarray:
+    """``arr[adr]`` as a view that follows ``arr`` (nothing to gather per read); ``adr`` must be an ascending
+    arithmetic run (``ValueError`` otherwise), as the arm's addresses are (the arm is the scene's first tree)."""
+    idx = as_index(adr)
+    if not isinstance(idx, slice):
+        raise ValueError(f"addresses {np.asarray(adr).tolist()} are not an ascending arithmetic run")
+    return arr[idx]
+
+
 class ControlPeriod:
     """Advance one ``MjData`` by control periods of ``frame_skip`` physics steps (see the module docstring).
 
@@ -69,7 +78,8 @@ class ControlPeriod:
         self._sensordata, self._tau = data.sensordata, as_index(tau_adr)
         self._warn = data.warning.number  # a live view of the warning counters
         self._qpos, self._qvel, self._act = data.qpos, data.qvel, data.act
-        self._arm_qd = as_index(np.asarray(arm_dof_adr))
+        self._qd_arm = live_view(data.qvel, arm_dof_adr)
+        self._arm_is_all = self._qd_arm.size == model.nv  # its speed screen then bounds all of qvel
         self._marble_lin: np.ndarray | None = None
         self.tau = np.zeros(len(np.asarray(tau_adr)))
         self.forget()
@@ -109,10 +119,11 @@ class ControlPeriod:
         if wb != self._warn_seen:
             new_warning = bool((w > self._warn_counts).any())
             self._warn_counts, self._warn_seen = w.copy(), wb
-        qd_arm = qvel[self._arm_qd]
+        qd_arm = self._qd_arm
         lin = None if self._marble_lin is None else qvel[self._marble_lin]
-        if (qpos.dot(qpos) < _SCREEN_MAXVAL2 and qvel.dot(qvel) < _SCREEN_MAXVAL2
-                and qd_arm.dot(qd_arm) < _SCREEN_JOINT2 and (lin is None or _dot(lin, lin) < _SCREEN_MARBLE2)):
+        if (qd_arm.dot(qd_arm) < _SCREEN_JOINT2 and qpos.dot(qpos) < _SCREEN_MAXVAL2
+                and (self._arm_is_all or qvel.dot(qvel) < _SCREEN_MAXVAL2)
+                and (lin is None or _dot(lin, lin) < _SCREEN_MARBLE2)):
             unstable, stage = new_warning, True
         else:
             big = max(_max(np.abs(qpos)), _max(np.abs(qvel)))  # NaN if any entry is NaN
