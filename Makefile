@@ -1,7 +1,7 @@
 # One virtual environment for everything; `make demo` and `make test` create it on first use.
 PY ?= python3.11
 VENV := .venv
-# Extras installed into .venv (CI adds ray and video: `make test EXTRAS=test,ray,video`).
+# Extras installed into .venv (CI adds ray, video, lint, docs and fast: see .ci/run).
 EXTRAS ?= test
 comma := ,
 STAMP := $(VENV)/.installed-$(subst $(comma),-,$(EXTRAS))
