@@ -7,9 +7,11 @@ Fits the 6-joint SP inward cascade (default GP fit) on ``n`` rows of simulated J
 queries from the held-out motions: ``predict_one`` (the paper's feedforward), ``predict_one_var`` (mean and
 propagated variance, what the gated controller calls), ``add_sample`` (one online sample into every joint),
 and both single-query paths again with a full online window; and whole controller ticks
-(:class:`cascgp.FeedforwardController`, PD plus feedforward): ungated, and with the default innovation gate (RBD
+(:class:`cascgp.FeedforwardController`, PD plus feedforward): ungated, with the default innovation gate (RBD
 plus ``predict_one`` per tick) and its update per measured sample (``observe``: one more ``predict_one`` and RBD
-call). Medians and 90th percentiles over ``--reps`` calls, one thread. Prints a table and writes
+call), and with each variance gate (RBD plus ``predict_one_var``). Medians, 90th and 99th percentiles over
+``--reps`` calls, one thread; ``compiled`` says whether the compiled single-query loop ran
+(:mod:`cascgp.models.fastkernel`: Numba installed, ``CASCGP_JIT`` not 0). Prints a table and writes
 ``bench_online.json``.
 """
 
@@ -34,7 +36,8 @@ def _times(fn, args_list, reps: int) -> dict[str, float]:
         fn(*a)
         out.append(time.perf_counter() - t0)
     us = 1e6 * np.asarray(out)
-    return {"median_us": float(np.median(us)), "p90_us": float(np.percentile(us, 90))}
+    return {"median_us": float(np.median(us)), "p90_us": float(np.percentile(us, 90)),
+            "p99_us": float(np.percentile(us, 99))}
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -69,25 +72,34 @@ def main(argv: list[str] | None = None) -> None:
     from cascgp.controller import FeedforwardController
 
     ticks = [(0.0, x[0], x[1], lambda t, x=x: x) for x in q]
-    for label, gate in (("controller tick, ungated", False), ("controller tick, innovation gate", "innovation")):
+    gates = (("controller tick, ungated", False), ("controller tick, innovation gate", "innovation"),
+             ("controller tick, wiener gate", "wiener"), ("controller tick, floor gate", "floor"),
+             ("controller tick, variance gate", "variance"))
+    for label, gate in gates:
         ctrl = FeedforwardController(model, jaco_env.DEFAULT_KP, jaco_env.DEFAULT_KD, jaco_env.robot.TORQUE_LIMITS,
                                      fallback=rbd, gate=gate, online_every=1)
         ctrl.start(None, {})
         rows[label + " (offline)"] = _times(ctrl, ticks, a.reps)
+        if gate == "innovation":
+            innovation = ctrl
     measured = [(test.q[i], test.qd[i], test.tau[i], 0.025 * k) for k, i in enumerate(range(0, test.n_samples, 3))]
-    rows["innovation update per sample (observe)"] = _times(ctrl.observe, measured, a.reps)
+    rows["innovation update per sample (observe)"] = _times(innovation.observe, measured, a.reps)
     model.start_online(a.window)
     samples = [(test.q[i], test.qd[i], test.qdd[i], test.tau[i]) for i in range(0, test.n_samples, 10)]
     rows["add_sample (window filling and full)"] = _times(model.add_sample, samples, max(3 * a.window, 300))
     rows["predict_one (online, full window)"] = _times(model.predict_one, q, a.reps)
     rows["predict_one_var (online, full window)"] = _times(model.predict_one_var, q, a.reps)
+    from cascgp.models.fastkernel import jit_enabled
+
     res = {"n_train": model.n_train, "window": a.window, "fit_s": fit_s, "reps": a.reps, "rows": rows,
+           "compiled": jit_enabled(),
            "control_period_us": 25_000.0, "command": "python -m scripts.bench_online " + " ".join(argv or [])}
     write_json(out / "bench_online.json", res)
-    print(f"SP inward, 6 joints, n = {model.n_train}, online window {a.window}, one thread")
-    print("| call | median (us) | p90 (us) |\n|---|---|---|")
+    print(f"SP inward, 6 joints, n = {model.n_train}, online window {a.window}, one thread, "
+          f"compiled single-query loop: {'yes' if res['compiled'] else 'no'}")
+    print("| call | median (us) | p90 (us) | p99 (us) |\n|---|---|---|---|")
     for k, v in rows.items():
-        print(f"| {k} | {v['median_us']:.0f} | {v['p90_us']:.0f} |")
+        print(f"| {k} | {v['median_us']:.0f} | {v['p90_us']:.0f} | {v['p99_us']:.0f} |")
     print(f"wrote {out / 'bench_online.json'}")
 
 
