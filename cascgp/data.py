@@ -25,8 +25,8 @@ Files are ``.npz`` archives (``numpy.savez``) written atomically (temporary file
 folder, then :func:`os.replace`) and re-validated on load.  Format version:
 :data:`FORMAT_VERSION`.
 
-(A little over 400 lines: one record type with its validation, derivatives, slicing and file
-format.)
+(One record type with its validation, slicing and file format; the numerical differentiation of
+:meth:`DynamicsData.from_measurements` is :mod:`cascgp.derivatives`.)
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .derivatives import SavGol, differentiate
 from .io import atomic_savez, check_format_header, read_npz
 
 __all__ = ["DynamicsData", "SavGol", "FORMAT_VERSION", "differentiate"]
@@ -81,73 +82,6 @@ def _check_finite(name: str, a: np.ndarray) -> None:
         if a.ndim > 1:
             col = f", column {int(np.flatnonzero(bad[r].ravel())[0])}"
         raise ValueError(f"DynamicsData.{name}: non-finite value (NaN or inf) at row {r}{col}")
-
-
-@dataclass(frozen=True)
-class SavGol:
-    """Savitzky-Golay smoothing for :meth:`DynamicsData.from_measurements`.
-
-    The acceleration is the first derivative of a local polynomial of degree ``polyorder``
-    fitted by least squares to ``window`` consecutive velocity samples
-    (:func:`scipy.signal.savgol_filter` with ``deriv=1``, ``mode="interp"``).  It assumes
-    uniform sampling within a segment (the segment's median period is used); segments
-    shorter than ``window`` fall back to plain central differences.
-    """
-
-    window: int = 7
-    polyorder: int = 2
-
-    def __post_init__(self) -> None:
-        if self.window < 3 or self.window % 2 == 0:
-            raise ValueError(f"SavGol.window: expected an odd integer >= 3, got {self.window}")
-        if not 1 <= self.polyorder < self.window:
-            raise ValueError(
-                f"SavGol.polyorder: expected 1 <= polyorder < window, got {self.polyorder}")
-
-    def noise_gain(self, dt: float) -> float:
-        r"""Variance gain of the differentiating filter for white noise on the velocities, in s⁻².
-
-        In the interior of a segment the filter is a fixed linear combination
-        :math:`\hat{\ddot q}_t = \sum_k c_k \dot q_{t+k}` (``scipy.signal.savgol_coeffs(window, polyorder,
-        deriv=1, delta=dt)``), so independent velocity noise of variance :math:`\sigma^2_{\dot q}` gives the
-        acceleration noise variance :math:`\sigma^2_{\ddot q} = \sigma^2_{\dot q} \sum_k c_k^2`; this returns
-        :math:`\sum_k c_k^2`. (Window 9, order 2, ``dt`` = 0.01 s: :math:`c_k = k / (60\,dt)`, gain
-        :math:`1 / (60\,dt^2)` = 166.7 s⁻².) The centre coefficient of a centred first-derivative filter is 0,
-        so that acceleration noise is uncorrelated with the velocity noise of the same sample. The
-        ``window // 2`` samples at each end of a segment (``mode="interp"``) use other, noisier
-        coefficients; they are not covered.
-        """
-        if not np.isfinite(dt) or dt <= 0:
-            raise ValueError(f"dt: expected a positive sample period (s), got {dt!r}")
-        from scipy.signal import savgol_coeffs
-
-        c = savgol_coeffs(self.window, self.polyorder, deriv=1, delta=float(dt), use="dot")
-        return float(np.sum(c * c))
-
-
-def differentiate(t: np.ndarray, x: np.ndarray, segment: np.ndarray, smoothing: SavGol | None) -> np.ndarray:
-    r"""Time derivative of ``x`` (T, N) within each segment: the filter of :meth:`DynamicsData.from_measurements`
-    and of logs without derivative columns (:mod:`cascgp.logs`).
-
-    With ``smoothing`` a segment of at least ``smoothing.window`` rows uses :func:`scipy.signal.savgol_filter`
-    (``deriv=1``, ``delta`` = the segment's median period, ``mode="interp"``); shorter segments and
-    ``smoothing=None`` use :func:`numpy.gradient` on the sample times. A one-row segment gets 0.
-    """
-    out = np.zeros_like(x, dtype=np.float64)
-    cuts = np.flatnonzero(np.diff(segment) != 0) + 1
-    for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(t)]):
-        if hi - lo < 2:
-            continue
-        ts = t[lo:hi]
-        if smoothing is not None and hi - lo >= smoothing.window:
-            from scipy.signal import savgol_filter
-
-            h = float(np.median(np.diff(ts)))
-            out[lo:hi] = savgol_filter(x[lo:hi], smoothing.window, smoothing.polyorder, deriv=1, delta=h, axis=0,
-                                       mode="interp")
-        else:
-            out[lo:hi] = np.gradient(x[lo:hi], ts, axis=0, edge_order=1)
-    return out
 
 
 @dataclass(frozen=True, eq=False)
@@ -324,7 +258,8 @@ class DynamicsData:
 
         ``smoothing=SavGol(window, polyorder)`` (or an odd ``int`` window, polyorder 2) uses a
         Savitzky-Golay differentiating filter instead (see :class:`SavGol`): less noise, a
-        little more bias on fast motions; no phase lag (the filter is centred).
+        little more bias on fast motions; no phase lag when centred (the default), past rows only
+        with ``SavGol(..., causal=True)``.
         """
         if isinstance(smoothing, (int, np.integer)) and not isinstance(smoothing, bool):
             smoothing = SavGol(int(smoothing))
@@ -337,7 +272,8 @@ class DynamicsData:
         qdd = differentiate(probe.t, probe.qd, probe._ids, smoothing)
         meta2 = dict(probe.meta)
         meta2.setdefault("qdd_source", "numerical differentiation of qd" + (
-            f" (Savitzky-Golay window={smoothing.window}, polyorder={smoothing.polyorder})"
+            f" ({'causal ' if smoothing.causal else ''}Savitzky-Golay window={smoothing.window}, "
+            f"polyorder={smoothing.polyorder})"
             if smoothing is not None else " (central differences)"))
         return cls(q=probe.q, qd=probe.qd, qdd=qdd, tau=probe.tau, t=probe.t,
                    segment=probe.segment, meta=meta2)

@@ -69,7 +69,8 @@ def filter_name(smoothing: SavGol | None) -> str:
     """Human-readable name of a derivative filter, as recorded in ``meta["derivative_filter"]``."""
     if smoothing is None:
         return "central differences (numpy.gradient)"
-    return f"Savitzky-Golay (window={smoothing.window}, polyorder={smoothing.polyorder})"
+    kind = "causal Savitzky-Golay" if smoothing.causal else "Savitzky-Golay"
+    return f"{kind} (window={smoothing.window}, polyorder={smoothing.polyorder})"
 
 
 # --------------------------------------------------------------------------- reading

@@ -1,0 +1,122 @@
+"""Numerical differentiation of sampled joint signals: the accelerations a learner gets from measured
+velocities (:meth:`cascgp.data.DynamicsData.from_measurements`, :mod:`cascgp.logs`).
+
+:class:`SavGol` is the Savitzky-Golay derivative, centred (offline, zero phase) or causal (what a controller
+running online can compute); :func:`differentiate` applies it per time-contiguous segment.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["SavGol", "differentiate"]
+
+
+@dataclass(frozen=True)
+class SavGol:
+    r"""Savitzky-Golay smoothing for :meth:`cascgp.data.DynamicsData.from_measurements`.
+
+    The acceleration is the first derivative of a local polynomial of degree ``polyorder``
+    fitted by least squares to ``window`` consecutive velocity samples. It assumes uniform sampling
+    within a segment (the segment's median period is used).
+
+    ============  =====================================================================================
+    ``causal``    the estimate at sample :math:`t`
+    ============  =====================================================================================
+    ``False``     centred (offline): the fit to samples :math:`t - w/2 \ldots t + w/2`, evaluated at
+                  :math:`t` (:func:`scipy.signal.savgol_filter`, ``deriv=1``, ``mode="interp"``); zero
+                  phase, but it needs :math:`\lfloor w/2 \rfloor` future samples. Segments shorter than
+                  ``window`` fall back to central differences.
+    ``True``      causal (what a controller running online can compute): the fit to the last
+                  :math:`w` samples :math:`t - w + 1 \ldots t`, evaluated at the newest one
+                  (``savgol_coeffs(..., pos=window - 1)``); exact for polynomials of degree
+                  ``polyorder``, but with a larger noise gain and a phase error that grows with
+                  frequency. The first rows of a segment use the fit to the rows available (degree
+                  lowered to fit); the first row gets 0.
+    ============  =====================================================================================
+    """
+
+    window: int = 7
+    polyorder: int = 2
+    causal: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.causal, (bool, np.bool_)):
+            raise TypeError(f"SavGol.causal: expected a bool, got {type(self.causal).__name__} {self.causal!r}")
+        if self.window < 3 or self.window % 2 == 0:
+            raise ValueError(f"SavGol.window: expected an odd integer >= 3, got {self.window}")
+        if not 1 <= self.polyorder < self.window:
+            raise ValueError(
+                f"SavGol.polyorder: expected 1 <= polyorder < window, got {self.polyorder}")
+
+    def noise_gain(self, dt: float) -> float:
+        r"""Variance gain of the differentiating filter for white noise on the velocities, in s⁻².
+
+        In the interior of a segment the filter is a fixed linear combination
+        :math:`\hat{\ddot q}_t = \sum_k c_k \dot q_{t+k}` (``scipy.signal.savgol_coeffs(window, polyorder,
+        deriv=1, delta=dt)``), so independent velocity noise of variance :math:`\sigma^2_{\dot q}` gives the
+        acceleration noise variance :math:`\sigma^2_{\ddot q} = \sigma^2_{\dot q} \sum_k c_k^2`; this returns
+        :math:`\sum_k c_k^2`. (Window 9, order 2, ``dt`` = 0.01 s: :math:`c_k = k / (60\,dt)`, gain
+        :math:`1 / (60\,dt^2)` = 166.7 s⁻².) The centre coefficient of a centred first-derivative filter is 0,
+        so that acceleration noise is uncorrelated with the velocity noise of the same sample; a causal
+        filter's newest coefficient is not, so its acceleration noise is correlated with that sample's. The
+        ``window // 2`` samples at each end of a segment (``mode="interp"``) and the first ``window - 1`` rows
+        of a causal filter use other, noisier coefficients; they are not covered.
+        """
+        if not np.isfinite(dt) or dt <= 0:
+            raise ValueError(f"dt: expected a positive sample period (s), got {dt!r}")
+        c = self.coefficients(float(dt))
+        return float(np.sum(c * c))
+
+    def coefficients(self, dt: float) -> np.ndarray:
+        r"""The interior filter :math:`c_k`: :math:`\hat{\ddot q}_t = \sum_k c_k \dot q_{t-w+1+k}` (causal) or
+        :math:`\sum_k c_k \dot q_{t-\lfloor w/2 \rfloor+k}` (centred), in s⁻¹ per sample."""
+        from scipy.signal import savgol_coeffs
+
+        pos = self.window - 1 if self.causal else None
+        return savgol_coeffs(self.window, self.polyorder, deriv=1, delta=float(dt), pos=pos, use="dot")
+
+
+def differentiate(t: np.ndarray, x: np.ndarray, segment: np.ndarray, smoothing: SavGol | None) -> np.ndarray:
+    r"""Time derivative of ``x`` (T, N) within each segment: the filter of
+    :meth:`cascgp.data.DynamicsData.from_measurements` and of logs without derivative columns (:mod:`cascgp.logs`).
+
+    With ``smoothing`` a segment of at least ``smoothing.window`` rows uses :func:`scipy.signal.savgol_filter`
+    (``deriv=1``, ``delta`` = the segment's median period, ``mode="interp"``); shorter segments and
+    ``smoothing=None`` use :func:`numpy.gradient` on the sample times. A one-row segment gets 0. A causal
+    ``smoothing`` (:class:`SavGol` with ``causal=True``) uses past rows only, in every segment.
+    """
+    out = np.zeros_like(x, dtype=np.float64)
+    cuts = np.flatnonzero(np.diff(segment) != 0) + 1
+    for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(t)]):
+        if hi - lo < 2:
+            continue
+        ts = t[lo:hi]
+        if smoothing is not None and smoothing.causal:
+            out[lo:hi] = _causal_derivative(x[lo:hi], float(np.median(np.diff(ts))), smoothing)
+        elif smoothing is not None and hi - lo >= smoothing.window:
+            from scipy.signal import savgol_filter
+
+            h = float(np.median(np.diff(ts)))
+            out[lo:hi] = savgol_filter(x[lo:hi], smoothing.window, smoothing.polyorder, deriv=1, delta=h, axis=0,
+                                       mode="interp")
+        else:
+            out[lo:hi] = np.gradient(x[lo:hi], ts, axis=0, edge_order=1)
+    return out
+
+
+def _causal_derivative(x: np.ndarray, h: float, smoothing: SavGol) -> np.ndarray:
+    """The causal Savitzky-Golay derivative of one segment ``x`` (T, N), T >= 2, sample period ``h``."""
+    from numpy.lib.stride_tricks import sliding_window_view
+    from scipy.signal import savgol_coeffs
+
+    w, T = smoothing.window, len(x)
+    out = np.zeros_like(x, dtype=np.float64)
+    for m in range(2, min(w, T + 1)):  # row m - 1 sees the m rows 0 .. m - 1
+        c = savgol_coeffs(m, min(smoothing.polyorder, m - 1), deriv=1, delta=h, pos=m - 1, use="dot")
+        out[m - 1] = c @ x[:m]
+    if T >= w:
+        out[w - 1:] = sliding_window_view(x, w, axis=0) @ smoothing.coefficients(h)
+    return out
