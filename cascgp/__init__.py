@@ -6,7 +6,7 @@ Public names are imported lazily (so ``import cascgp.data`` does not import torc
 name                module                 what
 ==================  =====================  =================================================
 DynamicsData        cascgp.data            samples q, qd, qdd, tau, t, segment, meta
-SavGol              cascgp.data            smoothing option for numerical differentiation
+SavGol              cascgp.derivatives     Savitzky-Golay derivative (centred or causal)
 state_features      cascgp.features        db / df per-joint states
 input_spec          cascgp.features        inputs of joint i's GP (standard/inward/outward)
 build_inputs        cascgp.features        GP input matrices of every joint
@@ -39,7 +39,7 @@ __version__ = "0.2.0"
 
 _EXPORTS = {
     "DynamicsData": "cascgp.data",
-    "SavGol": "cascgp.data",
+    "SavGol": "cascgp.derivatives",
     "state_features": "cascgp.features",
     "input_spec": "cascgp.features",
     "build_inputs": "cascgp.features",
