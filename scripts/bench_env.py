@@ -24,6 +24,8 @@ import argparse
 import json
 import os
 import platform
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -150,7 +152,11 @@ def main(argv: list[str] | None = None) -> None:
               f"{r['cg_vs_newton_arm_max_diff_rad']:15.2e} / {r['cg_vs_newton_marble_max_diff_m']:.2e}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    head = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                          cwd=Path(__file__).resolve().parent).stdout.strip() or None
     meta = {"mujoco": mujoco.__version__, "python": platform.python_version(), "machine": platform.machine(),
+            "command": "python -m scripts.bench_env " + " ".join(sys.argv[1:] if argv is None else argv),
+            "git_commit": head, "load_average_end": list(os.getloadavg()), "cpu_count": os.cpu_count(),
             "note": "one run; env and raw timed in alternating chunks of 10 control steps, in --rounds rounds; "
                     "env_cost_over_raw = env wall time / raw wall time of the same chunk, median over all chunks "
                     "(1 = no overhead), ratio_env_over_raw = its inverse, per_round = the ratio of each round's "
