@@ -127,6 +127,19 @@ class FeedforwardController:
 
     The weights of the last tick are in :attr:`last_gate`. What the gates cost and buy, measured:
     docs/studies/index.md.
+
+    Example:
+        >>> import numpy as np
+        >>> reference = lambda t: (np.array([0.3, 0.0]), np.zeros(2), np.zeros(2))  # q_d, qd_d, qdd_d at t
+        >>> pd = FeedforwardController(None, kp=10.0, kd=1.0, torque_limits=np.array([5.0, 5.0]))
+        >>> pd.start(None, {})
+        >>> pd(0.0, np.zeros(2), np.array([0.0, 1.0]), reference)  # Kp e + Kd e_dot, no feedforward
+        array([ 3., -1.])
+        >>> pd(0.0, np.array([-1.0, 0.0]), np.zeros(2), reference)  # clipped to the actuator limits
+        array([5., 0.])
+
+        With a fitted model (:mod:`cascgp.models`) the feedforward is ``model.predict_one(q_d, qd_d, qdd_d)``:
+        ``FeedforwardController(model, kp, kd, limits, fallback=nominal_rbd, gate=True)``.
     """
 
     def __init__(

@@ -7,7 +7,9 @@ import importlib
 
 import pytest
 
-MODULES = ["cascgp.data", "cascgp.buffer", "cascgp.metrics", "cascgp.logs", "cascgp.rbd", "cascgp.learning"]
+MODULES = ["cascgp.data", "cascgp.buffer", "cascgp.metrics", "cascgp.logs", "cascgp.rbd", "cascgp.learning",
+           "cascgp.models", "cascgp.controller",
+           "jaco_env.envs.pour_v0", "jaco_env.envs.payload_v0"]
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -67,6 +67,19 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
 
     ## Version History
     - v0: initial version.
+
+    ## Example
+        >>> import gymnasium as gym
+        >>> import numpy as np
+        >>> import jaco_env
+        >>> env = gym.make("JacoPayload-v0", payload_mass=1.2)
+        >>> obs, info = env.reset(seed=0)
+        >>> q, qd, tau, t = jaco_env.split_obs(obs)
+        >>> obs.shape, q.shape, t, info["payload_mass"]
+        ((19,), (6,), 0.0, 1.2)
+        >>> obs, reward, terminated, truncated, info = env.step(np.zeros(6, dtype=np.float32))
+        >>> info["qacc"].shape, truncated                  # true accelerations: for analysis only
+        ((6,), False)
     """
 
     _scene_kind = "payload"

@@ -135,6 +135,18 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
       solver, the measured torque is an instantaneous sample instead of the period mean; then link-side torque
       sensors, the firmware torque loop with datasheet-derived rotor inertia and friction instead of dm_control's
       4 / 2 kg m^2 armature, and gains derived for the new inertia.)
+
+    ## Example
+        >>> import gymnasium as gym
+        >>> import jaco_env
+        >>> env = gym.make("JacoPour-v0")
+        >>> obs, info = env.reset(seed=0, options={"task": "left"})
+        >>> obs.shape, info["task"], info["n_marbles"] > 0
+        ((22,), 'left', True)
+        >>> q, qd, tau, t = jaco_env.split_obs(obs)      # measured joint state; obs[19:22] is the jar position
+        >>> obs, reward, terminated, truncated, info = env.step(env.action_space.low * 0)
+        >>> round(float(obs[jaco_env.OBS_TIME]), 3), info["unstable"]
+        (0.025, False)
     """
 
     _scene_kind = "pour"
