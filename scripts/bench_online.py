@@ -3,7 +3,8 @@
     python -m scripts.bench_online --out out/bench [--data out/study/data] [--n 500] [--window 150]
 
 Fits the 6-joint SP inward cascade (default GP fit) on ``n`` rows of simulated Jaco 2 data (the study's
-``jaco_train.npz`` at 10 Hz; without ``--data`` the quick collection preset is recorded), then times on
+``jaco_train.npz`` at 10 Hz; without ``--data`` a collection preset is recorded: the quick one (36 s of
+training motion, 360 rows) when it has ``n`` rows, else the full one (600 s, 6,000 rows)), then times on
 queries from the held-out motions: ``predict_one`` (the paper's feedforward), ``predict_one_var`` (mean and
 propagated variance, what the gated controller calls), ``add_sample`` (one online sample into every joint),
 and both single-query paths again with a full online window; and whole controller ticks
@@ -26,6 +27,10 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import numpy as np  # noqa: E402
+
+
+#: Training rows at 10 Hz of the quick collection preset (3 motions of 12 s).
+QUICK_ROWS = 360
 
 
 def _times(fn, args_list, reps: int) -> dict[str, float]:
@@ -58,7 +63,7 @@ def main(argv: list[str] | None = None) -> None:
     from cascgp_experiments.common import NOMINAL_URDF
 
     out = Path(a.out)
-    train, test = study_data(a.data, out)
+    train, test = study_data(a.data, out, preset="quick" if a.n <= QUICK_ROWS else "full")
     data = train.subsample(10.0)
     data = data.take(np.arange(min(a.n, data.n_samples)))
     rbd = load_nominal(NOMINAL_URDF)
