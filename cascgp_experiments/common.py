@@ -102,6 +102,13 @@ def interval_mean(grid: Iterable[float], values: np.ndarray, lo: float, hi: floa
     return v[m].mean(axis=0)
 
 
+def median_curves(block: dict[str, Any], scoring: str = "predicted") -> dict[str, Any]:
+    """``{model: (G, N)}`` per-grid-point medians over subsets of a curves block; ``scoring="measured"``: the
+    cascades scored with the measured neighbour torque (a model without a torque input has one score)."""
+    return {m: (v.get("measured", v) if scoring == "measured" else v)["nrmse_median"]
+            for m, v in block["models"].items()}
+
+
 def make_table(grid: list[float], curves: dict[str, list[list[float]]],
                intervals: Iterable[tuple[float, float]] = TABLE_INTERVALS) -> dict[str, Any]:
     """Table I from mean curves: ``{"intervals": [[lo, hi]...], "rows": {model: [[j][k]]},

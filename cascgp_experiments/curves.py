@@ -20,6 +20,17 @@ too, in training and (``prepare``) in scoring.
 Jobs run through :mod:`cascgp_experiments.execution` (local processes or a Ray cluster, each job with one
 torch/BLAS thread, a resumable job cache); the numbers do not depend on the worker count or the backend.
 
+Two scorings of a cascade (``nrmse`` and ``measured``): with its chained *predicted* neighbour torque (the
+model's own prediction, the default of :meth:`cascgp.models.CascadedGPModel.predict`) and with the test data's
+*measured* neighbour torque (:func:`cascgp.models.measured.predict_measured_neighbour`, ``CurveSpec.measured``).
+
+Shared cells: a cascade's first joint in its chain direction (inward: joint N, outward: joint 1) takes every
+joint's state and no torque, the inputs of the standard model's GP of that joint, so it is the same model by
+construction. When the standard model of the same kind (NP/SP, derivative based/free) is in the run, that
+joint's scores (both scorings) are the standard job's, so the two are exactly equal; the cascade's own fit of
+the joint still feeds its chain. ``block["shared"]`` records each shared cell and the largest difference of the
+cascade's own fit from the standard's there.
+
 The RBD baseline is not trained: its test prediction is the nominal RNEA torque, the same for
 every subset and ``T``.
 """
@@ -37,6 +48,7 @@ from typing import Any
 import numpy as np
 from cascgp_experiments.common import RBD
 from cascgp_experiments.execution import default_workers, run_jobs  # noqa: F401  (default_workers: re-exported)
+from cascgp_experiments.pooled_stats import chain_first, standard_twin
 
 
 @dataclass
@@ -57,6 +69,7 @@ class CurveSpec:
     audit_fraction: float = 0.05
     df_delta: float = 0.1
     factory: str = "cascgp.models:make_model"
+    measured: str | None = "cascgp.models.measured:predict_measured_neighbour"  # None: predicted scoring only
     gp_overrides: dict = field(default_factory=dict)
 
 
@@ -163,7 +176,8 @@ def curve_job(spec: dict[str, Any], model: str, subset: int, data_sha256: dict[s
     make = _resolve(spec.factory)
     from cascgp.features import history_from_data
 
-    rows, walls, ntrain, audits = [], [], [], []
+    measured = _resolve(spec.measured) if spec.measured and model.split("-")[1] != "standard" else None
+    rows, rows_meas, walls, ntrain, audits = [], [], [], [], []
     prev = None
     for gi, T in enumerate(spec.grid):
         d = data.first_seconds(T)
@@ -178,6 +192,8 @@ def curve_job(spec: dict[str, Any], model: str, subset: int, data_sha256: dict[s
         walls.append(time.perf_counter() - t0)
         mean, _ = m.predict_data(test)
         rows.append(nrmse(np.asarray(mean)[mask], test.tau[mask]).tolist())
+        if measured is not None:
+            rows_meas.append(nrmse(np.asarray(measured(m, test))[mask], test.tau[mask]).tolist())
         ntrain.append(d.n_samples)
         if audited(spec, model, subset, gi):
             ref = make(model, data.dof, rbd=st["rbd"] if sp else None, gp_config=_cold_config(spec, subset),
@@ -191,8 +207,10 @@ def curve_job(spec: dict[str, Any], model: str, subset: int, data_sha256: dict[s
                            "wall_s": walls[-1], "wall_cold_s": time.perf_counter() - t1})
         prev = m
         report_progress(1, f"{model}#{subset} T={T:g} s")
-    return {"model": model, "subset": subset, "nrmse": rows, "fit_wall_s": walls, "n_train": ntrain,
-            "audit": audits}
+    out = {"model": model, "subset": subset, "nrmse": rows, "fit_wall_s": walls, "n_train": ntrain, "audit": audits}
+    if measured is not None:
+        out["nrmse_measured"] = rows_meas
+    return out
 
 
 def rbd_curve(state: dict[str, Any]) -> list[float]:
@@ -212,7 +230,9 @@ def run_curves(spec: CurveSpec, models: list[str], *, workers: int | None = None
     per-model curves block of the results JSON:
 
     ``{"grid_s", "n_subsets", "n_test_rows", "models": {m: {"nrmse_mean" (G, N), "nrmse_std" (G, N),
-    "nrmse_all" (S, G, N), "fit_wall_s" (S, G), "n_train" (S, G)}}, "wall_s", "jobs"}``.
+    "nrmse_median", "nrmse_q25", "nrmse_q75" (G, N), "nrmse_all" (S, G, N), "fit_wall_s" (S, G), "n_train" (S, G),
+    "measured": {the same nrmse_* summaries, cascades scored with the measured neighbour torque}}},
+    "shared": [{"model", "joint", "with", "max_abs_diff_own_fit"}], "wall_s", "jobs"}``.
 
     Finished jobs are cached as JSON in ``cache_dir`` (keyed by the spec, the model, the subset and the
     data files' contents) so an interrupted run resumes; the numbers do not depend on ``workers`` or
@@ -246,19 +266,35 @@ def run_curves(spec: CurveSpec, models: list[str], *, workers: int | None = None
                                 "nrmse_median": c[0], "nrmse_q25": c[0], "nrmse_q75": c[0]}
             continue
         allr = np.array([results[(m, s)]["nrmse"] for s in range(spec.n_subsets)])  # (S, G, N)
-        out["models"][m] = {
-            "nrmse_median": np.median(allr, 0), "nrmse_q25": np.percentile(allr, 25, axis=0),
-            "nrmse_q75": np.percentile(allr, 75, axis=0),
-            "nrmse_mean": allr.mean(0), "nrmse_std": allr.std(0), "nrmse_all": allr,
-            "fit_wall_s": [results[(m, s)]["fit_wall_s"] for s in range(spec.n_subsets)],
-            "n_train": [results[(m, s)]["n_train"] for s in range(spec.n_subsets)],
-        }
+        meas = [results[(m, s)].get("nrmse_measured") for s in range(spec.n_subsets)]
+        allm = np.array(meas) if all(x is not None for x in meas) else None
+        st = standard_twin(m)
+        j0 = chain_first(m, allr.shape[2])
+        if j0 is not None and st in gp_models:
+            std = np.array([results[(st, s)]["nrmse"] for s in range(spec.n_subsets)])
+            out.setdefault("shared", []).append({"model": m, "joint": j0, "with": st, "max_abs_diff_own_fit": float(
+                np.abs(allr[:, :, j0] - std[:, :, j0]).max())})
+            for a in (allr, allm):
+                if a is not None:
+                    a[:, :, j0] = std[:, :, j0]
+        out["models"][m] = {**_summary(allr),
+                            "fit_wall_s": [results[(m, s)]["fit_wall_s"] for s in range(spec.n_subsets)],
+                            "n_train": [results[(m, s)]["n_train"] for s in range(spec.n_subsets)]}
+        if allm is not None:
+            out["models"][m]["measured"] = _summary(allm)
     out["audit"] = audit_summary([a for (m, s_), r in sorted(results.items()) for a in r.get("audit", [])],
                                  spec.audit_fraction, len(gp_models) * spec.n_subsets * len(spec.grid))
     out["wall_s"] = time.perf_counter() - t_start
     out["n_cached_jobs"] = res.n_cached
     out["jobs"] = {**res.stats(), "labels": [f"{m}#{s}" for m, s in pairs]}
     return out
+
+
+def _summary(allr: np.ndarray) -> dict[str, Any]:
+    """Summaries over subsets of (S, G, N) scores, with the scores themselves (``nrmse_all``)."""
+    return {"nrmse_median": np.median(allr, 0), "nrmse_q25": np.percentile(allr, 25, axis=0),
+            "nrmse_q75": np.percentile(allr, 75, axis=0), "nrmse_mean": allr.mean(0), "nrmse_std": allr.std(0),
+            "nrmse_all": allr}
 
 
 def audit_summary(records: list[dict], fraction: float, n_fits: int, tol: float = 0.1) -> dict[str, Any]:

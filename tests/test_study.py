@@ -92,7 +92,8 @@ class _LinearModel:
 
     def fit(self, data: DynamicsData, init=None) -> "_LinearModel":
         X = np.concatenate([data.q, data.qd, data.qdd, np.ones((data.n_samples, 1))], axis=1)
-        A = X.T @ X + 1e-3 * np.eye(X.shape[1])
+        # another ridge for a cascade, so that its fit of a shared joint differs from the standard model's
+        A = X.T @ X + (1e-3 if self.name.endswith("standard") else 1.0) * np.eye(X.shape[1])
         self.W = np.linalg.solve(A, X.T @ data.tau)
         self.warm = init is not None
         # An "NLL" per joint that the audit can compare: the residual sum of squares, plus a
@@ -109,6 +110,11 @@ class _LinearModel:
 
 def fake_make(name, dof, rbd=None, **kw):
     return _LinearModel(name, dof, rbd, **kw)
+
+
+def fake_measured(model: _LinearModel, data: DynamicsData) -> np.ndarray:
+    """A stand-in for scoring with the measured neighbour torque: the prediction moved towards the data."""
+    return 0.5 * (model.predict_data(data)[0] + data.tau)
 
 
 def _synthetic(path: Path, n_seg: int, seconds: float, hz: float, seed: int) -> Path:
@@ -131,9 +137,21 @@ def test_run_curves_with_fake_factory_and_cache(tmp_path: Path) -> None:
     tr = _synthetic(tmp_path / "train.npz", 3, 12.0, 50.0, 0)
     te = _synthetic(tmp_path / "test.npz", 2, 6.0, 50.0, 1)
     spec = CurveSpec(train_path=str(tr), test_path=str(te), n_subsets=3, grid=[1.0, 2.0, 10.0],
-                     factory=f"{__name__}:fake_make", urdf=None, audit_fraction=0.5)
+                     factory=f"{__name__}:fake_make", urdf=None, audit_fraction=0.5,
+                     measured=f"{__name__}:fake_measured")
     models = ["np-standard", "np-inward"]
     out = run_curves(spec, models, workers=1, cache_dir=tmp_path / "cache")
+    # both scorings of the cascade; the standard model has one
+    assert "measured" in out["models"]["np-inward"] and "measured" not in out["models"]["np-standard"]
+    std, inw = (np.asarray(out["models"][m]["nrmse_all"]) for m in models)
+    meas = np.asarray(out["models"]["np-inward"]["measured"]["nrmse_all"])
+    assert meas.shape == inw.shape and np.all(meas[:, :, :2] < inw[:, :, :2])
+    # the inward cascade's last joint is the standard model's GP: its cells are the standard job's, bit-equal
+    assert out["shared"][0]["model"] == "np-inward" and out["shared"][0]["joint"] == 2
+    assert out["shared"][0]["max_abs_diff_own_fit"] > 0  # the cascade's own fit differed there
+    np.testing.assert_array_equal(inw[:, :, 2], std[:, :, 2])
+    np.testing.assert_array_equal(meas[:, :, 2], std[:, :, 2])
+    assert not np.array_equal(inw[:, :, 0], std[:, :, 0])
     # Audit: the seeded sample of fits, each refitted cold; gap = protocol - cold NLL (0.5 for a
     # warm-started fit of the fake model, 0 for the first grid point).
     from cascgp_experiments.curves import audited
@@ -266,7 +284,8 @@ def _regenerate_from_json_alone(out: Path, tmp_path: Path) -> None:
     code = ("import sys; from cascgp_experiments import plots; plots.render(sys.argv[1], sys.argv[2]); "
             "bad = [m for m in sys.modules if m.split('.')[0] in ('jaco_env', 'torch', 'pinocchio') "
             "or (m.startswith('cascgp.') and m != 'cascgp.io') or (m.startswith('cascgp_experiments.') and m not in "
-            "('cascgp_experiments.plots', 'cascgp_experiments.common', 'cascgp_experiments.claims'))]; "
+            "('cascgp_experiments.plots', 'cascgp_experiments.common', 'cascgp_experiments.claims', "
+            "'cascgp_experiments.pooled_stats'))]; "
             "assert not bad, bad")
     subprocess.run([sys.executable, "-c", code, str(fresh / "results.json"), str(fresh)], check=True,
                    env=_env(), cwd=REPO, timeout=120)
@@ -325,3 +344,43 @@ def test_sign_test_and_paired_comparison() -> None:
     c = paired(block, "x", "y")
     assert c["wins"][0] == [10, 10, 10] and c["losses"][1] == [10, 10, 10] and c["wins"][2] == [0, 0, 0]
     assert paired_verdict(c) == (3, 3, 3)
+
+
+def test_identical_cells_shown_and_not_counted() -> None:
+    """A cascade's chain-first joint against the standard model (or itself under the other scoring) is the same
+    model: left out of the sign-test counts, the pooled statistic and the table's cascade-beats-standard count."""
+    from cascgp_experiments.claims import cascade_vs_standard, paired, paired_markdown, paired_verdict
+    from cascgp_experiments.pooled_stats import identical_joints, run_family
+
+    assert identical_joints("np-inward", "np-standard", 6) == (5,)
+    assert identical_joints("sp-standard-df", "sp-outward-df", 6) == (0,)
+    assert identical_joints("np-inward", "np-inward", 6) == (5,)  # the two scorings
+    assert identical_joints("np-inward", "np-outward", 6) == () == identical_joints("sp-inward", "np-standard", 6)
+    assert identical_joints("np-inward-df", "np-standard", 6) == ()
+    rng = np.random.default_rng(3)
+    st = rng.uniform(0.1, 0.2, (10, 3, 3))
+    inw = st * 0.9  # better on every joint and subset ...
+    inw[:, :, 2] = st[:, :, 2]  # ... except the shared last joint, equal
+    inw[:, 0, 2] *= 0.5  # (made unequal in one point: still not counted)
+    meas = inw * 0.8
+    meas[:, :, 2] = inw[:, :, 2]
+    block = {"grid_s": [1.5, 4.5, 9.5], "n_subsets": 10, "models": {
+        "np-standard": {"nrmse_all": st}, "np-inward": {"nrmse_all": inw, "measured": {"nrmse_all": meas}}}}
+    c = paired(block, "np-inward", "np-standard")
+    assert c["identical"] == [2] and c["wins"][2] == [0, 0, 0] and c["losses"][2] == [0, 0, 0]
+    assert paired_verdict(c) == (6, 0, 0)  # 2 joints x 3 intervals; the shared joint not counted
+    c = paired(block, "np-inward", "np-inward", a_scoring="measured")
+    assert c["identical"] == [2] and paired_verdict(c) == (6, 0, 0)
+    text = "\n".join(paired_markdown(block, "t"))
+    assert "J3 =" in text and "better in 6, worse in 0, no significant difference in 0 of 6 cells" in text
+    fam = run_family(block, ())
+    assert fam == []
+    from cascgp_experiments.pooled_stats import JACO_FAMILIES
+
+    rows = run_family(block, JACO_FAMILIES["cascade vs standard (predicted neighbour torque)"])
+    assert len(rows) == 3 and all(r["excluded_joints"] == [2] for r in rows)
+    np.testing.assert_allclose([r["ratio"] for r in rows], 0.9)  # joint 3 left out: exactly 0.9
+    assert all(r["wins"] == 10 for r in rows)
+    rows_t = {m: np.asarray(v["nrmse_all"]).mean(0).T.tolist() for m, v in block["models"].items()}
+    rows_t["np-outward"] = rows_t["np-standard"]
+    assert list(cascade_vs_standard(rows_t, "np")) == [2, 2, 2]
