@@ -267,6 +267,17 @@ def _check_results(out: Path, res: dict) -> None:
     # the table in the JSON is the interval mean of the median curves in the JSON
     t = make_table(jaco["grid_s"], {m: v["nrmse_median"] for m, v in jaco["models"].items()})
     assert json.loads(json.dumps(t["rows"]).replace("NaN", "null")) == jaco["table"]["rows"]
+    # both scorings of every cascade; the chain-first joint shared with the standard model, bit-equal
+    from cascgp_experiments.pooled_stats import chain_first, standard_twin
+
+    assert len(jaco["shared"]) == 8 and "table_measured" in jaco and jaco["pooled"]
+    for m, v in jaco["models"].items():
+        j = chain_first(m, 6)
+        assert ("measured" in v) == (j is not None)
+        if j is not None:
+            std = np.asarray(jaco["models"][standard_twin(m)]["nrmse_all"])[:, :, j]
+            np.testing.assert_array_equal(np.asarray(v["nrmse_all"])[:, :, j], std)
+            np.testing.assert_array_equal(np.asarray(v["measured"]["nrmse_all"])[:, :, j], std)
     a = jaco["audit"]
     assert a["n_fits"] == len(VARIANTS) * jaco["n_subsets"] * G and a["n_audited_fits"] >= 1
     assert a["n_gps"] == 6 * a["n_audited_fits"] and 0.0 <= a["within_tol"] <= 1.0
