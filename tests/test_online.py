@@ -77,6 +77,26 @@ def test_online_samples_equal_the_closed_form_gp_and_the_window_drops_the_oldest
     assert model.n_online == 8
 
 
+def test_many_samples_through_a_small_window_stay_equal_to_the_closed_form_gp() -> None:
+    """The rank-one updates of the window's inverse (and its recomputation once per window length) keep the
+    weights and variances equal to a refactorised GP after the window has turned over many times."""
+    arm = make_arm(3, friction=0.3)
+    model = make_model("sp-inward", 3, make_arm(3), gp_config=GPFitConfig(n_restarts=1, max_iter=40)).fit(
+        sinusoid_data(arm, 4.0, 10.0, seed=1, noise=0.02))
+    new = sinusoid_data(make_arm(3, friction=0.8), 4.0, 10.0, seed=11, noise=0.02)
+    samples = [(new.q[i], new.qd[i], new.qdd[i], new.tau[i]) for i in range(new.n_samples)]
+    model.start_online(window=4)
+    query = (new.q[5] + 0.01, new.qd[5], new.qdd[5])
+    for i, s in enumerate(samples[:31]):
+        model.add_sample(*s)
+        if i % 5 == 0 or i >= 28:
+            m_ref, v_ref = _closed_form(model, samples[max(0, i - 3): i + 1], *query)
+            m2, v2 = model.predict_one_var(*query)
+            np.testing.assert_allclose(model.predict_one(*query), m_ref, rtol=1e-7, atol=1e-7)
+            np.testing.assert_allclose(m2, m_ref, rtol=1e-7, atol=1e-7)
+            np.testing.assert_allclose(v2, v_ref, rtol=1e-5, atol=1e-9)
+
+
 def test_online_learning_moves_the_prediction_toward_new_data_and_refit_resets_it() -> None:
     arm = make_arm(3, friction=0.3)
     model = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=40)).fit(
@@ -145,7 +165,7 @@ def test_stop_online_restores_the_fitted_model_exactly(name: str) -> None:
 
 
 def test_a_sample_refused_by_one_joint_changes_no_joint(monkeypatch) -> None:
-    """If one joint's window factor fails (here forced on the second joint, with a full window, so that the
+    """If one joint's window update fails (here forced on the second joint, with a full window, so that the
     oldest sample would have been dropped), the sample enters no joint: mean, variance and count unchanged,
     and the model goes on exactly as one that never saw it."""
     import cascgp.models.online as online
@@ -160,15 +180,15 @@ def test_a_sample_refused_by_one_joint_changes_no_joint(monkeypatch) -> None:
         model.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
     twin = copy.deepcopy(model)
     mean0, var0 = model.predict_one_var(*query)
-    real, calls = online.dpotrf, {"n": 0}
+    real, calls = online._JointWindow.propose, {"n": 0}
 
-    def failing(a, **kw):
+    def failing(self, z, y):
         calls["n"] += 1
         if calls["n"] == 2:
             raise np.linalg.LinAlgError("forced: not positive definite")
-        return real(a, **kw)
+        return real(self, z, y)
 
-    monkeypatch.setattr(online, "dpotrf", failing)
+    monkeypatch.setattr(online._JointWindow, "propose", failing)
     with pytest.raises(np.linalg.LinAlgError, match="forced"):
         model.add_sample(new.q[5], new.qd[5], new.qdd[5], new.tau[5])
     monkeypatch.undo()
