@@ -37,6 +37,7 @@ from cascgp.gates import (GATE_RULES, GATE_SUFFIXES, INNOVATION_HALF_LIFE_S, Gat
 __all__ = ["Controller", "InverseDynamics", "FeedforwardController", "GateRule", "GATE_RULES", "GATE_SUFFIXES",
            "INNOVATION_HALF_LIFE_S", "gate_weights", "innovation_weights"]
 
+_F64 = np.dtype(np.float64)
 _BIG = 1e300  # stands in for an overflowed feedback term; far beyond any actuator limit
 
 Reference = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
@@ -291,6 +292,8 @@ class FeedforwardController:
         return np.where(bad, 0.0, terms.sum(axis=0))
 
     def _measured(self, name: str, x: Any) -> np.ndarray:
+        if type(x) is np.ndarray and x.dtype == _F64 and x.shape == (self.dof,):
+            return x  # what the general form below returns for a float64 (N,) array
         try:
             a = np.asarray(x)
         except (TypeError, ValueError) as exc:  # ragged nested sequences
@@ -305,6 +308,12 @@ class FeedforwardController:
         out = reference(t)
         if not isinstance(out, (tuple, list)) or len(out) != 3:
             raise ValueError("reference: expected reference(t) to return (q_d, qd_d, qdd_d)")
+        a, b, c = out
+        shape = (self.dof,)
+        if (type(a) is np.ndarray and type(b) is np.ndarray and type(c) is np.ndarray and a.dtype == _F64
+                and b.dtype == _F64 and c.dtype == _F64 and a.shape == shape and b.shape == shape
+                and c.shape == shape):
+            return a, b, c  # what the general form below returns for float64 (N,) arrays
         parts = []
         for nm, x in zip(("q_d", "qd_d", "qdd_d"), out):
             a = np.asarray(x)
