@@ -397,14 +397,14 @@ class CascadedGPModel:
                         rbd_torque: Any = None) -> tuple[np.ndarray, np.ndarray]:
         """Mean torque and *propagated* latent variance (N,), (N,) for ONE query: the single-query form of
         ``predict(..., propagate=True)`` (equal to round-off; with an online window open, of the enlarged
-        sets). The first call builds one ``(n, n)`` matrix per joint (:meth:`prepare_variance`); a query then
-        costs one ``(n, n)`` product per joint on top of :meth:`predict_one`. ``rbd_torque``: as for
+        sets). The first call gathers each joint's Cholesky factor (:meth:`prepare_variance`); a query then
+        costs one ``(n, n)`` triangular solve per joint on top of :meth:`predict_one`. ``rbd_torque``: as for
         :meth:`predict_one`."""
         f, tau_rbd = load_query(self, q, qd, qdd, q_hist, rbd_torque)
         return self.prepare_variance().mean_var(f, tau_rbd)
 
     def prepare_variance(self) -> FastVariance:
-        """Build the single-query variance path now (one ``(n, n)`` triangular inverse per joint), e.g. before an
+        """Build the single-query variance path now (each joint's Cholesky factor as BLAS reads it), e.g. before an
         episode, so that the first gated control tick does not pay for it. Built once
         per fit and shared by every online window opened on it; returns it."""
         self._require_fitted()

@@ -194,8 +194,8 @@ class FastVariance:
         = \sum_k \tilde\alpha_{jk}\, \kappa'(a_{jk})\, 2\,(z^\tau_j - z^\tau_{jk})\, t_j
 
     in the fast path's scaled coordinates (:math:`c = \sqrt s`, :math:`t_j` = ``t_inv_scale``). The solve reads
-    half of an ``(n, n)`` matrix per joint (it was a product with the explicit inverse :math:`c_j L_j^{-1}`, which
-    reads all of it and had to be built first); at n = 500 that memory traffic is most of the query's time.
+    half of an ``(n, n)`` matrix per joint (a product with the explicit inverse :math:`c_j L_j^{-1}` would read all
+    of it); at n = 500 that memory traffic is most of the query's time.
 
     Attributes:
         L: per joint, :math:`L_j^\top` (a Fortran-ordered view of the factor, as BLAS reads it); scale: ``(N,)``
