@@ -82,6 +82,10 @@ class CollectConfig:
     #: ``"savgol"``: q̈ from the measured q̇ by the Savitzky-Golay filter (the study's); ``"true"``: the
     #: simulator's true accelerations ``info["qacc"]`` (privileged; for the calibration ablation only).
     qdd_source: str = "savgol"
+    #: The env's ``sensor_pipeline`` (``jaco_env.signal_pipeline``): ``"ideal"`` (the study's data so far) or
+    #: ``"jaco2"`` (the real arm's read skew, differentiated velocity, torque offset, drift, filter and noise
+    #: per actuator; values and sources in ``docs/sensing-sources.md``).
+    sensor_pipeline: str = "ideal"
 
     def __post_init__(self) -> None:
         for name in ("n_subsets", "n_test"):
@@ -104,13 +108,17 @@ class CollectConfig:
             raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {self.sensor_noise!r}")
         if self.qdd_source not in QDD_SOURCES:
             raise ValueError(f"qdd_source: expected one of {QDD_SOURCES}, got {self.qdd_source!r}")
+        if self.sensor_pipeline not in SENSOR_PIPELINES:
+            raise ValueError(f"sensor_pipeline: expected one of {SENSOR_PIPELINES}, got {self.sensor_pipeline!r}")
 
 
 #: Values of :attr:`CollectConfig.sensor_noise` and :attr:`CollectConfig.qdd_source`.
 SENSOR_NOISE = ("default", "none")
 QDD_SOURCES = ("savgol", "true")
+#: Values of :attr:`CollectConfig.sensor_pipeline` (the env's presets).
+SENSOR_PIPELINES = ("ideal", "jaco2")
 #: Fields added after the study data were collected, with the value those data had (for the reuse check).
-_LATER_FIELDS = {"sensor_noise": "default", "qdd_source": "savgol"}
+_LATER_FIELDS = {"sensor_noise": "default", "qdd_source": "savgol", "sensor_pipeline": "ideal"}
 
 
 def sensor_model(sensor_noise: str):
@@ -152,16 +160,21 @@ def _command_source(seed: int, duration: float) -> Callable[[float], np.ndarray]
     return excitation.make_command(seed=seed, duration=duration)
 
 
-def make_env(rate_hz: float, payload_mass: float, sensor_noise: str = "default"):
+def make_env(rate_hz: float, payload_mass: float, sensor_noise: str = "default", sensor_pipeline: str = "ideal"):
     """The collection's env: ``JacoPayload-v0`` in velocity mode at ``rate_hz``, no episode time limit;
-    ``sensor_noise="none"``: noiseless measurements (see :attr:`CollectConfig.sensor_noise`)."""
+    ``sensor_noise="none"``: noiseless measurements (see :attr:`CollectConfig.sensor_noise`);
+    ``sensor_pipeline``: the env's option of that name (see :attr:`CollectConfig.sensor_pipeline`)."""
     import gymnasium as gym
 
     import jaco_env  # noqa: F401  (registers the environments)
 
     if sensor_noise not in SENSOR_NOISE:
         raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {sensor_noise!r}")
-    kw = {"sensor_noise": None} if sensor_noise == "none" else {}
+    if sensor_pipeline not in SENSOR_PIPELINES:
+        raise ValueError(f"sensor_pipeline: expected one of {SENSOR_PIPELINES}, got {sensor_pipeline!r}")
+    kw: dict = {"sensor_noise": None} if sensor_noise == "none" else {}
+    if sensor_pipeline != "ideal":  # "ideal" is the env's default: its data are unchanged
+        kw["sensor_pipeline"] = sensor_pipeline
     return gym.make(ENV_ID, control_mode="velocity", control_freq=float(rate_hz),
                     payload_mass=float(payload_mass), max_episode_steps=10**9, **kw)
 
@@ -194,7 +207,7 @@ def record_motion(seed: int, duration: float, cfg: CollectConfig, *, segment: in
     """Run one velocity-commanded motion and return its measured record (qdd differentiated).
 
     ``on_steps(k)``: called every 100 steps with the number of steps done since the last call."""
-    env = make_env(cfg.rate_hz, cfg.payload_mass, cfg.sensor_noise)
+    env = make_env(cfg.rate_hz, cfg.payload_mass, cfg.sensor_noise, cfg.sensor_pipeline)
     try:
         obs, info = env.reset(seed=seed)
         command = _command_source(seed, duration)
@@ -236,7 +249,7 @@ def record_motions_vector(seeds: list[int], duration: float, cfg: CollectConfig,
     import gymnasium as gym
 
     n = len(seeds)
-    fns = [partial(make_env, cfg.rate_hz, cfg.payload_mass, cfg.sensor_noise)] * n
+    fns = [partial(make_env, cfg.rate_hz, cfg.payload_mass, cfg.sensor_noise, cfg.sensor_pipeline)] * n
     venv = (gym.vector.AsyncVectorEnv(fns, context="spawn") if asynchronous else gym.vector.SyncVectorEnv(fns))
     try:
         obs, info = venv.reset(seed=[int(s) for s in seeds])

@@ -60,9 +60,10 @@ from jaco_env.sensors import (  # noqa: E402
     SensorNoise,
     split_obs,
 )
+from jaco_env.signal_pipeline import SignalPipeline  # noqa: E402
 
-__all__ = ["__version__", "NOMINAL_URDF", "robot", "SensorNoise", "DEFAULT_KP", "DEFAULT_KD", "split_obs", "OBS_Q",
-           "OBS_QD", "OBS_TAU", "OBS_TIME", "OBS_JAR", "MEASUREMENT_DIM", "POUR_OBS_DIM"]
+__all__ = ["__version__", "NOMINAL_URDF", "robot", "SensorNoise", "SignalPipeline", "DEFAULT_KP", "DEFAULT_KD",
+           "split_obs", "OBS_Q", "OBS_QD", "OBS_TAU", "OBS_TIME", "OBS_JAR", "MEASUREMENT_DIM", "POUR_OBS_DIM"]
 
 #: 60 s at the default 40 Hz control rate.
 MAX_EPISODE_STEPS = 2400

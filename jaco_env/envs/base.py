@@ -63,6 +63,7 @@ from jaco_env import robot, scene
 from jaco_env.checks import is_real_number, real_array
 from jaco_env.envs.stepping import MAX_JOINT_SPEED, MAX_MARBLE_SPEED, ControlPeriod, live_view  # noqa: F401
 from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
+from jaco_env.signal_pipeline import PipelineState, SignalPipeline
 
 #: Largest physics step (s); the step is control_dt / ceil(control_dt / MAX_PHYSICS_STEP).
 MAX_PHYSICS_STEP = 0.002
@@ -244,7 +245,8 @@ class JacoMujocoEnv(MujocoEnv):
     action_space: spaces.Box  # a Box of the torque or velocity limits (_set_action_space)
 
     def __init__(self, *, control_mode: str, control_freq: float, sensor_noise: SensorNoise | None, n_marbles: int,
-                 render_mode: str | None, width: int, height: int, camera_name: str | None):
+                 render_mode: str | None, width: int, height: int, camera_name: str | None,
+                 sensor_pipeline: str | SignalPipeline = "ideal"):
         # No defaults here: each environment's signature holds the public defaults.
         if control_mode not in ("torque", "velocity"):
             raise ValueError(f"control_mode must be 'torque' or 'velocity', got {control_mode!r}")
@@ -255,6 +257,7 @@ class JacoMujocoEnv(MujocoEnv):
             raise ValueError(f"control_freq must be a number in [1, 1000] Hz, got {control_freq!r}")
         if sensor_noise is not None and not isinstance(sensor_noise, SensorNoise):
             raise TypeError(f"sensor_noise must be a SensorNoise or None, got {type(sensor_noise).__name__}")
+        self.sensor_pipeline = SignalPipeline.resolve(sensor_pipeline)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         if render_mode == "human" and (reason := no_display_reason()) is not None:
@@ -300,6 +303,12 @@ class JacoMujocoEnv(MujocoEnv):
         self._act_high = self.action_space.high.astype(np.float64)
         slots = [slice(0, _N)] + ([slice(_N, 2 * _N)] if control_mode == "velocity" else [])
         self._period = ControlPeriod(m, d, self.frame_skip, slots, self._tau_sensor, self.arm_dof_adr)
+        # The sensing pipeline (signal_pipeline.py): None for "ideal", whose measurement is the noise alone.
+        self._signal: PipelineState | None = None
+        self._pending: np.ndarray | None = None  # this step's pipeline measurement, time not yet set
+        if not self.sensor_pipeline.is_ideal:
+            self._signal = PipelineState(self.sensor_pipeline, self.control_dt, timestep, self.frame_skip)
+            self._period.set_samples(self._signal.marks(self._q_arm, self._qd_arm))
         self._step_count = 0
         self._unstable = False
         self._last_obs: np.ndarray | None = None
@@ -351,9 +360,27 @@ class JacoMujocoEnv(MujocoEnv):
     def _simulate(self, a: np.ndarray) -> bool:
         """Advance one control period (:class:`~jaco_env.envs.stepping.ControlPeriod`: the command, the
         physics, the torque sample at the end state); return True when the simulation went unstable."""
-        return self._period.run(a)
+        if self._period.run(a):
+            return True
+        sig = self._signal
+        if sig is not None:  # a non-finite measurement is an unstable step
+            self._pending = sig.measure(self.np_random, self.sensor_noise, self._q_arm, self._qd_arm,
+                                        self._period.tau, True)
+            return self._pending is None
+        return False
 
     def _measure(self) -> np.ndarray:
+        sig = self._signal
+        if sig is not None:
+            out = self._pending
+            if out is None:  # the reset observation: the state as it is, unfiltered
+                out = sig.measure(self.np_random, self.sensor_noise, self._q_arm, self._qd_arm, self._period.tau,
+                                  False)
+                if out is None:
+                    raise ValueError("the sensing pipeline gave a non-finite reset observation")
+            self._pending = None
+            out[-1] = self._step_count * self.control_dt
+            return out
         return self.sensor_noise.measurement(self.np_random, self._q_arm, self._qd_arm, self._period.tau,
                                              self._step_count * self.control_dt)  # self.time
 
@@ -367,6 +394,9 @@ class JacoMujocoEnv(MujocoEnv):
         self._unstable = False
         self._period.tau = np.zeros(_N)
         self._period.forget()
+        self._pending = None
+        if self._signal is not None:
+            self._signal.reset(self.np_random)
 
     # ------------------------------------------------------------------ reset flow
     def _parse_options(self, options: dict | None) -> dict:

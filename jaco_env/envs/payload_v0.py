@@ -19,6 +19,7 @@ from jaco_env.checks import real_array
 from jaco_env.envs.base import JacoMujocoEnv, check_mass, check_options
 from jaco_env.kinematics import home_pose
 from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
+from jaco_env.signal_pipeline import SignalPipeline
 
 
 class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
@@ -41,7 +42,8 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
 
     ## Observation Space
     ``Box(-inf, inf, (19,), float64)``: entries 0-18 of ``JacoPour-v0`` (measured q, qd, tau,
-    time since reset).
+    time since reset), read through ``sensor_pipeline`` as in ``JacoPour-v0`` (read skew, velocity
+    source, torque offset, drift, filter and noise per actuator; ``"ideal"``, the default, or ``"jaco2"``).
 
     ## Rewards
     Always 0 (this environment is for data collection).
@@ -63,7 +65,8 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
     ## Arguments
     ``gym.make("JacoPayload-v0", control_mode="torque", control_freq=40.0,
     sensor_noise=SensorNoise(), payload_mass=0.8, render_mode=None, width=480, height=480,
-    camera_name=None)``.
+    camera_name=None, sensor_pipeline="ideal")``; ``sensor_pipeline`` (``"ideal"``, ``"jaco2"`` or a
+    :class:`jaco_env.SignalPipeline`) as in ``JacoPour-v0``.
 
     ## Version History
     - v0: initial version.
@@ -95,14 +98,16 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
         width: int = 480,
         height: int = 480,
         camera_name: str | None = None,
+        sensor_pipeline: str | SignalPipeline = "ideal",
     ):
         EzPickle.__init__(self, control_mode, control_freq, sensor_noise, payload_mass, render_mode, width,
-                          height, camera_name)
+                          height, camera_name, sensor_pipeline)
         self._fixed_mass = scene.BOTTLE_MASS
         self.default_payload = check_mass(payload_mass, scene.BOTTLE_MASS, scene.MAX_PAYLOAD, "payload_mass")
         JacoMujocoEnv.__init__(self, control_mode=control_mode, control_freq=control_freq,
                                sensor_noise=sensor_noise, n_marbles=0, render_mode=render_mode, width=width,
-                               height=height, camera_name=camera_name)
+                               height=height, camera_name=camera_name,
+                               sensor_pipeline=sensor_pipeline)
 
     def _parse_options(self, options: dict | None) -> dict:
         opts = check_options(options, ("payload_mass", "q0"))

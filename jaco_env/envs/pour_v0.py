@@ -20,6 +20,7 @@ from jaco_env import scene
 from jaco_env.checks import is_real_number
 from jaco_env.envs.base import JacoMujocoEnv, check_mass, check_options
 from jaco_env.sensors import POUR_OBS_DIM, SensorNoise
+from jaco_env.signal_pipeline import SignalPipeline
 from jaco_env.tasks import DEFAULT_TASKS, PouringTask, get_task
 
 #: Default range (kg) of the total payload in the hand (bottle + marbles + extra rigid mass),
@@ -75,7 +76,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
     ``Box(-inf, inf, (22,), float64)``; measurements carry Gaussian noise
     (:class:`jaco_env.sensors.SensorNoise`, default q 5e-4 rad, qd 5e-3 rad/s, tau 0.1 N m).
     Joint accelerations are not observed. All measurements are **instantaneous samples at the
-    same instant** (the end of the control period), as the Jaco 2's sampled joint sensors. The
+    same instant** (the end of the control period) under the default ``sensor_pipeline="ideal"``. The
     measured joint torque is the **link-side** torque of the strain-gauge joint torque sensors,
     read from MuJoCo ``torque`` sensors on the child links and projected on the joint axes: the
     torque passed to the links, without rotor inertia or gear friction. Hence ``(q, qd, tau)`` of
@@ -83,6 +84,21 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
     payload at that instant, with the acceleration at that instant (which a data set estimates by
     differentiating ``qd``); contact forces of the marbles on the bottle are part of it. The
     layout is defined once in :mod:`jaco_env.sensors` (``jaco_env.split_obs``).
+
+    ``sensor_pipeline`` chooses how the joint state is read (:mod:`jaco_env.signal_pipeline`; values and
+    their sources in ``docs/sensing-sources.md``); the physics is the same under every pipeline:
+
+    | Factor (joints 1-3 / 4-6)            | ``SignalPipeline`` field | ``"ideal"`` | ``"jaco2"``          |
+    |--------------------------------------|--------------------------|-------------|----------------------|
+    | read skew (q, qd, then tau last)     | ``read_skew_s``          | 0           | 4 ms                 |
+    | velocity (``velocity_window_s``)     | ``velocity_source``      | ``"true"``  | differenced, 10 ms   |
+    | torque offset per episode (std)      | ``tau_offset_std``       | 0           | 0.3 / 0.07 N m       |
+    | torque random-walk drift             | ``tau_drift_std``        | 0           | 0.01 / 0.0025 N m/√s |
+    | torque first-order low-pass cut-off  | ``tau_filter_hz``        | 0 (none)    | 10 Hz                |
+    | torque noise per actuator size       | ``tau_noise_scale``      | 1           | 1 / 0.25             |
+
+    ``"ideal"`` is the behaviour described above, draw for draw. A non-finite measurement truncates the
+    episode with ``info["unstable"] = True``.
 
     | Num   | Observation                                                         | Unit  |
     |-------|---------------------------------------------------------------------|-------|
@@ -119,7 +135,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
     ``gym.make("JacoPour-v0", control_mode="torque", control_freq=40.0,
     sensor_noise=SensorNoise(), n_marbles=30, task=None, payload_range=PAYLOAD_RANGE,
     render_mode=None, width=480, height=480, camera_name=None, tracking_cost_weight=W_TRACK,
-    pour_reward_weight=W_POUR)``. ``task``: default task name or
+    pour_reward_weight=W_POUR, sensor_pipeline="ideal")``. ``sensor_pipeline``: ``"ideal"``,
+    ``"jaco2"`` or a :class:`jaco_env.SignalPipeline` (see Observation Space). ``task``: default task name or
     ``PouringTask``; ``None`` draws one of ``DEFAULT_TASKS`` per reset. ``reset(options=
     {"task": name_or_task, "payload_mass": kg})`` overrides both for one episode. Every option is
     checked before the simulation is touched (a rejected ``reset`` changes no state): unknown keys
@@ -166,9 +183,11 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         camera_name: str | None = None,
         tracking_cost_weight: float = W_TRACK,
         pour_reward_weight: float = W_POUR,
+        sensor_pipeline: str | SignalPipeline = "ideal",
     ):
         EzPickle.__init__(self, control_mode, control_freq, sensor_noise, n_marbles, task, payload_range,
-                          render_mode, width, height, camera_name, tracking_cost_weight, pour_reward_weight)
+                          render_mode, width, height, camera_name, tracking_cost_weight, pour_reward_weight,
+                          sensor_pipeline)
         if not isinstance(n_marbles, (int, np.integer)) or isinstance(n_marbles, (bool, np.bool_)):
             raise TypeError(f"n_marbles must be an integer, got {type(n_marbles).__name__} {n_marbles!r}")
         if not 1 <= n_marbles <= 60:
@@ -196,7 +215,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
                 check_mass(t.payload_mass, self._fixed_mass + 1e-3, scene.MAX_PAYLOAD, f"task {t.name!r} payload_mass")
         JacoMujocoEnv.__init__(self, control_mode=control_mode, control_freq=control_freq,
                                sensor_noise=sensor_noise, n_marbles=n_marbles, render_mode=render_mode,
-                               width=width, height=height, camera_name=camera_name)
+                               width=width, height=height, camera_name=camera_name,
+                               sensor_pipeline=sensor_pipeline)
         m = self.model
         self._jar_body = m.body("jar").id
         self.marble_qpos_adr = np.array([m.jnt_qposadr[m.joint(f"marble{k}").id] for k in range(n_marbles)])

@@ -1,0 +1,216 @@
+"""How the simulated Jaco 2 reports its joint state: the sensing pipeline and its named factors.
+
+:class:`SignalPipeline` is a frozen set of named factors between the simulated arm and the measured
+``[q, qd, tau]`` of an observation (layout in :mod:`jaco_env.sensors`). The environments take it as
+``sensor_pipeline="ideal" | "jaco2" | SignalPipeline(...)``; the additive Gaussian noise stays
+``sensor_noise`` (:class:`~jaco_env.sensors.SensorNoise`), which the pipeline only scales per joint.
+
+=====================  ==========================================================  ==========  =============
+field                  factor                                                      ``ideal``   ``jaco2``
+=====================  ==========================================================  ==========  =============
+``read_skew_s``        (a) time between the sequential reads of q, then qd, then    0           0.004 s
+                       tau (tau last, at the end of the control period)
+``velocity_source``    (b) ``"true"`` (simulated velocity) or ``"differentiated"``  ``"true"``  ``"differentiated"``
+                       (backward difference of the true q over the window)
+``velocity_window_s``  (b) the difference's window                                  0.01 s      0.01 s
+``tau_offset_std``     (c) torque offset drawn per episode, N m (per joint)         0           0.3 / 0.07
+``tau_drift_std``      (c) random-walk drift of the offset, N m/sqrt(s)             0           0.01 / 0.0025
+``tau_filter_hz``      (c) first-order low-pass cut-off of the torque (0: none)     0           10 Hz
+``tau_noise_scale``    (c) scale of the ``SensorNoise`` torque noise per joint      1           1 / 0.25
+=====================  ==========================================================  ==========  =============
+
+(x / y: joints 1-3 / joints 4-6.) The parameters of ``jaco2``, their public sources and the
+assumptions where none exists are in ``docs/sensing-sources.md``.
+
+Times are rounded to whole physics steps and kept within one control period: the q read at most
+one period back, the velocity window at most what is left of the period before the qd read. The
+torque filter is the exact discretisation, at the sample rate, of a first-order filter of time
+constant ``1 / (2 pi f_c)`` whose input is held between samples: ``y_k = y_{k-1} + alpha (u_k -
+y_{k-1})``, ``alpha = 1 - exp(-dt / tau)``, started at the first sample after reset (the reset
+observation's torque is zero, unfiltered). The measured torque is ``filter(tau) + offset + drift +
+noise``: the noise is the read-out's, after the filter, so ``SensorNoise.tau_std`` keeps its meaning.
+The drift starts at 0 at reset and adds ``N(0, tau_drift_std^2 dt)`` per sample after the noise draw.
+
+``ideal`` is the identity: the environment then runs exactly its noise-only measurement (the same
+random draws in the same order). A non-finite measurement truncates the episode with
+``info["unstable"] = True``; no observation carries NaN or inf.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from jaco_env.checks import is_real_number
+from jaco_env.robot import N_JOINTS
+from jaco_env.sensors import SensorNoise
+
+#: Allowed ranges of the numeric fields (inclusive), for validation and its messages.
+_RANGES = {
+    "read_skew_s": (0.0, 0.05),
+    "velocity_window_s": (1e-4, 0.1),
+    "tau_offset_std": (0.0, 10.0),  # the raw offsets before zeroing reach about +-10 N m
+    "tau_drift_std": (0.0, 1.0),
+    "tau_filter_hz": (0.0, 1000.0),
+    "tau_noise_scale": (0.0, 10.0),
+}
+_PER_JOINT = ("tau_offset_std", "tau_drift_std", "tau_noise_scale")
+VELOCITY_SOURCES = ("true", "differentiated")
+PRESETS = ("ideal", "jaco2")
+
+
+def _joints(big: float, small: float) -> tuple[float, ...]:
+    """Per-joint values: ``big`` on joints 1-3 (K75+ actuators), ``small`` on joints 4-6 (K58)."""
+    return (big,) * 3 + (small,) * (N_JOINTS - 3)
+
+
+@dataclass(frozen=True)
+class SignalPipeline:
+    """Named factors of the sensing pipeline (module docstring); validated at construction.
+
+    Per-joint fields take one real number (all joints) or ``N_JOINTS`` of them and are stored as a tuple.
+    Invalid values raise ``TypeError`` / ``ValueError`` naming the field and its allowed range.
+    """
+
+    read_skew_s: float = 0.0
+    velocity_source: str = "true"
+    velocity_window_s: float = 0.01
+    tau_offset_std: tuple[float, ...] = (0.0,) * N_JOINTS
+    tau_drift_std: tuple[float, ...] = (0.0,) * N_JOINTS
+    tau_filter_hz: float = 0.0
+    tau_noise_scale: tuple[float, ...] = (1.0,) * N_JOINTS
+
+    def __post_init__(self) -> None:
+        if self.velocity_source not in VELOCITY_SOURCES:
+            raise ValueError(f"SignalPipeline.velocity_source must be one of {VELOCITY_SOURCES}, "
+                             f"got {self.velocity_source!r}")
+        for name, (lo, hi) in _RANGES.items():
+            v = getattr(self, name)
+            if name in _PER_JOINT:
+                vals = (v,) if is_real_number(v) else v
+                if not (isinstance(vals, (tuple, list, np.ndarray)) and len(vals) in (1, N_JOINTS)
+                        and all(is_real_number(x) for x in vals)):
+                    raise TypeError(f"SignalPipeline.{name} must be a real number or {N_JOINTS} real numbers "
+                                    f"in [{lo}, {hi}], got {v!r}")
+                vals = tuple(float(x) for x in vals) * (N_JOINTS if len(vals) == 1 else 1)
+            else:
+                if not is_real_number(v):
+                    raise TypeError(f"SignalPipeline.{name} must be a real number in [{lo}, {hi}], "
+                                    f"got {type(v).__name__} {v!r}")
+                vals = (float(v),)
+            if not all(math.isfinite(x) and lo <= x <= hi for x in vals):
+                raise ValueError(f"SignalPipeline.{name} must be in [{lo}, {hi}] (finite), got {v!r}")
+            object.__setattr__(self, name, vals if name in _PER_JOINT else vals[0])
+
+    @classmethod
+    def ideal(cls) -> "SignalPipeline":
+        """The identity: q, qd, tau sampled together at the end of the period, the true velocity, no offset,
+        drift or filter, the same torque noise on every joint."""
+        return cls()
+
+    @classmethod
+    def jaco2(cls) -> "SignalPipeline":
+        """Every factor at its sourced or stated value (``docs/sensing-sources.md``)."""
+        # read skew: sequential USB reads of angles, velocities, torques (kinova-ros kinova_arm.cpp
+        # publishJointAngles); velocity: a firmware estimate (kinova_comm.cpp line 623), differenced over the
+        # 100 Hz main loop; offsets and drift after zeroing (kinova-ros issues 352, 358, 366), sized at about 1 %
+        # of each actuator's range; filter: SetTorqueFilterMeasuredTorque (Kinova.API.USBCommandLayerUbuntu.h),
+        # cut-off assumed; noise scaled by the K58 / K75+ torque ranges 6.8 / 30.5.
+        return cls(read_skew_s=0.004, velocity_source="differentiated", velocity_window_s=0.01,
+                   tau_offset_std=_joints(0.3, 0.07), tau_drift_std=_joints(0.01, 0.0025), tau_filter_hz=10.0,
+                   tau_noise_scale=_joints(1.0, 0.25))
+
+    @classmethod
+    def resolve(cls, value: "str | SignalPipeline") -> "SignalPipeline":
+        """The pipeline of the env option ``sensor_pipeline`` (a preset name or a ``SignalPipeline``)."""
+        if isinstance(value, SignalPipeline):
+            return value
+        if isinstance(value, str):
+            if value not in PRESETS:
+                raise ValueError(f"sensor_pipeline must be one of {PRESETS} or a SignalPipeline, got {value!r}")
+            return cls.ideal() if value == "ideal" else cls.jaco2()
+        raise TypeError(f"sensor_pipeline must be one of {PRESETS} or a SignalPipeline, "
+                        f"got {type(value).__name__} {value!r}")
+
+    @property
+    def is_ideal(self) -> bool:
+        """True when every factor is the identity (the env then skips the pipeline)."""
+        return self == SignalPipeline()
+
+    def as_dict(self) -> dict:
+        return {f.name: getattr(self, f.name) for f in fields(self)}
+
+
+class PipelineState:
+    """The per-environment state of a non-ideal :class:`SignalPipeline`: sample instants, offset, drift, filter.
+
+    ``timestep`` (s) and ``frame_skip`` describe the control period of ``control_dt`` seconds. The sample
+    instants are in physics steps from the start of the period: :attr:`q_step`, :attr:`qd_step` (and
+    :attr:`qw_step`, the start of the velocity window); tau is sampled at ``frame_skip``.
+    """
+
+    def __init__(self, pipeline: SignalPipeline, control_dt: float, timestep: float, frame_skip: int):
+        p, n = pipeline, int(frame_skip)
+        self.pipeline = p
+        k = min(int(round(p.read_skew_s / timestep)), n // 2)
+        self.qd_step, self.q_step = n - k, n - 2 * k
+        self.differentiated = p.velocity_source == "differentiated"
+        w = max(1, min(int(round(p.velocity_window_s / timestep)), self.qd_step))
+        self.qw_step = self.qd_step - w
+        self.velocity_window = w * timestep
+        self.q = np.zeros(N_JOINTS)   # q at q_step
+        self.qd = np.zeros(N_JOINTS)  # qd at qd_step
+        self.q_at_qd = np.zeros(N_JOINTS)  # q at qd_step (differentiated velocity)
+        self.q_w = np.zeros(N_JOINTS)  # q at qw_step (differentiated velocity)
+        self.alpha = 1.0 - math.exp(-control_dt * 2.0 * math.pi * p.tau_filter_hz) if p.tau_filter_hz > 0 else 1.0
+        self.drift_step = np.asarray(p.tau_drift_std) * math.sqrt(control_dt)
+        self.has_drift = bool(self.drift_step.any())
+        self.scale = np.asarray(p.tau_noise_scale, dtype=np.float64)
+        self.offset = np.zeros(N_JOINTS)
+        self.drift = np.zeros(N_JOINTS)
+        self.filtered: np.ndarray | None = None
+
+    def marks(self, q_arm: np.ndarray, qd_arm: np.ndarray) -> dict[int, list[tuple[np.ndarray, np.ndarray]]]:
+        """The copies :meth:`jaco_env.envs.stepping.ControlPeriod.set_samples` makes within each period."""
+        out: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
+        out.setdefault(self.q_step, []).append((self.q, q_arm))
+        if self.differentiated:
+            out.setdefault(self.qd_step, []).append((self.q_at_qd, q_arm))
+            out.setdefault(self.qw_step, []).append((self.q_w, q_arm))
+        else:
+            out.setdefault(self.qd_step, []).append((self.qd, qd_arm))
+        return out
+
+    def reset(self, rng: np.random.Generator) -> None:
+        """A new episode: the offset drawn (one draw of ``N_JOINTS`` normals), drift 0, filter unprimed."""
+        std = np.asarray(self.pipeline.tau_offset_std)
+        self.offset = std * rng.standard_normal(N_JOINTS) if std.any() else np.zeros(N_JOINTS)
+        self.drift = np.zeros(N_JOINTS)
+        self.filtered = None
+
+    def measure(self, rng: np.random.Generator, noise: SensorNoise, q: np.ndarray, qd: np.ndarray,
+                tau: np.ndarray, sampled: bool) -> np.ndarray | None:
+        """``[q, qd, tau, 0]`` measured (the caller sets the time), or None when not finite.
+
+        ``sampled``: the period's samples (:attr:`q`, ...) were taken (a step); else (the reset observation)
+        ``q``, ``qd`` and ``tau`` are used as they are, unfiltered.
+        """
+        n = N_JOINTS
+        if sampled:
+            q = self.q
+            qd = (self.q_at_qd - self.q_w) / self.velocity_window if self.differentiated else self.qd
+            if self.filtered is None or self.alpha == 1.0:  # no filter: the sample itself, exactly
+                self.filtered = tau.copy()
+            else:
+                self.filtered += self.alpha * (tau - self.filtered)
+            tau = self.filtered
+        e = rng.standard_normal((3, n))  # the draws of SensorNoise.measurement
+        e *= noise._std
+        e[2] *= self.scale
+        if sampled and self.has_drift:
+            self.drift += self.drift_step * rng.standard_normal(n)
+        out = np.concatenate((q, qd, tau + self.offset + self.drift, (0.0,)))
+        out[:3 * n] += e.ravel()
+        return out if math.isfinite(out.dot(out)) else None
