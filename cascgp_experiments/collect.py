@@ -41,6 +41,8 @@ serially, 14 s as jobs on 2 processes and 46 s in a 2-env ``AsyncVectorEnv``
 Ablations (``docs/studies/calibration.md``, not the study's data): ``sensor_noise="none"`` records noiseless
 measurements (the motions are the same: the command is open loop and the firmware acts on the simulator's state);
 ``qdd_source="true"`` stores the simulator's true accelerations instead of the filtered ones.
+``sensor_pipeline="jaco2"`` reads the joint state through the real arm's sensing pipeline
+(``jaco_env.signal_pipeline``) instead of the default ``"ideal"``.
 
 Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N]
 [--ray ADDRESS] [--sensor-noise none] [--qdd true]``.

@@ -248,3 +248,37 @@ def test_non_finite_measurement_truncates_as_unstable(env_id):
     assert trunc and info["unstable"] and np.all(np.isfinite(obs))
     np.testing.assert_array_equal(obs, obs1)
     env.close()
+
+
+def test_times_are_capped_within_the_period_at_the_collection_rate():
+    """100 Hz (the collection's rate): 5 physics steps of 2 ms; the 10 ms window is cut to what is left."""
+    env = gym.make("JacoPayload-v0", control_mode="velocity", control_freq=100.0, sensor_pipeline="jaco2")
+    st = env.unwrapped._signal
+    assert (st.q_step, st.qd_step, st.qw_step) == (1, 3, 0)
+    assert st.velocity_window == pytest.approx(0.006)
+    env.close()
+
+
+def test_env_with_a_pipeline_pickles():
+    import pickle
+
+    env = gym.make("JacoPayload-v0", sensor_pipeline=SignalPipeline(tau_filter_hz=5.0))
+    clone = pickle.loads(pickle.dumps(env.unwrapped))
+    assert clone.sensor_pipeline == SignalPipeline(tau_filter_hz=5.0)
+    clone.close()
+    env.close()
+
+
+def test_collection_passes_the_pipeline_through():
+    from cascgp_experiments.collect import CollectConfig, make_env, same_collection
+
+    with pytest.raises(ValueError, match=r"sensor_pipeline: expected one of \('ideal', 'jaco2'\)"):
+        CollectConfig(sensor_pipeline="real")
+    with pytest.raises(ValueError, match="sensor_pipeline"):
+        make_env(100.0, 0.8, "default", "real")
+    env = make_env(100.0, 0.8, "default", "jaco2")
+    assert env.unwrapped.sensor_pipeline == SignalPipeline.jaco2()
+    env.close()
+    cfg = CollectConfig()
+    stored = {k: v for k, v in vars(cfg).items() if k != "sensor_pipeline"}  # a file from before the option
+    assert cfg.sensor_pipeline == "ideal" and same_collection(stored, cfg)
