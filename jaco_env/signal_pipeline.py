@@ -5,19 +5,17 @@
 ``sensor_pipeline="ideal" | "jaco2" | SignalPipeline(...)``; the additive Gaussian noise stays
 ``sensor_noise`` (:class:`~jaco_env.sensors.SensorNoise`), which the pipeline only scales per joint.
 
-=====================  ==========================================================  ==========  =============
-field                  factor                                                      ``ideal``   ``jaco2``
-=====================  ==========================================================  ==========  =============
-``read_skew_s``        (a) time between the sequential reads of q, then qd, then    0           0.004 s
-                       tau (tau last, at the end of the control period)
-``velocity_source``    (b) ``"true"`` (simulated velocity) or ``"differentiated"``  ``"true"``  ``"differentiated"``
-                       (backward difference of the true q over the window)
-``velocity_window_s``  (b) the difference's window                                  0.01 s      0.01 s
-``tau_offset_std``     (c) torque offset drawn per episode, N m (per joint)         0           0.3 / 0.07
-``tau_drift_std``      (c) random-walk drift of the offset, N m/sqrt(s)             0           0.01 / 0.0025
-``tau_filter_hz``      (c) first-order low-pass cut-off of the torque (0: none)     0           10 Hz
-``tau_noise_scale``    (c) scale of the ``SensorNoise`` torque noise per joint      1           1 / 0.25
-=====================  ==========================================================  ==========  =============
+=====================  =====================================================  ==========  ==================
+field                  factor                                                 ``ideal``   ``jaco2``
+=====================  =====================================================  ==========  ==================
+``read_skew_s``        (a) time between the reads of q, qd, tau (tau last)    0           0.004 s
+``velocity_source``    (b) simulated velocity or backward difference of q     ``"true"``  "differentiated"
+``velocity_window_s``  (b) the difference's window                            0.01 s      0.01 s
+``tau_offset_std``     (c) torque offset drawn per episode, N m               0           0.3 / 0.07
+``tau_drift_std``      (c) random-walk drift of the offset, N m/sqrt(s)       0           0.01 / 0.0025
+``tau_filter_hz``      (c) first-order low-pass cut-off of the torque, Hz     0 (none)    10
+``tau_noise_scale``    (c) scale of the ``SensorNoise`` torque noise          1           1 / 0.25
+=====================  =====================================================  ==========  ==================
 
 (x / y: joints 1-3 / joints 4-6.) The parameters of ``jaco2``, their public sources and the
 assumptions where none exists are in ``docs/sensing-sources.md``.
@@ -25,11 +23,12 @@ assumptions where none exists are in ``docs/sensing-sources.md``.
 Times are rounded to whole physics steps and kept within one control period: the q read at most
 one period back, the velocity window at most what is left of the period before the qd read. The
 torque filter is the exact discretisation, at the sample rate, of a first-order filter of time
-constant ``1 / (2 pi f_c)`` whose input is held between samples: ``y_k = y_{k-1} + alpha (u_k -
-y_{k-1})``, ``alpha = 1 - exp(-dt / tau)``, started at the first sample after reset (the reset
-observation's torque is zero, unfiltered). The measured torque is ``filter(tau) + offset + drift +
-noise``: the noise is the read-out's, after the filter, so ``SensorNoise.tau_std`` keeps its meaning.
-The drift starts at 0 at reset and adds ``N(0, tau_drift_std^2 dt)`` per sample after the noise draw.
+constant ``T = 1 / (2 pi f_c)`` whose input is held between samples: ``y_k = y_{k-1} + alpha (u_k -
+y_{k-1})``, ``alpha = 1 - exp(-dt / T)``, started at the first sample after reset (the reset
+observation's torque sample is zero, as under ``ideal``, and is not filtered). The measured torque
+is ``filter(tau) + offset + drift + noise``: the noise is the read-out's, after the filter, so
+``SensorNoise.tau_std`` keeps its meaning. The drift starts at 0 at reset and adds ``N(0,
+tau_drift_std^2 dt)`` per sample after the noise draw.
 
 ``ideal`` is the identity: the environment then runs exactly its noise-only measurement (the same
 random draws in the same order). A non-finite measurement truncates the episode with
