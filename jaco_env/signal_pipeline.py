@@ -8,7 +8,8 @@
 =====================  =====================================================  ==========  ==================
 field                  factor                                                 ``ideal``   ``jaco2``
 =====================  =====================================================  ==========  ==================
-``read_skew_s``        (a) time between the reads of q, qd, tau (tau last)    0           0.004 s
+``q_lead_s``           (a) how long before the tau read q is read             0           0.0083 s
+``qd_lead_s``          (a) how long before the tau read qd is read            0           0.0028 s
 ``velocity_source``    (b) simulated velocity or backward difference of q     ``"true"``  "differentiated"
 ``velocity_window_s``  (b) the difference's window                            0.01 s      0.01 s
 ``tau_offset_std``     (c) torque offset drawn per episode, N m               0           0.3 / 0.07
@@ -20,8 +21,9 @@ field                  factor                                                 ``
 (x / y: joints 1-3 / joints 4-6.) The parameters of ``jaco2``, their public sources and the
 assumptions where none exists are in ``docs/sensing-sources.md``.
 
-Times are rounded to whole physics steps and kept within one control period: the q read at most
-one period back, the velocity window at most what is left of the period before the qd read. The
+Times are rounded to whole physics steps and kept within one control period: tau is read at its
+end, q and qd at most ``frame_skip - 1`` physics steps before it, the velocity window at most what is
+left of the period before the qd read. The
 torque filter is the exact discretisation, at the sample rate, of a first-order filter of time
 constant ``T = 1 / (2 pi f_c)`` whose input is held between samples: ``y_k = y_{k-1} + alpha (u_k -
 y_{k-1})``, ``alpha = 1 - exp(-dt / T)``, started at the first sample after reset (the reset
@@ -48,7 +50,8 @@ from jaco_env.sensors import SensorNoise
 
 #: Allowed ranges of the numeric fields (inclusive), for validation and its messages.
 _RANGES = {
-    "read_skew_s": (0.0, 0.05),
+    "q_lead_s": (0.0, 0.05),
+    "qd_lead_s": (0.0, 0.05),
     "velocity_window_s": (1e-4, 0.1),
     "tau_offset_std": (0.0, 10.0),  # the raw offsets before zeroing reach about +-10 N m
     "tau_drift_std": (0.0, 1.0),
@@ -73,7 +76,8 @@ class SignalPipeline:
     Invalid values raise ``TypeError`` / ``ValueError`` naming the field and its allowed range.
     """
 
-    read_skew_s: float = 0.0
+    q_lead_s: float = 0.0
+    qd_lead_s: float = 0.0
     velocity_source: str = "true"
     velocity_window_s: float = 0.01
     tau_offset_std: tuple[float, ...] = (0.0,) * N_JOINTS
@@ -112,12 +116,14 @@ class SignalPipeline:
     @classmethod
     def jaco2(cls) -> "SignalPipeline":
         """Every factor at its sourced or stated value (``docs/sensing-sources.md``)."""
-        # read skew: sequential USB reads of angles, velocities, torques (kinova-ros kinova_arm.cpp
-        # publishJointAngles); velocity: a firmware estimate (kinova_comm.cpp line 623), differenced over the
-        # 100 Hz main loop; offsets and drift after zeroing (kinova-ros issues 352, 358, 366), sized at about 1 %
-        # of each actuator's range; filter: SetTorqueFilterMeasuredTorque (Kinova.API.USBCommandLayerUbuntu.h),
-        # cut-off assumed; noise scaled by the K58 / K75+ torque ranges 6.8 / 30.5.
-        return cls(read_skew_s=0.004, velocity_source="differentiated", velocity_window_s=0.01,
+        # read skew: the driver's status timer makes 9 API calls per cycle (kinova-ros kinova_arm.cpp statusTimer;
+        # publishJointAngles calls getJointAngles, getAngularCommand, getJointVelocities, getJointTorques in this
+        # order) and reaches about 40 Hz when asked for 100 Hz (kinova-ros issue 281): about 2.8 ms per call, so
+        # q is read 3 calls and qd 1 call before tau. Velocity: a firmware estimate (kinova_comm.cpp line 623),
+        # differenced over the 100 Hz main loop. Offsets and drift after zeroing (kinova-ros issues 352, 358,
+        # 366), sized at about 1 % of each actuator's range. Filter: SetTorqueFilterMeasuredTorque
+        # (Kinova.API.USBCommandLayerUbuntu.h), cut-off assumed. Noise scaled by the K58 / K75+ ranges 6.8 / 30.5.
+        return cls(q_lead_s=0.0083, qd_lead_s=0.0028, velocity_source="differentiated", velocity_window_s=0.01,
                    tau_offset_std=_joints(0.3, 0.07), tau_drift_std=_joints(0.01, 0.0025), tau_filter_hz=10.0,
                    tau_noise_scale=_joints(1.0, 0.25))
 
@@ -153,8 +159,10 @@ class PipelineState:
     def __init__(self, pipeline: SignalPipeline, control_dt: float, timestep: float, frame_skip: int):
         p, n = pipeline, int(frame_skip)
         self.pipeline = p
-        k = min(int(round(p.read_skew_s / timestep)), n // 2)
-        self.qd_step, self.q_step = n - k, n - 2 * k
+        def lead(t: float) -> int:
+            return min(int(round(t / timestep)), n - 1)
+
+        self.q_step, self.qd_step = n - lead(p.q_lead_s), n - lead(p.qd_lead_s)
         self.differentiated = p.velocity_source == "differentiated"
         w = max(1, min(int(round(p.velocity_window_s / timestep)), self.qd_step))
         self.qw_step = self.qd_step - w

@@ -34,9 +34,10 @@ def _zeros():
 
 # ------------------------------------------------------------------ validation and presets
 @pytest.mark.parametrize("field, value, exc, match", [
-    ("read_skew_s", -0.001, ValueError, r"read_skew_s must be in \[0.0, 0.05\]"),
-    ("read_skew_s", "0.004", TypeError, r"read_skew_s must be a real number in \[0.0, 0.05\]"),
-    ("read_skew_s", True, TypeError, "read_skew_s"),
+    ("q_lead_s", -0.001, ValueError, r"q_lead_s must be in \[0.0, 0.05\]"),
+    ("qd_lead_s", 0.06, ValueError, r"qd_lead_s must be in \[0.0, 0.05\]"),
+    ("q_lead_s", "0.004", TypeError, r"q_lead_s must be a real number in \[0.0, 0.05\]"),
+    ("qd_lead_s", True, TypeError, "qd_lead_s"),
     ("velocity_source", "firmware", ValueError, r"velocity_source must be one of \('true', 'differentiated'\)"),
     ("velocity_window_s", 0.0, ValueError, r"velocity_window_s must be in \[0.0001, 0.1\]"),
     ("tau_offset_std", 11.0, ValueError, r"tau_offset_std must be in \[0.0, 10.0\]"),
@@ -179,13 +180,13 @@ def _fine_run(actions, sp):
 def test_skewed_reads_and_differentiated_velocity():
     rng = np.random.default_rng(3)
     actions = [rng.uniform(-3, 3, 6).astype(np.float32) for _ in range(12)]
-    sp = SignalPipeline(read_skew_s=0.004, velocity_source="differentiated", velocity_window_s=0.01)
+    sp = SignalPipeline(q_lead_s=0.0077, qd_lead_s=0.0038, velocity_source="differentiated", velocity_window_s=0.01)
     env = gym.make("JacoPayload-v0", sensor_noise=None, sensor_pipeline=sp)
     ideal = gym.make("JacoPayload-v0", sensor_noise=None)
     env.reset(seed=0)
     ideal.reset(seed=0)
     st = env.unwrapped._signal
-    assert (st.q_step, st.qd_step, st.qw_step) == (9, 11, 6)  # 4 ms = 2 steps of 1.92 ms, 10 ms = 5 steps
+    assert (st.q_step, st.qd_step, st.qw_step) == (9, 11, 6)  # 7.7 / 3.8 / 10 ms = 4 / 2 / 5 steps of 1.92 ms
     qs, _ = _fine_run(actions, sp)
     for k, a in enumerate(actions):
         obs = env.step(a)[0]
@@ -203,7 +204,7 @@ def test_skewed_reads_and_differentiated_velocity():
 def test_skewed_true_velocity_is_read_before_the_torque():
     rng = np.random.default_rng(4)
     actions = [rng.uniform(-3, 3, 6).astype(np.float32) for _ in range(6)]
-    env = gym.make("JacoPayload-v0", sensor_noise=None, sensor_pipeline=SignalPipeline(read_skew_s=0.004))
+    env = gym.make("JacoPayload-v0", sensor_noise=None, sensor_pipeline=SignalPipeline(qd_lead_s=0.004))
     env.reset(seed=0)
     fine = gym.make("JacoPayload-v0", sensor_noise=None, control_freq=520.0, max_episode_steps=10**6)
     fine.reset(seed=0)
@@ -250,12 +251,19 @@ def test_non_finite_measurement_truncates_as_unstable(env_id):
     env.close()
 
 
+def test_times_are_capped_within_the_period():
+    st = PipelineState(SignalPipeline(q_lead_s=0.05, qd_lead_s=0.05, velocity_source="differentiated"), DT, TS, 13)
+    assert (st.q_step, st.qd_step, st.qw_step) == (1, 1, 0)
+    st = PipelineState(SignalPipeline(q_lead_s=0.05, velocity_source="differentiated"), 0.002, 0.002, 1)
+    assert (st.q_step, st.qd_step, st.qw_step) == (1, 1, 0)
+
+
 def test_times_are_capped_within_the_period_at_the_collection_rate():
     """100 Hz (the collection's rate): 5 physics steps of 2 ms; the 10 ms window is cut to what is left."""
     env = gym.make("JacoPayload-v0", control_mode="velocity", control_freq=100.0, sensor_pipeline="jaco2")
     st = env.unwrapped._signal
-    assert (st.q_step, st.qd_step, st.qw_step) == (1, 3, 0)
-    assert st.velocity_window == pytest.approx(0.006)
+    assert (st.q_step, st.qd_step, st.qw_step) == (1, 4, 0)  # 8.3 / 2.8 ms = 4 / 1 steps of 2 ms
+    assert st.velocity_window == pytest.approx(0.008)  # 10 ms cut to the 4 steps before the qd read
     env.close()
 
 

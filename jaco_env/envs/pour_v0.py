@@ -90,7 +90,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
 
     | Factor (joints 1-3 / 4-6)            | ``SignalPipeline`` field | ``"ideal"`` | ``"jaco2"``          |
     |--------------------------------------|--------------------------|-------------|----------------------|
-    | read skew (q, qd, then tau last)     | ``read_skew_s``          | 0           | 4 ms                 |
+    | q read before tau (read skew)        | ``q_lead_s``             | 0           | 8.3 ms               |
+    | qd read before tau (read skew)       | ``qd_lead_s``            | 0           | 2.8 ms               |
     | velocity (``velocity_window_s``)     | ``velocity_source``      | ``"true"``  | differenced, 10 ms   |
     | torque offset per episode (std)      | ``tau_offset_std``       | 0           | 0.3 / 0.07 N m       |
     | torque random-walk drift             | ``tau_drift_std``        | 0           | 0.01 / 0.0025 N m/√s |
