@@ -290,3 +290,23 @@ def test_collection_passes_the_pipeline_through():
     cfg = CollectConfig()
     stored = {k: v for k, v in vars(cfg).items() if k != "sensor_pipeline"}  # a file from before the option
     assert cfg.sensor_pipeline == "ideal" and same_collection(stored, cfg)
+
+
+def test_env_offset_is_redrawn_per_episode_and_added_to_the_torque():
+    sp = SignalPipeline(tau_offset_std=(0.3,) * 3 + (0.07,) * 3)
+    env = gym.make("JacoPayload-v0", sensor_noise=None, sensor_pipeline=sp)
+    ideal = gym.make("JacoPayload-v0", sensor_noise=None)
+    offsets = []
+    for seed in range(3):
+        env.reset(seed=seed)
+        ideal.reset(seed=seed)
+        offsets.append(env.unwrapped._signal.offset.copy())
+        for k in range(3):
+            a = np.full(6, 0.2 * k, dtype=np.float32)
+            tau = jaco_env.split_obs(env.step(a)[0])[2]
+            np.testing.assert_allclose(tau, jaco_env.split_obs(ideal.step(a)[0])[2] + offsets[-1], rtol=0, atol=1e-12)
+    assert not np.allclose(offsets[0], offsets[1]) and not np.allclose(offsets[1], offsets[2])
+    env.reset(seed=0)
+    np.testing.assert_array_equal(env.unwrapped._signal.offset, offsets[0])  # seeded
+    env.close()
+    ideal.close()
