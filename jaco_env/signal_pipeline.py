@@ -30,7 +30,8 @@ y_{k-1})``, ``alpha = 1 - exp(-dt / T)``, started at the first sample after rese
 observation's torque sample is zero, as under ``ideal``, and is not filtered). The measured torque
 is ``filter(tau) + offset + drift + noise``: the noise is the read-out's, after the filter, so
 ``SensorNoise.tau_std`` keeps its meaning. The drift starts at 0 at reset and adds ``N(0,
-tau_drift_std^2 dt)`` per sample after the noise draw.
+tau_drift_std^2 dt)`` per sample after the noise draw. The offset is drawn at reset after the
+environment's own draws (task, payload, marbles), so one seed starts the same episode under every pipeline.
 
 ``ideal`` is the identity: the environment then runs exactly its noise-only measurement (the same
 random draws in the same order). A non-finite measurement truncates the episode with

@@ -310,3 +310,15 @@ def test_env_offset_is_redrawn_per_episode_and_added_to_the_torque():
     np.testing.assert_array_equal(env.unwrapped._signal.offset, offsets[0])  # seeded
     env.close()
     ideal.close()
+
+
+def test_the_episode_draws_are_the_same_under_any_pipeline():
+    """Task, payload and marbles are drawn before the pipeline's offset: the same start for one seed."""
+    starts = []
+    for sp in ("ideal", "jaco2"):
+        env = gym.make("JacoPour-v0", n_marbles=10, sensor_pipeline=sp)
+        _, info = env.reset(seed=21)
+        starts.append((info["payload_mass"], info["task"], env.unwrapped.marble_positions()))
+        env.close()
+    assert starts[0][:2] == starts[1][:2]
+    np.testing.assert_array_equal(starts[0][2], starts[1][2])

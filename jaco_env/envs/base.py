@@ -395,8 +395,6 @@ class JacoMujocoEnv(MujocoEnv):
         self._period.tau = np.zeros(_N)
         self._period.forget()
         self._pending = None
-        if self._signal is not None:
-            self._signal.reset(self.np_random)
 
     # ------------------------------------------------------------------ reset flow
     def _parse_options(self, options: dict | None) -> dict:
@@ -414,6 +412,8 @@ class JacoMujocoEnv(MujocoEnv):
         """End of ``reset_model``: the first observation, recorded (``step`` and ``render`` need a reset)."""
         self._terminated = False
         self._warned_terminated = False
+        if self._signal is not None:  # after the episode's draws (task, payload, marbles): the same for any pipeline
+            self._signal.reset(self.np_random)
         self._last_obs = self._get_obs()
         return self._last_obs
 
