@@ -42,10 +42,11 @@ Ablations (``docs/studies/calibration.md``, not the study's data): ``sensor_nois
 measurements (the motions are the same: the command is open loop and the firmware acts on the simulator's state);
 ``qdd_source="true"`` stores the simulator's true accelerations instead of the filtered ones.
 ``sensor_pipeline="jaco2"`` reads the joint state through the real arm's sensing pipeline
-(``jaco_env.signal_pipeline``) instead of the default ``"ideal"``.
+(``jaco_env.signal_pipeline``) instead of the default ``"ideal"``, and differentiates q̇ with the causal filter
+(``qdd_filter``, factor (d)).
 
 Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N]
-[--ray ADDRESS] [--sensor-noise none] [--qdd true]``.
+[--ray ADDRESS] [--sensor-noise none] [--qdd true] [--sensor-pipeline jaco2] [--qdd-filter causal]``.
 """
 
 from __future__ import annotations
@@ -88,6 +89,17 @@ class CollectConfig:
     #: ``"jaco2"`` (the real arm's read skew, differentiated velocity, torque offset, drift, filter and noise
     #: per actuator; values and sources in ``docs/sensing-sources.md``).
     sensor_pipeline: str = "ideal"
+    #: The q̈ filter (factor (d) of the sensing pipeline): ``"centred"`` (the Savitzky-Golay fit evaluated at its
+    #: centre: zero phase, offline) or ``"causal"`` (evaluated at the newest sample, as a controller running
+    #: online computes it: ``cascgp.derivatives.SavGol(causal=True)``); ``None`` follows ``sensor_pipeline``
+    #: (``"jaco2"``: causal, ``"ideal"``: centred).
+    qdd_filter: str | None = None
+
+    @property
+    def smoothing(self) -> SavGol:
+        """The q̈ filter this collection uses (see :attr:`qdd_filter`)."""
+        causal = (self.qdd_filter or ("causal" if self.sensor_pipeline == "jaco2" else "centred")) == "causal"
+        return SavGol(self.savgol_window, self.savgol_polyorder, causal=causal)
 
     def __post_init__(self) -> None:
         for name in ("n_subsets", "n_test"):
@@ -112,15 +124,18 @@ class CollectConfig:
             raise ValueError(f"qdd_source: expected one of {QDD_SOURCES}, got {self.qdd_source!r}")
         if self.sensor_pipeline not in SENSOR_PIPELINES:
             raise ValueError(f"sensor_pipeline: expected one of {SENSOR_PIPELINES}, got {self.sensor_pipeline!r}")
+        if self.qdd_filter is not None and self.qdd_filter not in QDD_FILTERS:
+            raise ValueError(f"qdd_filter: expected None or one of {QDD_FILTERS}, got {self.qdd_filter!r}")
 
 
 #: Values of :attr:`CollectConfig.sensor_noise` and :attr:`CollectConfig.qdd_source`.
 SENSOR_NOISE = ("default", "none")
 QDD_SOURCES = ("savgol", "true")
-#: Values of :attr:`CollectConfig.sensor_pipeline` (the env's presets).
+#: Values of :attr:`CollectConfig.sensor_pipeline` (the env's presets) and :attr:`CollectConfig.qdd_filter`.
 SENSOR_PIPELINES = ("ideal", "jaco2")
+QDD_FILTERS = ("centred", "causal")
 #: Fields added after the study data were collected, with the value those data had (for the reuse check).
-_LATER_FIELDS = {"sensor_noise": "default", "qdd_source": "savgol", "sensor_pipeline": "ideal"}
+_LATER_FIELDS = {"sensor_noise": "default", "qdd_source": "savgol", "sensor_pipeline": "ideal", "qdd_filter": None}
 
 
 def sensor_model(sensor_noise: str):
@@ -194,7 +209,7 @@ def _record(seed: int, rows: np.ndarray, qacc: np.ndarray, cfg: CollectConfig, s
             "payload_mass": float(cfg.payload_mass), "rate_hz": float(cfg.rate_hz), "seed": int(seed),
             "warmup_seconds": float(cfg.warmup_seconds)}
     data = DynamicsData.from_measurements(t, q, qd, tau, meta=meta,
-                                          smoothing=SavGol(cfg.savgol_window, cfg.savgol_polyorder),
+                                          smoothing=cfg.smoothing,
                                           segment=np.full(t.shape, segment, dtype=np.int64))
     data.meta["qdd_error"] = qdd_error_stats(data.qdd, qacc)
     if cfg.qdd_source == "true":

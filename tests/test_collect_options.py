@@ -107,3 +107,30 @@ def test_study_data_rejects_collection_options_with_a_folder(tmp_path: Path) -> 
         study_data(tmp_path, tmp_path, sensor_noise="none")
     with pytest.raises(ValueError, match="preset"):
         study_data(None, tmp_path, preset="huge")
+
+
+def test_qdd_filter_follows_the_pipeline_unless_given() -> None:
+    assert not CollectConfig().smoothing.causal
+    assert CollectConfig(sensor_pipeline="jaco2").smoothing.causal
+    assert not CollectConfig(sensor_pipeline="jaco2", qdd_filter="centred").smoothing.causal
+    assert CollectConfig(qdd_filter="causal").smoothing.causal
+    assert CollectConfig().smoothing.window == CollectConfig().savgol_window
+    with pytest.raises(ValueError, match="qdd_filter"):
+        CollectConfig(qdd_filter="zero-phase")
+    old = {k: v for k, v in asdict(CollectConfig()).items() if k != "qdd_filter"}
+    assert same_collection(old, CollectConfig()) and not same_collection(old, CollectConfig(qdd_filter="causal"))
+
+
+def test_causal_qdd_arm_differs_from_the_centred_only_in_qdd(arms, tmp_path: Path) -> None:
+    train, _ = collect(tmp_path / "causal", replace(TINY, qdd_filter="causal"), workers=1)[:2]
+    ref = arms["noisy"][0]
+    for name in ("q", "qd", "tau", "t"):
+        np.testing.assert_array_equal(getattr(train, name), getattr(ref, name))
+    assert not np.array_equal(train.qdd, ref.qdd)
+    assert "causal Savitzky-Golay" in train.meta["qdd_source"]
+    # the causal estimate at a row uses no later row: recomputing it from the rows up to there gives the same value
+    k = 60
+    from cascgp.derivatives import differentiate
+
+    head = differentiate(train.t[:k], train.qd[:k], train.segment[:k], replace(TINY, qdd_filter="causal").smoothing)
+    np.testing.assert_array_equal(head, train.qdd[:k])

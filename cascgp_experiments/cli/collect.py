@@ -3,7 +3,7 @@
 Usage::
 
     cascgp collect --out out/study/data [--quick|--smoke] [--workers N | --ray ADDRESS] [--vector-env]
-        [--sensor-noise none] [--qdd true]
+        [--sensor-noise none] [--qdd true] [--sensor-pipeline jaco2] [--qdd-filter causal]
 
 The protocol and the files: :mod:`cascgp_experiments.collect`.
 """
@@ -30,6 +30,10 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                     help="the env's SensorNoise() (default) or noiseless sensors (an ablation)")
     ap.add_argument("--qdd", default="savgol", choices=("savgol", "true"),
                     help="q̈ from the Savitzky-Golay filter (default) or the simulator's true q̈ (an ablation)")
+    ap.add_argument("--sensor-pipeline", default="ideal", choices=("ideal", "jaco2"),
+                    help="the env's sensing pipeline: ideal (default) or the real Jaco 2's (docs/sensing-sources.md)")
+    ap.add_argument("--qdd-filter", default=None, choices=("centred", "causal"),
+                    help="the Savitzky-Golay q̈ filter (default: causal with --sensor-pipeline jaco2, else centred)")
     ap.add_argument("--force", action="store_true", help="collect again even if files exist")
     ap.add_argument("--vector-env", action="store_true",
                     help="run the motions of a split --workers at a time in one Gymnasium AsyncVectorEnv instead of "
@@ -38,7 +42,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     a = ap.parse_args(argv)
     check_args(ap, a)
     base = PRESETS["quick" if a.quick else "smoke" if a.smoke else "full"]
-    kw = asdict(base) | {"seed": a.seed, "sensor_noise": a.sensor_noise, "qdd_source": a.qdd}
+    kw = asdict(base) | {"seed": a.seed, "sensor_noise": a.sensor_noise, "qdd_source": a.qdd,
+                         "sensor_pipeline": a.sensor_pipeline, "qdd_filter": a.qdd_filter}
     if a.payload_mass is not None:
         kw["payload_mass"] = a.payload_mass
     with session(a.ray, a.workers):
