@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import make_arm, sinusoid_data
+from tests.conftest import make_arm, sinusoid_data
 
 from cascgp.data import DynamicsData, SavGol
 from cascgp.logs import DEFAULT_SMOOTHING, LogFormatError, filter_name, read_log, write_log, write_predictions

@@ -11,7 +11,7 @@ from cascgp.features import input_dim, state_features
 from cascgp.gp import GPFitConfig
 from cascgp.metrics import nrmse
 from cascgp.models import MODEL_NAMES, CascadedGPModel, load_model, make_model
-from conftest import make_arm, sinusoid_data, two_link_closed_form
+from tests.conftest import make_arm, sinusoid_data, two_link_closed_form
 
 FAST = GPFitConfig(n_restarts=1, max_iter=200)
 
