@@ -201,8 +201,17 @@ class RigidBodyModel:
         Returns:
             tau: (N,) or (T, N) in N m, float64.
         """
-        q, qd, qdd = self._check_states(q, qd, qdd)
         model, data = self.pin_model, self._data
+        if (type(q) is np.ndarray and type(qd) is np.ndarray and type(qdd) is np.ndarray
+                and q.dtype == qd.dtype == qdd.dtype == np.float64 and q.shape == qd.shape == qdd.shape == (self.dof,)
+                and q.flags.c_contiguous and qd.flags.c_contiguous and qdd.flags.c_contiguous):
+            # One configuration of float64 arrays (what a controller passes every tick): RNEA first, the checks
+            # only if the torque is not finite (a NaN or inf input always gives one), so that bad input still
+            # raises the checks' error below and good input skips their cost.
+            tau = pin.rnea(model, data, q, qd, qdd)
+            if np.isfinite(tau).all():
+                return tau.copy()
+        q, qd, qdd = self._check_states(q, qd, qdd)
         if q.ndim == 1:
             return pin.rnea(model, data, q, qd, qdd).copy()
         out = np.empty_like(q)

@@ -350,3 +350,23 @@ def test_generator_cli(tmp):
     text, sidecar = gen.generate(error=0.1, seed=0, urdf_name="arm.urdf")
     assert out.read_text() == text
     assert json.loads(out.with_suffix(".json").read_text()) == sidecar
+
+
+def test_single_state_fast_path_equals_the_checked_path_and_refuses_bad_input(exact):
+    """A (N,) float64 state skips the input checks unless the torque is not finite: the same bits as the checked
+    path (a list, or a strided view, goes through the checks), and NaN or inf still raise naming the field."""
+    q, qd, qdd = _states(20, seed=3)
+    for t in range(20):
+        fast = exact.inverse_dynamics(q[t], qd[t], qdd[t])
+        checked = exact.inverse_dynamics(q[t].tolist(), qd[t].tolist(), qdd[t].tolist())
+        np.testing.assert_array_equal(fast, checked)
+    wide = np.zeros((exact.dof, 2))
+    wide[:, 0] = q[0]
+    np.testing.assert_array_equal(exact.inverse_dynamics(wide[:, 0], qd[0], qdd[0]),
+                                  exact.inverse_dynamics(q[0], qd[0], qdd[0]))
+    for k, name in enumerate(("q", "qd", "qdd")):
+        for bad in (np.nan, np.inf, -np.inf):
+            args = [q[0].copy(), qd[0].copy(), qdd[0].copy()]
+            args[k][1] = bad
+            with pytest.raises(ValueError, match=rf"^{name} must be finite"):
+                exact.inverse_dynamics(*args)
