@@ -85,9 +85,10 @@ class CollectConfig:
     #: ``"savgol"``: q̈ from the measured q̇ by the Savitzky-Golay filter (the study's); ``"true"``: the
     #: simulator's true accelerations ``info["qacc"]`` (privileged; for the calibration ablation only).
     qdd_source: str = "savgol"
-    #: The env's ``sensor_pipeline`` (``jaco_env.signal_pipeline``): ``"ideal"`` (the study's data so far) or
+    #: The env's ``sensor_pipeline`` (``jaco_env.signal_pipeline``): ``"ideal"`` (the study's data so far),
     #: ``"jaco2"`` (the real arm's read skew, differentiated velocity, torque offset, drift, filter and noise
-    #: per actuator; values and sources in ``docs/sensing-sources.md``).
+    #: per actuator; values and sources in ``docs/sensing-sources.md``) or ``"ideal+<factor>[+...]"`` (factors
+    #: ``skew``, ``velocity``, ``torque`` of ``jaco_env.signal_pipeline.FACTORS`` on top of ``ideal``).
     sensor_pipeline: str = "ideal"
     #: The q̈ filter (factor (d) of the sensing pipeline): ``"centred"`` (the Savitzky-Golay fit evaluated at its
     #: centre: zero phase, offline) or ``"causal"`` (evaluated at the newest sample, as a controller running
@@ -122,8 +123,7 @@ class CollectConfig:
             raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {self.sensor_noise!r}")
         if self.qdd_source not in QDD_SOURCES:
             raise ValueError(f"qdd_source: expected one of {QDD_SOURCES}, got {self.qdd_source!r}")
-        if self.sensor_pipeline not in SENSOR_PIPELINES:
-            raise ValueError(f"sensor_pipeline: expected one of {SENSOR_PIPELINES}, got {self.sensor_pipeline!r}")
+        _check_pipeline(self.sensor_pipeline)
         if self.qdd_filter is not None and self.qdd_filter not in QDD_FILTERS:
             raise ValueError(f"qdd_filter: expected None or one of {QDD_FILTERS}, got {self.qdd_filter!r}")
 
@@ -131,9 +131,19 @@ class CollectConfig:
 #: Values of :attr:`CollectConfig.sensor_noise` and :attr:`CollectConfig.qdd_source`.
 SENSOR_NOISE = ("default", "none")
 QDD_SOURCES = ("savgol", "true")
-#: Values of :attr:`CollectConfig.sensor_pipeline` (the env's presets) and :attr:`CollectConfig.qdd_filter`.
+#: The presets of :attr:`CollectConfig.sensor_pipeline` (``"ideal+<factor>..."`` names are accepted too) and the
+#: values of :attr:`CollectConfig.qdd_filter`.
 SENSOR_PIPELINES = ("ideal", "jaco2")
 QDD_FILTERS = ("centred", "causal")
+
+
+def _check_pipeline(name: object) -> None:
+    """Raise ``ValueError`` naming ``sensor_pipeline`` unless ``name`` is a pipeline name the env accepts."""
+    from jaco_env.signal_pipeline import FACTORS, SignalPipeline
+
+    if not SignalPipeline.is_name(name):
+        raise ValueError(f"sensor_pipeline: expected one of {SENSOR_PIPELINES} or 'ideal+' and factors of "
+                         f"{tuple(FACTORS)} joined by '+', got {name!r}")
 #: Fields added after the study data were collected, with the value those data had (for the reuse check).
 _LATER_FIELDS = {"sensor_noise": "default", "qdd_source": "savgol", "sensor_pipeline": "ideal", "qdd_filter": None}
 
@@ -187,8 +197,7 @@ def make_env(rate_hz: float, payload_mass: float, sensor_noise: str = "default",
 
     if sensor_noise not in SENSOR_NOISE:
         raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {sensor_noise!r}")
-    if sensor_pipeline not in SENSOR_PIPELINES:
-        raise ValueError(f"sensor_pipeline: expected one of {SENSOR_PIPELINES}, got {sensor_pipeline!r}")
+    _check_pipeline(sensor_pipeline)
     kw: dict = {"sensor_noise": None} if sensor_noise == "none" else {}
     if sensor_pipeline != "ideal":  # "ideal" is the env's default: its data are unchanged
         kw["sensor_pipeline"] = sensor_pipeline

@@ -19,7 +19,9 @@ field                  factor                                                 ``
 =====================  =====================================================  ==========  ==================
 
 (x / y: joints 1-3 / joints 4-6.) The parameters of ``jaco2``, their public sources and the
-assumptions where none exists are in ``docs/sensing-sources.md``.
+assumptions where none exists are in ``docs/sensing-sources.md``. A single factor on top of ``ideal``
+is named ``"ideal+skew"`` (a), ``"ideal+velocity"`` (b) or ``"ideal+torque"`` (c), and factors combine
+(``"ideal+skew+torque"``; :data:`FACTORS`, :meth:`SignalPipeline.with_factors`).
 
 Times are rounded to whole physics steps and kept within one control period: tau is read at its
 end, q and qd at most ``frame_skip - 1`` physics steps before it, the velocity window at most what is
@@ -62,6 +64,14 @@ _RANGES = {
 _PER_JOINT = ("tau_offset_std", "tau_drift_std", "tau_noise_scale")
 VELOCITY_SOURCES = ("true", "differentiated")
 PRESETS = ("ideal", "jaco2")
+#: The environment-level factors by name, with the fields each one sets (to the ``jaco2`` values) on top of
+#: ``ideal``: ``"ideal+skew+torque"`` names such a pipeline. Factor (d), the q̈ filter, belongs to data
+#: collection (``cascgp_experiments.collect``), not to the environment.
+FACTORS: dict[str, tuple[str, ...]] = {
+    "skew": ("q_lead_s", "qd_lead_s"),                                                # (a)
+    "velocity": ("velocity_source", "velocity_window_s"),                             # (b)
+    "torque": ("tau_offset_std", "tau_drift_std", "tau_filter_hz", "tau_noise_scale"),  # (c)
+}
 
 
 def _joints(big: float, small: float) -> tuple[float, ...]:
@@ -129,16 +139,40 @@ class SignalPipeline:
                    tau_noise_scale=_joints(1.0, 0.25))
 
     @classmethod
+    def with_factors(cls, *factors: str) -> "SignalPipeline":
+        """``ideal`` with the named factors (keys of :data:`FACTORS`) at their ``jaco2`` values."""
+        bad = [f for f in factors if f not in FACTORS]
+        if bad:
+            raise ValueError(f"sensor_pipeline factor must be one of {tuple(FACTORS)}, got {bad[0]!r}")
+        full = cls.jaco2()
+        return cls(**{name: getattr(full, name) for f in factors for name in FACTORS[f]})
+
+    @classmethod
     def resolve(cls, value: "str | SignalPipeline") -> "SignalPipeline":
-        """The pipeline of the env option ``sensor_pipeline`` (a preset name or a ``SignalPipeline``)."""
+        """The pipeline of the env option ``sensor_pipeline``: a preset name, ``"ideal+<factor>[+<factor>...]"``
+        (factors of :data:`FACTORS`) or a ``SignalPipeline``."""
+        expected = f"one of {PRESETS}, 'ideal+' and factors of {tuple(FACTORS)} joined by '+', or a SignalPipeline"
         if isinstance(value, SignalPipeline):
             return value
         if isinstance(value, str):
-            if value not in PRESETS:
-                raise ValueError(f"sensor_pipeline must be one of {PRESETS} or a SignalPipeline, got {value!r}")
-            return cls.ideal() if value == "ideal" else cls.jaco2()
-        raise TypeError(f"sensor_pipeline must be one of {PRESETS} or a SignalPipeline, "
-                        f"got {type(value).__name__} {value!r}")
+            if value in PRESETS:
+                return cls.ideal() if value == "ideal" else cls.jaco2()
+            head, *factors = value.split("+")
+            if head != "ideal" or not factors or any(f not in FACTORS for f in factors):
+                raise ValueError(f"sensor_pipeline must be {expected}, got {value!r}")
+            return cls.with_factors(*factors)
+        raise TypeError(f"sensor_pipeline must be {expected}, got {type(value).__name__} {value!r}")
+
+    @staticmethod
+    def is_name(value: object) -> bool:
+        """True when ``value`` is a pipeline name that :meth:`resolve` accepts."""
+        if not isinstance(value, str):
+            return False
+        try:
+            SignalPipeline.resolve(value)
+        except ValueError:
+            return False
+        return True
 
     @property
     def is_ideal(self) -> bool:

@@ -134,3 +134,12 @@ def test_causal_qdd_arm_differs_from_the_centred_only_in_qdd(arms, tmp_path: Pat
 
     head = differentiate(train.t[:k], train.qd[:k], train.segment[:k], replace(TINY, qdd_filter="causal").smoothing)
     np.testing.assert_array_equal(head, train.qdd[:k])
+
+
+def test_pipeline_factor_names_are_accepted_and_bad_ones_refused() -> None:
+    cfg = CollectConfig(sensor_pipeline="ideal+skew+torque")
+    assert not cfg.smoothing.causal  # only "jaco2" makes the q̈ filter causal by default
+    with pytest.raises(ValueError, match="sensor_pipeline: expected one of .*'skew', 'velocity', 'torque'"):
+        CollectConfig(sensor_pipeline="ideal+inertials")
+    with pytest.raises(ValueError, match="sensor_pipeline"):
+        CollectConfig(sensor_pipeline=None)  # type: ignore[arg-type]

@@ -8,6 +8,7 @@ reads and the differentiated velocity), and MuJoCo's inverse dynamics (the link-
 from __future__ import annotations
 
 import math
+from dataclasses import fields
 
 import gymnasium as gym
 import numpy as np
@@ -17,7 +18,7 @@ import jaco_env
 from jaco_env import excitation
 from jaco_env.robot import N_JOINTS
 from jaco_env.sensors import SensorNoise
-from jaco_env.signal_pipeline import PipelineState, SignalPipeline
+from jaco_env.signal_pipeline import FACTORS, PipelineState, SignalPipeline
 from tests.test_env_sensing import link_side_torque
 
 DT = 0.025
@@ -68,8 +69,29 @@ def test_presets():
 @pytest.mark.parametrize("env_id", ["JacoPayload-v0", "JacoPour-v0"])
 @pytest.mark.parametrize("value, exc", [("real", ValueError), (3, TypeError), (None, TypeError)])
 def test_env_rejects_bad_sensor_pipeline(env_id, value, exc):
-    with pytest.raises(exc, match=r"sensor_pipeline must be one of \('ideal', 'jaco2'\) or a SignalPipeline"):
+    with pytest.raises(exc, match=r"sensor_pipeline must be one of \('ideal', 'jaco2'\), 'ideal\+' and factors"):
         gym.make(env_id, sensor_pipeline=value)
+
+
+def test_named_factors_take_the_jaco2_values_of_their_fields_only():
+    full, ideal = SignalPipeline.jaco2(), SignalPipeline.ideal()
+    for factor, names in FACTORS.items():
+        p = SignalPipeline.resolve(f"ideal+{factor}")
+        assert p == SignalPipeline.with_factors(factor) and not p.is_ideal
+        for f in fields(SignalPipeline):
+            assert getattr(p, f.name) == getattr(full if f.name in names else ideal, f.name), (factor, f.name)
+    assert SignalPipeline.resolve("ideal+" + "+".join(FACTORS)) == full
+    assert SignalPipeline.resolve("ideal+torque+skew") == SignalPipeline.with_factors("skew", "torque")
+    assert SignalPipeline.is_name("ideal+velocity") and not SignalPipeline.is_name(3)
+
+
+@pytest.mark.parametrize("name", ["ideal+", "jaco2+skew", "ideal+inertials", "ideal+skew+", "Ideal"])
+def test_bad_factor_names_are_refused(name):
+    with pytest.raises(ValueError, match="sensor_pipeline must be one of"):
+        SignalPipeline.resolve(name)
+    assert not SignalPipeline.is_name(name)
+    with pytest.raises(ValueError, match="sensor_pipeline factor must be one of"):
+        SignalPipeline.with_factors("inertials")
 
 
 # ------------------------------------------------------------------ ideal is today's env

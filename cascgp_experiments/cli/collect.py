@@ -30,8 +30,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                     help="the env's SensorNoise() (default) or noiseless sensors (an ablation)")
     ap.add_argument("--qdd", default="savgol", choices=("savgol", "true"),
                     help="q̈ from the Savitzky-Golay filter (default) or the simulator's true q̈ (an ablation)")
-    ap.add_argument("--sensor-pipeline", default="ideal", choices=("ideal", "jaco2"),
-                    help="the env's sensing pipeline: ideal (default) or the real Jaco 2's (docs/sensing-sources.md)")
+    ap.add_argument("--sensor-pipeline", default="ideal",
+                    help="the env's sensing pipeline: ideal (default), jaco2 (the real Jaco 2's; "
+                         "docs/sensing-sources.md) or ideal+FACTOR[+FACTOR...] with factors skew, velocity, torque")
     ap.add_argument("--qdd-filter", default=None, choices=("centred", "causal"),
                     help="the Savitzky-Golay q̈ filter (default: causal with --sensor-pipeline jaco2, else centred)")
     ap.add_argument("--force", action="store_true", help="collect again even if files exist")
@@ -46,8 +47,12 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                          "sensor_pipeline": a.sensor_pipeline, "qdd_filter": a.qdd_filter}
     if a.payload_mass is not None:
         kw["payload_mass"] = a.payload_mass
+    try:
+        cfg = CollectConfig(**kw)
+    except ValueError as e:
+        ap.error(str(e))
     with session(a.ray, a.workers):
-        train, test, info = collect(a.out, CollectConfig(**kw), force=a.force, workers=a.workers, ray_address=a.ray,
+        train, test, info = collect(a.out, cfg, force=a.force, workers=a.workers, ray_address=a.ray,
                                     vector_env=a.vector_env)
     print(f"train: {train}\ntest: {test}\n{info}")
 
