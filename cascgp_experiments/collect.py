@@ -43,10 +43,11 @@ measurements (the motions are the same: the command is open loop and the firmwar
 ``qdd_source="true"`` stores the simulator's true accelerations instead of the filtered ones.
 ``sensor_pipeline="jaco2"`` reads the joint state through the real arm's sensing pipeline
 (``jaco_env.signal_pipeline``) instead of the default ``"ideal"``, and differentiates q̇ with the causal filter
-(``qdd_filter``, factor (d)).
+(``qdd_filter``, factor (d)) and simulates the arm with Kinova's URDF link inertials (``link_inertials``, factor (e)).
 
 Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N]
-[--ray ADDRESS] [--sensor-noise none] [--qdd true] [--sensor-pipeline jaco2] [--qdd-filter causal]``.
+[--ray ADDRESS] [--sensor-noise none] [--qdd true] [--sensor-pipeline jaco2] [--qdd-filter causal]
+[--link-inertials kinova]``.
 """
 
 from __future__ import annotations
@@ -95,6 +96,18 @@ class CollectConfig:
     #: online computes it: ``cascgp.derivatives.SavGol(causal=True)``); ``None`` follows ``sensor_pipeline``
     #: (``"jaco2"``: causal, ``"ideal"``: centred).
     qdd_filter: str | None = None
+    #: The arm's link inertials (the env option ``link_inertials``, factor (e)): ``"dm_control"`` or ``"kinova"``
+    #: (``jaco_env.link_inertials``); ``None`` follows ``sensor_pipeline`` (``"jaco2"``: Kinova's, otherwise
+    #: dm_control's). The nominal URDF of a model fitted to these data should be ``jaco_env.nominal_urdf`` of the
+    #: same value (:attr:`nominal_link_inertials`).
+    link_inertials: str | None = None
+
+    @property
+    def nominal_link_inertials(self) -> str:
+        """The link inertials the data's arm has (:attr:`link_inertials` resolved)."""
+        if self.link_inertials is not None:
+            return self.link_inertials
+        return "kinova" if self.sensor_pipeline == "jaco2" else "dm_control"
 
     @property
     def smoothing(self) -> SavGol:
@@ -126,6 +139,8 @@ class CollectConfig:
         _check_pipeline(self.sensor_pipeline)
         if self.qdd_filter is not None and self.qdd_filter not in QDD_FILTERS:
             raise ValueError(f"qdd_filter: expected None or one of {QDD_FILTERS}, got {self.qdd_filter!r}")
+        if self.link_inertials is not None and self.link_inertials not in LINK_INERTIALS:
+            raise ValueError(f"link_inertials: expected None or one of {LINK_INERTIALS}, got {self.link_inertials!r}")
 
 
 #: Values of :attr:`CollectConfig.sensor_noise` and :attr:`CollectConfig.qdd_source`.
@@ -135,6 +150,8 @@ QDD_SOURCES = ("savgol", "true")
 #: values of :attr:`CollectConfig.qdd_filter`.
 SENSOR_PIPELINES = ("ideal", "jaco2")
 QDD_FILTERS = ("centred", "causal")
+#: Values of :attr:`CollectConfig.link_inertials` besides ``None`` (``jaco_env.link_inertials.LINK_INERTIALS``).
+LINK_INERTIALS = ("dm_control", "kinova")
 
 
 def _check_pipeline(name: object) -> None:
@@ -145,7 +162,8 @@ def _check_pipeline(name: object) -> None:
         raise ValueError(f"sensor_pipeline: expected one of {SENSOR_PIPELINES} or 'ideal+' and factors of "
                          f"{tuple(FACTORS)} joined by '+', got {name!r}")
 #: Fields added after the study data were collected, with the value those data had (for the reuse check).
-_LATER_FIELDS = {"sensor_noise": "default", "qdd_source": "savgol", "sensor_pipeline": "ideal", "qdd_filter": None}
+_LATER_FIELDS = {"sensor_noise": "default", "qdd_source": "savgol", "sensor_pipeline": "ideal", "qdd_filter": None,
+                 "link_inertials": None}
 
 
 def sensor_model(sensor_noise: str):
@@ -187,10 +205,11 @@ def _command_source(seed: int, duration: float) -> Callable[[float], np.ndarray]
     return excitation.make_command(seed=seed, duration=duration)
 
 
-def make_env(rate_hz: float, payload_mass: float, sensor_noise: str = "default", sensor_pipeline: str = "ideal"):
+def make_env(rate_hz: float, payload_mass: float, sensor_noise: str = "default", sensor_pipeline: str = "ideal",
+             link_inertials: str | None = None):
     """The collection's env: ``JacoPayload-v0`` in velocity mode at ``rate_hz``, no episode time limit;
     ``sensor_noise="none"``: noiseless measurements (see :attr:`CollectConfig.sensor_noise`);
-    ``sensor_pipeline``: the env's option of that name (see :attr:`CollectConfig.sensor_pipeline`)."""
+    ``sensor_pipeline``, ``link_inertials``: the env's options of those names (see :class:`CollectConfig`)."""
     import gymnasium as gym
 
     import jaco_env  # noqa: F401  (registers the environments)
@@ -201,6 +220,8 @@ def make_env(rate_hz: float, payload_mass: float, sensor_noise: str = "default",
     kw: dict = {"sensor_noise": None} if sensor_noise == "none" else {}
     if sensor_pipeline != "ideal":  # "ideal" is the env's default: its data are unchanged
         kw["sensor_pipeline"] = sensor_pipeline
+    if link_inertials is not None:
+        kw["link_inertials"] = link_inertials
     return gym.make(ENV_ID, control_mode="velocity", control_freq=float(rate_hz),
                     payload_mass=float(payload_mass), max_episode_steps=10**9, **kw)
 
@@ -233,7 +254,7 @@ def record_motion(seed: int, duration: float, cfg: CollectConfig, *, segment: in
     """Run one velocity-commanded motion and return its measured record (qdd differentiated).
 
     ``on_steps(k)``: called every 100 steps with the number of steps done since the last call."""
-    env = make_env(cfg.rate_hz, cfg.payload_mass, cfg.sensor_noise, cfg.sensor_pipeline)
+    env = make_env(cfg.rate_hz, cfg.payload_mass, cfg.sensor_noise, cfg.sensor_pipeline, cfg.link_inertials)
     try:
         obs, info = env.reset(seed=seed)
         command = _command_source(seed, duration)
@@ -275,7 +296,8 @@ def record_motions_vector(seeds: list[int], duration: float, cfg: CollectConfig,
     import gymnasium as gym
 
     n = len(seeds)
-    fns = [partial(make_env, cfg.rate_hz, cfg.payload_mass, cfg.sensor_noise, cfg.sensor_pipeline)] * n
+    fns = [partial(make_env, cfg.rate_hz, cfg.payload_mass, cfg.sensor_noise, cfg.sensor_pipeline,
+                   cfg.link_inertials)] * n
     venv = (gym.vector.AsyncVectorEnv(fns, context="spawn") if asynchronous else gym.vector.SyncVectorEnv(fns))
     try:
         obs, info = venv.reset(seed=[int(s) for s in seeds])

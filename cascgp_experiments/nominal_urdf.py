@@ -32,36 +32,41 @@ import mujoco
 from cascgp_experiments.urdf_export import check_urdf_path, convert, format_float, make_sidecar, write_urdf
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "jaco_env" / "assets" / "jaco2_nominal.urdf"
+#: The committed nominal URDF of each link-inertial set (``jaco_env.nominal_urdf`` finds them in the package).
+OUT_NAMES = {"dm_control": "jaco2_nominal.urdf", "kinova": "jaco2_nominal_kinova.urdf"}
 #: Command written into the files' provenance.
 GENERATOR = "python -m scripts.generate_urdf"
 
 
-def build_bare_model() -> mujoco.MjModel:
+def build_bare_model(link_inertials: str = "dm_control") -> mujoco.MjModel:
     """Compile the bare simulated arm: no payload, no friction, no damping, no armature."""
     from jaco_env.robot import build_arm_mjcf
 
-    arm = build_arm_mjcf(armature=None, frictionloss=None, damping=None)
+    arm = build_arm_mjcf(armature=None, frictionloss=None, damping=None, link_inertials=link_inertials)
     return mujoco.MjModel.from_xml_string(arm.to_xml_string(), arm.get_assets())
 
 
-def generate(error: float = 0.1, seed: int = 0, urdf_name: str = DEFAULT_OUT.name) -> tuple[str, dict]:
+def generate(error: float = 0.1, seed: int = 0, urdf_name: str = DEFAULT_OUT.name,
+             link_inertials: str = "dm_control") -> tuple[str, dict]:
     """Build the nominal URDF text and the sidecar dict (nothing written).
 
     Args:
         error: relative calibration error ``e`` in [0, 1) (:mod:`cascgp_experiments.urdf_export`).
         seed: seed of the calibration error.
         urdf_name: file name of the URDF recorded in the sidecar.
+        link_inertials: the arm's link inertials (``jaco_env.link_inertials``): ``"dm_control"`` or ``"kinova"``.
 
     Returns:
         ``(urdf_text, sidecar)``.
     """
     from jaco_env import robot
 
-    m = build_bare_model()
+    m = build_bare_model(link_inertials)
     if m.nv != robot.N_JOINTS or m.nq != m.nv:
         raise ValueError(f"expected {robot.N_JOINTS} hinge joints, compiled model has nq={m.nq}, nv={m.nv}")
+    args = "" if link_inertials == "dm_control" else f", link_inertials={link_inertials!r}"
     source = (
-        "jaco_env.robot.build_arm_mjcf(armature=None, frictionloss=None, damping=None) "
+        f"jaco_env.robot.build_arm_mjcf(armature=None, frictionloss=None, damping=None{args}) "
         f"compiled with MuJoCo {mujoco.__version__} (dm_control {version('dm-control')})"
     )
     header = (
@@ -81,8 +86,9 @@ def generate(error: float = 0.1, seed: int = 0, urdf_name: str = DEFAULT_OUT.nam
     return text, sidecar
 
 
-def write(out: str | os.PathLike = DEFAULT_OUT, error: float = 0.1, seed: int = 0) -> tuple[Path, Path]:
+def write(out: str | os.PathLike = DEFAULT_OUT, error: float = 0.1, seed: int = 0,
+          link_inertials: str = "dm_control") -> tuple[Path, Path]:
     """Generate and write the URDF and its sidecar JSON; returns both paths."""
     out = check_urdf_path(out)
-    text, sidecar = generate(error=error, seed=seed, urdf_name=out.name)
+    text, sidecar = generate(error=error, seed=seed, urdf_name=out.name, link_inertials=link_inertials)
     return write_urdf(out, text, sidecar)

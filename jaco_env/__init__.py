@@ -17,6 +17,7 @@ module              owns
 ``oracle``          reference controllers (oracle, PD) for the episode runner
 ``excitation``      sum-of-sinusoids motions for data collection
 ``checks``          input checks shared by the envs and controllers (real numbers, real arrays)
+``link_inertials``  the arm's link inertials: dm_control's or Kinova's URDF values
 ==================  ==========================================================================
 
 Headless
@@ -38,6 +39,22 @@ __version__ = "0.2.0"
 #: or friction, and its JSON sidecar (armature, limits) beside it; ``cascgp.load_nominal(jaco_env.NOMINAL_URDF)``
 #: reads both. Written by ``python -m scripts.generate_urdf`` (:mod:`cascgp_experiments.nominal_urdf`).
 NOMINAL_URDF = Path(__file__).resolve().parent / "assets" / "jaco2_nominal.urdf"
+
+
+def nominal_urdf(link_inertials: str = "dm_control") -> Path:
+    """The shipped nominal URDF of the arm with the given link inertials (the env option ``link_inertials``:
+    ``"dm_control"``, :data:`NOMINAL_URDF`, or ``"kinova"``, Kinova's URDF values; :mod:`jaco_env.link_inertials`).
+
+    Example:
+        >>> import jaco_env
+        >>> jaco_env.nominal_urdf("kinova").name
+        'jaco2_nominal_kinova.urdf'
+    """
+    from jaco_env.link_inertials import check_link_inertials
+
+    suffix = "" if check_link_inertials(link_inertials) == "dm_control" else f"_{link_inertials}"
+    return NOMINAL_URDF.with_name(f"jaco2_nominal{suffix}.urdf")
+
 
 if sys.platform.startswith("linux") and "MUJOCO_GL" not in os.environ and not (
     os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
@@ -62,8 +79,9 @@ from jaco_env.sensors import (  # noqa: E402
 )
 from jaco_env.signal_pipeline import SignalPipeline  # noqa: E402
 
-__all__ = ["__version__", "NOMINAL_URDF", "robot", "SensorNoise", "SignalPipeline", "DEFAULT_KP", "DEFAULT_KD",
-           "split_obs", "OBS_Q", "OBS_QD", "OBS_TAU", "OBS_TIME", "OBS_JAR", "MEASUREMENT_DIM", "POUR_OBS_DIM"]
+__all__ = ["__version__", "NOMINAL_URDF", "nominal_urdf", "robot", "SensorNoise", "SignalPipeline", "DEFAULT_KP",
+           "DEFAULT_KD", "split_obs", "OBS_Q", "OBS_QD", "OBS_TAU", "OBS_TIME", "OBS_JAR", "MEASUREMENT_DIM",
+           "POUR_OBS_DIM"]
 
 #: 60 s at the default 40 Hz control rate.
 MAX_EPISODE_STEPS = 2400

@@ -55,6 +55,7 @@ import numpy as np
 from jaco_env import robot, scene
 from jaco_env.checks import is_real_number, real_array
 from jaco_env.gains import DEFAULT_KD, DEFAULT_KP
+from jaco_env.link_inertials import check_link_inertials
 
 Reference = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
@@ -73,20 +74,22 @@ def _as_gain(value, name: str) -> np.ndarray:
     return gain
 
 
-@functools.lru_cache(maxsize=1)
-def _rigid_model_xml() -> tuple[str, dict]:
-    root = scene.build_scene(kind="payload", control_mode=None)
+@functools.lru_cache(maxsize=2)
+def _rigid_model_xml(link_inertials: str) -> tuple[str, dict]:
+    root = scene.build_scene(kind="payload", control_mode=None, link_inertials=link_inertials)
     return root.to_xml_string(), root.get_assets()
 
 
-def rigid_scene_model(payload_mass: float, n_marbles: int = 0) -> mujoco.MjModel:
+def rigid_scene_model(payload_mass: float, n_marbles: int = 0,
+                      link_inertials: str = "dm_control") -> mujoco.MjModel:
     """The true arm + hand + bottle with the whole payload (marbles lumped) as one rigid body.
 
     Args:
         payload_mass: total mass in the hand (bottle + marbles + extra, kg).
         n_marbles: number of marbles included in ``payload_mass`` (lumped at their resting centroid).
+        link_inertials: the arm's link inertials, as the environment's option (:mod:`jaco_env.link_inertials`).
     """
-    xml, assets = _rigid_model_xml()
+    xml, assets = _rigid_model_xml(check_link_inertials(link_inertials))
     m = mujoco.MjModel.from_xml_string(xml, assets)
     b = m.body(scene.PAYLOAD_BODY).id
     extra = payload_mass - scene.BOTTLE_MASS - n_marbles * scene.MARBLE_MASS
@@ -195,17 +198,19 @@ class OracleController(PDController):
         if payload_mass is not None:
             self._build(float(payload_mass), self.n_marbles)
 
-    def _build(self, payload_mass: float, n_marbles: int) -> None:
-        self.model = rigid_scene_model(payload_mass, n_marbles)
+    def _build(self, payload_mass: float, n_marbles: int, link_inertials: str = "dm_control") -> None:
+        self.model = rigid_scene_model(payload_mass, n_marbles, link_inertials)
         self.data = mujoco.MjData(self.model)
         self._payload_b = self.model.body(scene.PAYLOAD_BODY).id
         self._extra = payload_mass - scene.BOTTLE_MASS - n_marbles * scene.MARBLE_MASS
 
     def start(self, env: Any, info: dict[str, Any]) -> None:
-        """Build the rigid model for this episode's payload and, on a pouring env, follow its marbles."""
+        """Build the rigid model for this episode's payload and the env's link inertials and, on a pouring
+        env, follow its marbles."""
         super().start(env, info)
         n_marbles = int(info.get("n_marbles", self.n_marbles))
-        self._build(float(info["payload_mass"]), n_marbles)
+        self._build(float(info["payload_mass"]), n_marbles,
+                    getattr(getattr(env, "unwrapped", env), "link_inertials", "dm_control"))
         follow = self.follow_marbles and n_marbles > 0 and hasattr(env, "marbles_in_bottle_frame")
         self._env = env if follow else None
 

@@ -83,6 +83,8 @@ import numpy as np
 from dm_control import mjcf
 from numpy.typing import ArrayLike
 
+from jaco_env import link_inertials as link_inertials_module
+
 N_JOINTS = 6
 JOINT_NAMES: tuple[str, ...] = tuple(f"joint_{i}" for i in range(1, N_JOINTS + 1))
 TORQUE_LIMITS = np.array([30.5, 30.5, 30.5, 6.8, 6.8, 6.8])
@@ -147,6 +149,7 @@ def build_arm_mjcf(
     armature: np.ndarray | None = ARMATURE,
     frictionloss: np.ndarray | None = FRICTIONLOSS,
     damping: np.ndarray | None = DAMPING,
+    link_inertials: str = "dm_control",
 ) -> mjcf.RootElement:
     """Compose the bare Jaco 2 arm (6 hinge joints) with its welded three-finger hand.
 
@@ -154,6 +157,8 @@ def build_arm_mjcf(
         armature: per-joint rotor inertia (kg m^2); ``None`` sets zero.
         frictionloss: per-joint dry friction (N m); ``None`` sets zero.
         damping: per-joint viscous damping (N m s / rad); ``None`` sets zero.
+        link_inertials: ``"dm_control"`` (the assets' masses, inertia from the meshes) or ``"kinova"``
+            (Kinova's URDF values, :mod:`jaco_env.link_inertials`).
 
     Returns:
         The MJCF root of the arm; the hand is attached at the ``wristsite`` and
@@ -172,6 +177,7 @@ def build_arm_mjcf(
             body.quat = quat_mul(quat, axis_angle_quat(axis, FINGER_CLOSED_ANGLE))
             joint.remove()
     arm.find("site", "wristsite").attach(hand)
+    link_inertials_module.apply(arm, link_inertials)
 
     zeros = np.zeros(N_JOINTS)
     armature = zeros if armature is None else np.broadcast_to(armature, (N_JOINTS,))

@@ -178,6 +178,7 @@ def build_scene(
     control_mode: str | None = "torque",
     timestep: float = 0.002,
     jar_pos: np.ndarray | None = None,
+    link_inertials: str = "dm_control",
 ) -> mjcf.RootElement:
     """Compose the scene.
 
@@ -188,6 +189,8 @@ def build_scene(
         control_mode: ``"torque"``, ``"velocity"`` or ``None`` (no actuators).
         timestep: physics step (s).
         jar_pos: initial jar position (m, jar bottom centre); the env moves it per task.
+        link_inertials: the arm's link inertials, ``"dm_control"`` or ``"kinova"``
+            (:mod:`jaco_env.link_inertials`).
     """
     if kind not in ("pour", "payload"):
         raise ValueError(f"kind must be 'pour' or 'payload', got {kind!r}")
@@ -213,7 +216,7 @@ def build_scene(
                        rgba=[0.55, 0.42, 0.3, 1], contype=MARBLE_BIT, conaffinity=0)
     root.worldbody.add("camera", name="overview", pos=[1.6, -1.3, 1.2], xyaxes=[0.63, 0.77, 0, -0.35, 0.29, 0.89])
 
-    arm = robot.build_arm_mjcf()
+    arm = robot.build_arm_mjcf(link_inertials=link_inertials)
     robot.add_torque_sensors(arm)
     _attach_bottle(arm, with_payload=True)
     root.attach(arm)

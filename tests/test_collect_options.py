@@ -143,3 +143,24 @@ def test_pipeline_factor_names_are_accepted_and_bad_ones_refused() -> None:
         CollectConfig(sensor_pipeline="ideal+inertials")
     with pytest.raises(ValueError, match="sensor_pipeline"):
         CollectConfig(sensor_pipeline=None)  # type: ignore[arg-type]
+
+
+def test_link_inertials_follow_the_pipeline_unless_given(tmp_path: Path) -> None:
+    assert CollectConfig().nominal_link_inertials == "dm_control"
+    assert CollectConfig(sensor_pipeline="jaco2").nominal_link_inertials == "kinova"
+    assert CollectConfig(sensor_pipeline="jaco2", link_inertials="dm_control").nominal_link_inertials == "dm_control"
+    with pytest.raises(ValueError, match="link_inertials: expected None or one of"):
+        CollectConfig(link_inertials="urdf")
+    old = {k: v for k, v in asdict(CollectConfig()).items() if k != "link_inertials"}
+    assert same_collection(old, CollectConfig()) and not same_collection(old, CollectConfig(link_inertials="kinova"))
+    from cascgp_experiments.collect import make_env
+
+    for option, expected in ((None, "dm_control"), ("kinova", "kinova")):
+        env = make_env(100.0, 0.8, "default", "ideal", option)
+        assert env.unwrapped.link_inertials == expected
+        env.close()
+    # Only the physics changes: the same commands, another arm, other torques.
+    heavy, _ = collect(tmp_path / "kinova", replace(TINY, link_inertials="kinova"), workers=1)[:2]
+    light, _ = collect(tmp_path / "dm", TINY, workers=1)[:2]
+    assert heavy.meta["collection"]["link_inertials"] == "kinova"
+    assert np.abs(heavy.tau - light.tau).max() > 0.1

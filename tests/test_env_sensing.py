@@ -65,10 +65,10 @@ def test_payload_velocity_mode_measures_link_side_torque(seed):
     env.close()
 
 
-@pytest.mark.parametrize("payload", [0.4, 1.5])
-def test_payload_torque_mode_measures_link_side_torque(payload):
-    """Torque mode, other poses/payloads: a PD torque around a drifting pose."""
-    env = gym.make("JacoPayload-v0", sensor_noise=None, payload_mass=payload)
+@pytest.mark.parametrize("payload, link_inertials", [(0.4, "dm_control"), (1.5, "dm_control"), (1.0, "kinova")])
+def test_payload_torque_mode_measures_link_side_torque(payload, link_inertials):
+    """Torque mode, other poses/payloads and both link-inertial sets: a PD torque around a drifting pose."""
+    env = gym.make("JacoPayload-v0", sensor_noise=None, payload_mass=payload, link_inertials=link_inertials)
     q0 = DEFAULT_TASKS["left"].reference(4.0)[0]
 
     def pd(k, obs, u):

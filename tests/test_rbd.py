@@ -228,16 +228,18 @@ def _numbers_and_skeleton(text: str) -> tuple[np.ndarray, str]:
     return np.array([float(x) for x in re.findall(pattern, text)]), re.sub(pattern, "#", text)
 
 
+@pytest.mark.parametrize("link_inertials", sorted(gen.OUT_NAMES))
 @pytest.mark.parametrize("suffix", [".urdf", ".json"])
-def test_committed_asset_equals_regeneration(suffix):
-    """The committed nominal model is what the script writes (error 0.1, seed 0): nobody hand-edits it."""
-    text, sidecar = gen.generate(error=0.1, seed=0, urdf_name=ASSET.name)
+def test_committed_asset_equals_regeneration(suffix, link_inertials):
+    """The committed nominal models are what the script writes (error 0.1, seed 0): nobody hand-edits them."""
+    asset = ASSET.with_name(gen.OUT_NAMES[link_inertials])
+    text, sidecar = gen.generate(error=0.1, seed=0, urdf_name=asset.name, link_inertials=link_inertials)
     fresh = text if suffix == ".urdf" else sidecar_text(sidecar)
-    committed = ASSET.with_suffix(suffix).read_text(encoding="utf-8")
+    committed = asset.with_suffix(suffix).read_text(encoding="utf-8")
     if committed != fresh:  # tolerate last-digit libm differences between machines, nothing else
         num_c, skel_c = _numbers_and_skeleton(committed)
         num_f, skel_f = _numbers_and_skeleton(fresh)
-        assert skel_c == skel_f, f"{ASSET.with_suffix(suffix)} differs from `python -m scripts.generate_urdf`"
+        assert skel_c == skel_f, f"{asset.with_suffix(suffix)} differs from `python -m scripts.generate_urdf`"
         np.testing.assert_allclose(num_c, num_f, rtol=1e-13, atol=1e-15)
 
 

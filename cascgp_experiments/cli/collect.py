@@ -4,6 +4,7 @@ Usage::
 
     cascgp collect --out out/study/data [--quick|--smoke] [--workers N | --ray ADDRESS] [--vector-env]
         [--sensor-noise none] [--qdd true] [--sensor-pipeline jaco2] [--qdd-filter causal]
+        [--link-inertials kinova]
 
 The protocol and the files: :mod:`cascgp_experiments.collect`.
 """
@@ -35,6 +36,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                          "docs/sensing-sources.md) or ideal+FACTOR[+FACTOR...] with factors skew, velocity, torque")
     ap.add_argument("--qdd-filter", default=None, choices=("centred", "causal"),
                     help="the Savitzky-Golay q̈ filter (default: causal with --sensor-pipeline jaco2, else centred)")
+    ap.add_argument("--link-inertials", default=None, choices=("dm_control", "kinova"),
+                    help="the arm's link inertials (default: kinova with --sensor-pipeline jaco2, else dm_control); "
+                         "fit with the nominal URDF of the same inertials")
     ap.add_argument("--force", action="store_true", help="collect again even if files exist")
     ap.add_argument("--vector-env", action="store_true",
                     help="run the motions of a split --workers at a time in one Gymnasium AsyncVectorEnv instead of "
@@ -44,7 +48,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     check_args(ap, a)
     base = PRESETS["quick" if a.quick else "smoke" if a.smoke else "full"]
     kw = asdict(base) | {"seed": a.seed, "sensor_noise": a.sensor_noise, "qdd_source": a.qdd,
-                         "sensor_pipeline": a.sensor_pipeline, "qdd_filter": a.qdd_filter}
+                         "sensor_pipeline": a.sensor_pipeline, "qdd_filter": a.qdd_filter,
+                         "link_inertials": a.link_inertials}
     if a.payload_mass is not None:
         kw["payload_mass"] = a.payload_mass
     try:

@@ -62,6 +62,7 @@ from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
 from jaco_env import robot, scene
 from jaco_env.checks import is_real_number, real_array
 from jaco_env.envs.stepping import MAX_JOINT_SPEED, MAX_MARBLE_SPEED, ControlPeriod, live_view  # noqa: F401
+from jaco_env.link_inertials import check_link_inertials
 from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
 from jaco_env.signal_pipeline import PipelineState, SignalPipeline
 
@@ -216,6 +217,14 @@ def _no_display_message(reason: str) -> str:
             "DISPLAY (or WAYLAND_DISPLAY), or start a virtual one (xvfb-run -a python ...).")
 
 
+def resolve_link_inertials(value: str | None, pipeline: SignalPipeline) -> str:
+    """The env option ``link_inertials``: a name of :data:`jaco_env.link_inertials.LINK_INERTIALS`, or ``None``
+    for the pipeline's own (``"kinova"`` under the full ``"jaco2"`` preset, ``"dm_control"`` otherwise)."""
+    if value is None:
+        return "kinova" if pipeline == SignalPipeline.jaco2() else "dm_control"
+    return check_link_inertials(value)
+
+
 def check_options(options: dict | None, allowed: tuple[str, ...]) -> dict:
     """The reset options as a dict (``{}`` for None); unknown keys raise ``ValueError``."""
     if options is None:
@@ -246,7 +255,7 @@ class JacoMujocoEnv(MujocoEnv):
 
     def __init__(self, *, control_mode: str, control_freq: float, sensor_noise: SensorNoise | None, n_marbles: int,
                  render_mode: str | None, width: int, height: int, camera_name: str | None,
-                 sensor_pipeline: str | SignalPipeline = "ideal"):
+                 sensor_pipeline: str | SignalPipeline = "ideal", link_inertials: str | None = None):
         # No defaults here: each environment's signature holds the public defaults.
         if control_mode not in ("torque", "velocity"):
             raise ValueError(f"control_mode must be 'torque' or 'velocity', got {control_mode!r}")
@@ -258,6 +267,9 @@ class JacoMujocoEnv(MujocoEnv):
         if sensor_noise is not None and not isinstance(sensor_noise, SensorNoise):
             raise TypeError(f"sensor_noise must be a SensorNoise or None, got {type(sensor_noise).__name__}")
         self.sensor_pipeline = SignalPipeline.resolve(sensor_pipeline)
+        #: The arm's link inertials (:mod:`jaco_env.link_inertials`): ``None`` follows the pipeline, Kinova's
+        #: URDF values under the full ``"jaco2"`` preset and dm_control's otherwise.
+        self.link_inertials = resolve_link_inertials(link_inertials, self.sensor_pipeline)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         if render_mode == "human" and (reason := no_display_reason()) is not None:
@@ -272,7 +284,7 @@ class JacoMujocoEnv(MujocoEnv):
         self.metadata = {**type(self).metadata, "render_fps": int(round(control_freq))}
 
         root = scene.build_scene(kind=self._scene_kind, n_marbles=self.n_marbles, control_mode=control_mode,
-                                 timestep=timestep)
+                                 timestep=timestep, link_inertials=self.link_inertials)
         # MujocoEnv loads from a file: one file per configuration per process (export_scene).
         obs_space = spaces.Box(-np.inf, np.inf, shape=(self._obs_dim,), dtype=np.float64)
         self._exit_closer = None

@@ -65,8 +65,9 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
     ## Arguments
     ``gym.make("JacoPayload-v0", control_mode="torque", control_freq=40.0,
     sensor_noise=SensorNoise(), payload_mass=0.8, render_mode=None, width=480, height=480,
-    camera_name=None, sensor_pipeline="ideal")``; ``sensor_pipeline`` (``"ideal"``, ``"jaco2"`` or a
-    :class:`jaco_env.SignalPipeline`) as in ``JacoPour-v0``.
+    camera_name=None, sensor_pipeline="ideal", link_inertials=None)``; ``sensor_pipeline`` (``"ideal"``,
+    ``"jaco2"`` or a :class:`jaco_env.SignalPipeline`) and ``link_inertials`` (``"dm_control"``, ``"kinova"``
+    or ``None``: the pipeline's) as in ``JacoPour-v0``.
 
     ## Version History
     - v0: initial version.
@@ -99,15 +100,16 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
         height: int = 480,
         camera_name: str | None = None,
         sensor_pipeline: str | SignalPipeline = "ideal",
+        link_inertials: str | None = None,
     ):
         EzPickle.__init__(self, control_mode, control_freq, sensor_noise, payload_mass, render_mode, width,
-                          height, camera_name, sensor_pipeline)
+                          height, camera_name, sensor_pipeline, link_inertials)
         self._fixed_mass = scene.BOTTLE_MASS
         self.default_payload = check_mass(payload_mass, scene.BOTTLE_MASS, scene.MAX_PAYLOAD, "payload_mass")
         JacoMujocoEnv.__init__(self, control_mode=control_mode, control_freq=control_freq,
                                sensor_noise=sensor_noise, n_marbles=0, render_mode=render_mode, width=width,
                                height=height, camera_name=camera_name,
-                               sensor_pipeline=sensor_pipeline)
+                               sensor_pipeline=sensor_pipeline, link_inertials=link_inertials)
 
     def _parse_options(self, options: dict | None) -> dict:
         opts = check_options(options, ("payload_mass", "q0"))

@@ -136,8 +136,10 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
     ``gym.make("JacoPour-v0", control_mode="torque", control_freq=40.0,
     sensor_noise=SensorNoise(), n_marbles=30, task=None, payload_range=PAYLOAD_RANGE,
     render_mode=None, width=480, height=480, camera_name=None, tracking_cost_weight=W_TRACK,
-    pour_reward_weight=W_POUR, sensor_pipeline="ideal")``. ``sensor_pipeline``: ``"ideal"``,
-    ``"jaco2"`` or a :class:`jaco_env.SignalPipeline` (see Observation Space). ``task``: default task name or
+    pour_reward_weight=W_POUR, sensor_pipeline="ideal", link_inertials=None)``. ``sensor_pipeline``: ``"ideal"``,
+    ``"jaco2"`` or a :class:`jaco_env.SignalPipeline` (see Observation Space). ``link_inertials``: the arm's
+    link inertials, ``"dm_control"`` or ``"kinova"`` (Kinova's URDF values, :mod:`jaco_env.link_inertials`);
+    ``None`` follows the pipeline (``"kinova"`` under ``"jaco2"``). ``task``: default task name or
     ``PouringTask``; ``None`` draws one of ``DEFAULT_TASKS`` per reset. ``reset(options=
     {"task": name_or_task, "payload_mass": kg})`` overrides both for one episode. Every option is
     checked before the simulation is touched (a rejected ``reset`` changes no state): unknown keys
@@ -185,10 +187,11 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         tracking_cost_weight: float = W_TRACK,
         pour_reward_weight: float = W_POUR,
         sensor_pipeline: str | SignalPipeline = "ideal",
+        link_inertials: str | None = None,
     ):
         EzPickle.__init__(self, control_mode, control_freq, sensor_noise, n_marbles, task, payload_range,
                           render_mode, width, height, camera_name, tracking_cost_weight, pour_reward_weight,
-                          sensor_pipeline)
+                          sensor_pipeline, link_inertials)
         if not isinstance(n_marbles, (int, np.integer)) or isinstance(n_marbles, (bool, np.bool_)):
             raise TypeError(f"n_marbles must be an integer, got {type(n_marbles).__name__} {n_marbles!r}")
         if not 1 <= n_marbles <= 60:
@@ -217,7 +220,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         JacoMujocoEnv.__init__(self, control_mode=control_mode, control_freq=control_freq,
                                sensor_noise=sensor_noise, n_marbles=n_marbles, render_mode=render_mode,
                                width=width, height=height, camera_name=camera_name,
-                               sensor_pipeline=sensor_pipeline)
+                               sensor_pipeline=sensor_pipeline, link_inertials=link_inertials)
         m = self.model
         self._jar_body = m.body("jar").id
         self.marble_qpos_adr = np.array([m.jnt_qposadr[m.joint(f"marble{k}").id] for k in range(n_marbles)])
