@@ -1,6 +1,7 @@
 """The sensing factorial study's report from its JSON alone: a Markdown page and one figure (effect per arm).
 
-``python -m studies.commands.sensing_factorial --report out/sensing_factorial/factorial.json`` renders them again.
+``python -m studies.commands.sensing_factorial --report out/sensing_factorial/factorial.json`` renders them again
+(``--slim PATH``: also writes the results without the curve summaries, as kept in the documentation).
 """
 
 from __future__ import annotations
@@ -72,12 +73,27 @@ def markdown(res: dict[str, Any]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def slim(res: dict[str, Any]) -> dict[str, Any]:
+    """The results without the curve summaries and job statistics: provenance, effects, verdicts and, per arm, its
+    collection options and every per-subset score (``nrmse_all``, both scorings) from which the rest follows."""
+    arms = {}
+    for arm, a in res["arms"].items():
+        c = a["curves"]
+        models = {m: {"nrmse_all": v["nrmse_all"], **({"measured": {"nrmse_all": v["measured"]["nrmse_all"]}}
+                                                      if "measured" in v else {})} for m, v in c["models"].items()}
+        arms[arm] = {k: v for k, v in a.items() if k != "curves"} | {
+            "curves": {"grid_s": c["grid_s"], "n_subsets": c["n_subsets"], "n_test_rows": c["n_test_rows"],
+                       "shared": c.get("shared", []), "wall_s": c["wall_s"], "models": models}}
+    return {k: v for k, v in res.items() if k != "arms"} | {"arms": arms}
+
+
 def figure(res: dict[str, Any], path: str | Path) -> Path:
     """One figure: per interval, the effect ratio per arm for NP and SP with its interquartile range."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import ScalarFormatter
 
     from cascgp_experiments.common import save_figure
 
@@ -97,6 +113,8 @@ def figure(res: dict[str, Any], path: str | Path) -> Path:
         ax.set_xticks(range(len(arms)), arms, rotation=45, ha="right")
         ax.set_title(f"{lo:g}-{hi:g} s of data")
         ax.set_yscale("log")
+        ax.yaxis.set_major_formatter(ScalarFormatter())
+        ax.yaxis.set_minor_formatter(ScalarFormatter())
     axes[0].set_ylabel("nRMSE ratio, cascades / standard\n(mean over subsets; bars: IQR)")
     axes[0].legend(loc="best")
     fig.tight_layout()

@@ -6,6 +6,8 @@ Usage::
     python -m studies.commands.sensing_factorial --out out/sensing_factorial --workers 2
     python -m studies.commands.sensing_factorial --out out/sf_quick --quick        # minutes; no verdicts
     python -m studies.commands.sensing_factorial --report out/sensing_factorial/factorial.json  # render again
+    python -m studies.commands.sensing_factorial --report out/sensing_factorial/factorial.json \
+        --slim docs/studies/sensing_factorial.json                                # the documentation's copy
 
 Writes ``factorial.json`` (every arm's collection options, curves and effects, the verdicts, the run's provenance),
 ``factorial.md`` and ``factorial.png`` to ``--out``; each arm's data and cached fits go to ``--out/<arm>/``, so an
@@ -18,10 +20,10 @@ import argparse
 import sys
 from pathlib import Path
 
-from cascgp.io import read_json
+from cascgp.io import read_json, write_json
 from cascgp_experiments.execution import add_execution_args, check_args, session
 from studies.sensing_factorial import ARMS, run
-from studies.sensing_factorial_report import figure, markdown
+from studies.sensing_factorial_report import figure, markdown, slim
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -29,6 +31,8 @@ def main(argv: list[str] | None = None) -> int:
     g = p.add_mutually_exclusive_group(required=True)
     g.add_argument("--out", type=Path, help="output folder")
     g.add_argument("--report", type=Path, help="a factorial.json: write its .md and .png beside it, run nothing")
+    p.add_argument("--slim", type=Path, default=None,
+                   help="with --report: also write the results without curve summaries and job statistics here")
     p.add_argument("--quick", action="store_true",
                    help="the quick collection, 2 subsets, one grid point per interval, 2 starts per fit; no verdicts")
     p.add_argument("--arms", default=",".join(ARMS), help=f"comma-separated arms (default all: {','.join(ARMS)})")
@@ -41,6 +45,8 @@ def main(argv: list[str] | None = None) -> int:
         res = read_json(a.report)
         a.report.with_suffix(".md").write_text(markdown(res), encoding="utf-8")
         figure(res, a.report.with_suffix(".png"))
+        if a.slim is not None:
+            write_json(a.slim, slim(res))
         return 0
     arms = [x for x in a.arms.split(",") if x]
     bad = [x for x in arms if x not in ARMS]

@@ -92,8 +92,15 @@ def test_quick_command_on_two_arms(tmp_path) -> None:
     from studies.commands.sensing_factorial import main
 
     (tmp_path / "factorial.md").unlink()
-    assert main(["--report", str(tmp_path / "factorial.json")]) == 0
+    assert main(["--report", str(tmp_path / "factorial.json"), "--slim", str(tmp_path / "slim.json")]) == 0
     assert (tmp_path / "factorial.md").read_text() == md
+    # the documentation's copy keeps every per-subset score and renders the same report
+    from studies.sensing_factorial_report import markdown
+
+    slim = json.loads((tmp_path / "slim.json").read_text())
+    assert markdown(slim) == md
+    assert slim["arms"]["jaco2"]["curves"]["models"]["sp-inward"]["nrmse_all"] == \
+        res["arms"]["jaco2"]["curves"]["models"]["sp-inward"]["nrmse_all"]
 
 
 def test_bad_arms_are_refused(tmp_path, capsys) -> None:
