@@ -105,9 +105,9 @@ class CollectConfig:
     @property
     def nominal_link_inertials(self) -> str:
         """The link inertials the data's arm has (:attr:`link_inertials` resolved)."""
-        if self.link_inertials is not None:
-            return self.link_inertials
-        return "kinova" if self.sensor_pipeline == "jaco2" else "dm_control"
+        from jaco_env.link_inertials import resolve
+
+        return resolve(self.link_inertials, self.sensor_pipeline)
 
     @property
     def smoothing(self) -> SavGol:
@@ -139,8 +139,12 @@ class CollectConfig:
         _check_pipeline(self.sensor_pipeline)
         if self.qdd_filter is not None and self.qdd_filter not in QDD_FILTERS:
             raise ValueError(f"qdd_filter: expected None or one of {QDD_FILTERS}, got {self.qdd_filter!r}")
-        if self.link_inertials is not None and self.link_inertials not in LINK_INERTIALS:
-            raise ValueError(f"link_inertials: expected None or one of {LINK_INERTIALS}, got {self.link_inertials!r}")
+        if self.link_inertials is not None:
+            from jaco_env.link_inertials import LINK_INERTIALS
+
+            if self.link_inertials not in LINK_INERTIALS:
+                raise ValueError(f"link_inertials: expected None or one of {LINK_INERTIALS}, "
+                                 f"got {self.link_inertials!r}")
 
 
 #: Values of :attr:`CollectConfig.sensor_noise` and :attr:`CollectConfig.qdd_source`.
@@ -150,8 +154,6 @@ QDD_SOURCES = ("savgol", "true")
 #: values of :attr:`CollectConfig.qdd_filter`.
 SENSOR_PIPELINES = ("ideal", "jaco2")
 QDD_FILTERS = ("centred", "causal")
-#: Values of :attr:`CollectConfig.link_inertials` besides ``None`` (``jaco_env.link_inertials.LINK_INERTIALS``).
-LINK_INERTIALS = ("dm_control", "kinova")
 
 
 def _check_pipeline(name: object) -> None:

@@ -29,11 +29,14 @@ from pathlib import Path
 
 import mujoco
 
+from jaco_env import nominal_urdf
+from jaco_env.link_inertials import LINK_INERTIALS
+
 from cascgp_experiments.urdf_export import check_urdf_path, convert, format_float, make_sidecar, write_urdf
 
 DEFAULT_OUT = Path(__file__).resolve().parents[1] / "jaco_env" / "assets" / "jaco2_nominal.urdf"
-#: The committed nominal URDF of each link-inertial set (``jaco_env.nominal_urdf`` finds them in the package).
-OUT_NAMES = {"dm_control": "jaco2_nominal.urdf", "kinova": "jaco2_nominal_kinova.urdf"}
+#: The committed nominal URDF of each link-inertial set, by file name (``jaco_env.nominal_urdf`` is the one rule).
+OUT_NAMES = {li: nominal_urdf(li).name for li in LINK_INERTIALS}
 #: Command written into the files' provenance.
 GENERATOR = "python -m scripts.generate_urdf"
 

@@ -73,6 +73,18 @@ def check_link_inertials(value: object) -> str:
     return value
 
 
+def resolve(value: object, sensor_pipeline: object) -> str:
+    """The option ``link_inertials`` resolved: a name of :data:`LINK_INERTIALS` as given, or, for ``None``, the
+    pipeline's own: ``"kinova"`` under the full ``"jaco2"`` preset (a name or the equal ``SignalPipeline``),
+    ``"dm_control"`` otherwise."""
+    if value is not None:
+        return check_link_inertials(value)
+    from jaco_env.signal_pipeline import SignalPipeline
+
+    jaco2 = sensor_pipeline == "jaco2" or sensor_pipeline == SignalPipeline.jaco2()
+    return "kinova" if jaco2 else "dm_control"
+
+
 def apply(arm: mjcf.RootElement, link_inertials: str) -> None:
     """Give the arm (with its hand attached) the chosen link inertials; ``"dm_control"`` leaves it as it is.
 

@@ -20,6 +20,8 @@ from cascgp_experiments.execution import add_execution_args, check_args, session
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     """``cascgp collect``: parse ``argv`` (``sys.argv[1:]`` when ``None``) and run."""
+    from jaco_env.link_inertials import LINK_INERTIALS
+
     ap = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", required=True, help="folder for jaco_train.npz and jaco_test.npz")
     g = ap.add_mutually_exclusive_group()
@@ -36,7 +38,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                          "docs/sensing-sources.md) or ideal+FACTOR[+FACTOR...] with factors skew, velocity, torque")
     ap.add_argument("--qdd-filter", default=None, choices=("centred", "causal"),
                     help="the Savitzky-Golay q̈ filter (default: causal with --sensor-pipeline jaco2, else centred)")
-    ap.add_argument("--link-inertials", default=None, choices=("dm_control", "kinova"),
+    ap.add_argument("--link-inertials", default=None, choices=LINK_INERTIALS,
                     help="the arm's link inertials (default: kinova with --sensor-pipeline jaco2, else dm_control); "
                          "fit with the nominal URDF of the same inertials")
     ap.add_argument("--force", action="store_true", help="collect again even if files exist")

@@ -62,7 +62,7 @@ from gymnasium.envs.mujoco.mujoco_env import MujocoEnv
 from jaco_env import robot, scene
 from jaco_env.checks import is_real_number, real_array
 from jaco_env.envs.stepping import MAX_JOINT_SPEED, MAX_MARBLE_SPEED, ControlPeriod, live_view  # noqa: F401
-from jaco_env.link_inertials import check_link_inertials
+from jaco_env.link_inertials import resolve as link_inertials_option
 from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
 from jaco_env.signal_pipeline import PipelineState, SignalPipeline
 
@@ -217,14 +217,6 @@ def _no_display_message(reason: str) -> str:
             "DISPLAY (or WAYLAND_DISPLAY), or start a virtual one (xvfb-run -a python ...).")
 
 
-def resolve_link_inertials(value: str | None, pipeline: SignalPipeline) -> str:
-    """The env option ``link_inertials``: a name of :data:`jaco_env.link_inertials.LINK_INERTIALS`, or ``None``
-    for the pipeline's own (``"kinova"`` under the full ``"jaco2"`` preset, ``"dm_control"`` otherwise)."""
-    if value is None:
-        return "kinova" if pipeline == SignalPipeline.jaco2() else "dm_control"
-    return check_link_inertials(value)
-
-
 def check_options(options: dict | None, allowed: tuple[str, ...]) -> dict:
     """The reset options as a dict (``{}`` for None); unknown keys raise ``ValueError``."""
     if options is None:
@@ -269,7 +261,7 @@ class JacoMujocoEnv(MujocoEnv):
         self.sensor_pipeline = SignalPipeline.resolve(sensor_pipeline)
         #: The arm's link inertials (:mod:`jaco_env.link_inertials`): ``None`` follows the pipeline, Kinova's
         #: URDF values under the full ``"jaco2"`` preset and dm_control's otherwise.
-        self.link_inertials = resolve_link_inertials(link_inertials, self.sensor_pipeline)
+        self.link_inertials = link_inertials_option(link_inertials, self.sensor_pipeline)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         if render_mode == "human" and (reason := no_display_reason()) is not None:
