@@ -41,12 +41,14 @@ serially, 14 s as jobs on 2 processes and 46 s in a 2-env ``AsyncVectorEnv``
 Ablations (``docs/studies/calibration.md``, not the study's data): ``sensor_noise="none"`` records noiseless
 measurements (the motions are the same: the command is open loop and the firmware acts on the simulator's state);
 ``qdd_source="true"`` stores the simulator's true accelerations instead of the filtered ones.
-``sensor_pipeline="jaco2"`` reads the joint state through the real arm's sensing pipeline
-(``jaco_env.signal_pipeline``) instead of the default ``"ideal"``, and differentiates q̇ with the causal filter
-(``qdd_filter``, factor (d)) and simulates the arm with Kinova's URDF link inertials (``link_inertials``, factor (e)).
+The default ``sensor_pipeline="jaco2"`` reads the joint state through the real arm's sensing pipeline
+(``jaco_env.signal_pipeline``), differentiates q̇ with the causal filter (``qdd_filter``, factor (d)) and simulates
+the arm with Kinova's URDF link inertials (``link_inertials``, factor (e)); ``sensor_pipeline="ideal"`` gives the
+idealised signal (synchronous samples, true velocity, no torque offset or filter), the centred filter and
+dm_control's inertials.
 
 Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N]
-[--ray ADDRESS] [--sensor-noise none] [--qdd true] [--sensor-pipeline jaco2] [--qdd-filter causal]
+[--ray ADDRESS] [--sensor-noise none] [--qdd true] [--sensor-pipeline ideal] [--qdd-filter causal]
 [--link-inertials kinova]``.
 """
 
@@ -86,11 +88,11 @@ class CollectConfig:
     #: ``"savgol"``: q̈ from the measured q̇ by the Savitzky-Golay filter (the study's); ``"true"``: the
     #: simulator's true accelerations ``info["qacc"]`` (privileged; for the calibration ablation only).
     qdd_source: str = "savgol"
-    #: The env's ``sensor_pipeline`` (``jaco_env.signal_pipeline``): ``"ideal"`` (the study's data so far),
-    #: ``"jaco2"`` (the real arm's read skew, differentiated velocity, torque offset, drift, filter and noise
-    #: per actuator; values and sources in ``docs/sensing-sources.md``) or ``"ideal+<factor>[+...]"`` (factors
-    #: ``skew``, ``velocity``, ``torque`` of ``jaco_env.signal_pipeline.FACTORS`` on top of ``ideal``).
-    sensor_pipeline: str = "ideal"
+    #: The env's ``sensor_pipeline`` (``jaco_env.signal_pipeline``): ``"jaco2"`` (the default: the real arm's
+    #: read skew, differentiated velocity, torque offset, drift, filter and noise per actuator; values and
+    #: sources in ``docs/sensing-sources.md``), ``"ideal"`` (the idealised signal) or ``"ideal+<factor>[+...]"``
+    #: (factors ``skew``, ``velocity``, ``torque`` of ``jaco_env.signal_pipeline.FACTORS`` on top of ``ideal``).
+    sensor_pipeline: str = "jaco2"
     #: The q̈ filter (factor (d) of the sensing pipeline): ``"centred"`` (the Savitzky-Golay fit evaluated at its
     #: centre: zero phase, offline) or ``"causal"`` (evaluated at the newest sample, as a controller running
     #: online computes it: ``cascgp.derivatives.SavGol(causal=True)``); ``None`` follows ``sensor_pipeline``
@@ -188,6 +190,21 @@ def same_collection(stored: dict | None, cfg: CollectConfig) -> bool:
     return isinstance(stored, dict) and {**_LATER_FIELDS, **stored} == asdict(cfg)
 
 
+def nominal_urdf_for(data_meta: dict) -> Path:
+    """The shipped nominal URDF (``jaco_env.nominal_urdf``) of the arm that recorded a collected file: its
+    ``meta["collection"]`` resolved with :data:`_LATER_FIELDS` (files written before the link inertials existed
+    were recorded with dm_control's), so a model's mean function has the link inertials of the simulated arm."""
+    from jaco_env import nominal_urdf
+    from jaco_env.link_inertials import resolve
+
+    stored = data_meta.get("collection")
+    if not isinstance(stored, dict):
+        raise ValueError("meta['collection']: expected the collection's settings (a file of this module), "
+                         f"got {type(stored).__name__}")
+    merged = {**_LATER_FIELDS, **stored}
+    return nominal_urdf(resolve(merged["link_inertials"], merged["sensor_pipeline"]))
+
+
 PRESETS: dict[str, CollectConfig] = {
     "full": CollectConfig(),
     "quick": CollectConfig(n_subsets=3, subset_seconds=12.0, n_test=2, test_seconds=20.0),
@@ -207,7 +224,7 @@ def _command_source(seed: int, duration: float) -> Callable[[float], np.ndarray]
     return excitation.make_command(seed=seed, duration=duration)
 
 
-def make_env(rate_hz: float, payload_mass: float, sensor_noise: str = "default", sensor_pipeline: str = "ideal",
+def make_env(rate_hz: float, payload_mass: float, sensor_noise: str = "default", sensor_pipeline: str = "jaco2",
              link_inertials: str | None = None):
     """The collection's env: ``JacoPayload-v0`` in velocity mode at ``rate_hz``, no episode time limit;
     ``sensor_noise="none"``: noiseless measurements (see :attr:`CollectConfig.sensor_noise`);
@@ -220,8 +237,7 @@ def make_env(rate_hz: float, payload_mass: float, sensor_noise: str = "default",
         raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {sensor_noise!r}")
     _check_pipeline(sensor_pipeline)
     kw: dict = {"sensor_noise": None} if sensor_noise == "none" else {}
-    if sensor_pipeline != "ideal":  # "ideal" is the env's default: its data are unchanged
-        kw["sensor_pipeline"] = sensor_pipeline
+    kw["sensor_pipeline"] = sensor_pipeline
     if link_inertials is not None:
         kw["link_inertials"] = link_inertials
     return gym.make(ENV_ID, control_mode="velocity", control_freq=float(rate_hz),

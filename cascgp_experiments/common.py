@@ -25,8 +25,12 @@ def _jaco_env_dir() -> Path:
     return Path(next(iter(spec.submodule_search_locations))).resolve()
 
 
-#: The Jaco 2 nominal URDF shipped as package data of ``jaco_env`` (the same path as ``jaco_env.NOMINAL_URDF``).
-NOMINAL_URDF = _jaco_env_dir() / "assets" / "jaco2_nominal.urdf"
+#: The nominal URDF of the environments' default arm, shipped as package data of ``jaco_env`` (the same path as
+#: ``jaco_env.NOMINAL_URDF``: Kinova's link inertials).
+NOMINAL_URDF = _jaco_env_dir() / "assets" / "jaco2_nominal_kinova.urdf"
+#: The nominal URDF of the arm with dm_control's link inertials (``jaco_env.nominal_urdf("dm_control")``), the arm
+#: of ``sensor_pipeline="ideal"``.
+NOMINAL_URDF_DM_CONTROL = _jaco_env_dir() / "assets" / "jaco2_nominal.urdf"
 
 #: Environment variable naming the IAS SARCOS ``.mat`` file used when a command is given no ``--sarcos``.
 SARCOS_ENV = "CASCGP_SARCOS"

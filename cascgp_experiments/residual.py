@@ -1,6 +1,7 @@
 """What the nominal rigid-body model misses on the simulated Jaco 2: a per-joint breakdown.
 
-:func:`breakdown` runs one noise-free sum-of-sinusoids motion (``JacoPayload-v0``, velocity mode,
+:func:`breakdown` runs one noise-free sum-of-sinusoids motion (``JacoPayload-v0``, velocity mode, the idealised
+``sensor_pipeline="ideal"``,
 100 Hz, the data-efficiency study's protocol), computes the residual ``tau - tau_RBD(q, qd, qdd)`` of
 the nominal model (``jaco_env/assets/jaco2_nominal.urdf``) with qdd from the study's Savitzky-Golay filter, and
 again with the true accelerations (the env's privileged ``info["qacc"]``). The measured torque is
@@ -22,7 +23,6 @@ import gymnasium as gym
 import jaco_env
 from cascgp.data import DynamicsData, SavGol
 from cascgp.rbd import load_nominal
-from cascgp_experiments.common import NOMINAL_URDF
 from jaco_env.excitation import make_command
 
 #: Rows of the printed table: (key of :func:`breakdown`'s result, label).
@@ -32,7 +32,10 @@ ROWS = (("tau_std", "std of measured torque"), ("residual_mean", "mean of RBD re
 
 def breakdown(seconds: float, seed: int, rate_hz: float = 100.0) -> dict[str, list[float]]:
     """Per joint (N m): spread of the measured torque, mean and spread of the RBD residual (estimated and true qdd)."""
-    env = gym.make("JacoPayload-v0", control_mode="velocity", control_freq=rate_hz, sensor_noise=None)
+    # The idealised signal (no read skew, offset or filter): the residual is then the model's alone.
+    env = gym.make("JacoPayload-v0", control_mode="velocity", control_freq=rate_hz, sensor_noise=None,
+                   sensor_pipeline="ideal")
+    urdf = jaco_env.nominal_urdf(env.unwrapped.link_inertials)
     obs, _ = env.reset(seed=seed)
     command = make_command(seed, seconds)
     rows, qacc = [], []
@@ -45,7 +48,7 @@ def breakdown(seconds: float, seed: int, rate_hz: float = 100.0) -> dict[str, li
     qacc = np.array(qacc)
     data = DynamicsData.from_measurements(t, q, qd, tau,
                                           smoothing=SavGol(9, 2))
-    rbd = load_nominal(NOMINAL_URDF)
+    rbd = load_nominal(urdf)
     residual = data.tau - rbd.inverse_dynamics(data.q, data.qd, data.qdd)
     residual_true = data.tau - rbd.inverse_dynamics(data.q, data.qd, qacc)
     return {

@@ -52,7 +52,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from cascgp_experiments.common import (FULL_GRID, NOMINAL_URDF, NP_DB, PAPER_TABLE, QUICK_GRID, RBD, SMOKE_GRID,
+from cascgp_experiments.common import (FULL_GRID, NP_DB, PAPER_TABLE, QUICK_GRID, RBD, SMOKE_GRID,
                                        VARIANTS, label, make_table, median_curves, read_json, write_json)
 from cascgp_experiments.curves import CurveSpec, run_curves
 from cascgp_experiments.execution import check_workers, session
@@ -163,7 +163,7 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
     # 2. curves (12 variants + RBD)
     spec = CurveSpec(train_path=str(out / "data" / "jaco_train.npz"), test_path=str(out / "data" / "jaco_test.npz"),
                      n_subsets=settings.n_subsets, grid=list(settings.grid), train_hz=10.0,
-                     test_hz=settings.test_hz, split_by="segment", urdf=str(NOMINAL_URDF),
+                     test_hz=settings.test_hz, split_by="segment", urdf=str(col.nominal_urdf_for(train.meta)),
                      n_restarts=settings.n_restarts, warm_start=settings.warm_start, seed=settings.seed,
                      audit_fraction=settings.audit_fraction)
     jaco = run_curves(spec, models + [RBD], workers=workers, ray_address=ray_address, cache_dir=out / "cache" / "jaco",

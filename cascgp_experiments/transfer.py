@@ -37,8 +37,9 @@ from cascgp.io import atomic_write_text, read_json, write_json
 from cascgp.learning import (PLAIN_CONTROLLERS, Attempt, AttemptContext, ControllerRun, Feedback, ModelFactory,
                              RetrainConfig, RunHooks, attempt_plan, check_controller, run_controller)
 from cascgp.rbd import load_nominal
-from cascgp_experiments.common import NOMINAL_URDF, save_figure
+from cascgp_experiments.common import save_figure
 from cascgp_experiments.run_hooks import PairedEpisodes, seed_offset_factory
+from jaco_env import nominal_urdf
 
 ENV_ID = "JacoPour-v0"
 FULL_CONTROLLERS = ("pd", "rbd", "sp-standard", "sp-inward", "sp-outward", "np-inward", "sp-inward-gated",
@@ -69,6 +70,16 @@ class TransferConfig:
     restarts: int = 3
     n_marbles: int = 30
     fit_seed_offset: int = 0  # added to every refit's GP seed (run_hooks.seed_offset_factory); 0 in the product
+    #: The env's ``sensor_pipeline`` (``jaco_env.signal_pipeline``): ``"jaco2"`` (the real arm's signal and
+    #: Kinova's link inertials, the env's default) or ``"ideal"``; the nominal model follows the env's inertials.
+    sensor_pipeline: str = "jaco2"
+
+    def __post_init__(self) -> None:
+        from jaco_env.signal_pipeline import SignalPipeline
+
+        if not SignalPipeline.is_name(self.sensor_pipeline):
+            raise ValueError(f"sensor_pipeline: expected 'ideal', 'jaco2' or 'ideal+' and factors joined by '+', "
+                             f"got {self.sensor_pipeline!r}")
 
     def plan(self) -> list[Attempt]:
         """Every attempt, in order (:func:`cascgp.learning.attempt_plan`)."""
@@ -87,8 +98,8 @@ class TransferConfig:
         return {"payload_mass": self.payload_mass}
 
     def make_env(self) -> gym.Env:
-        return gym.make(ENV_ID, n_marbles=self.n_marbles)
-
+        """The run's ``JacoPour-v0`` (``n_marbles``, ``sensor_pipeline``)."""
+        return gym.make(ENV_ID, n_marbles=self.n_marbles, sensor_pipeline=self.sensor_pipeline)
 
     def to_dict(self) -> dict[str, Any]:
         """The settings as JSON-ready values (tuples as lists)."""
@@ -96,7 +107,9 @@ class TransferConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TransferConfig":
-        return cls(**{**d, "controllers": tuple(d["controllers"]), "tasks": tuple(d["tasks"])})
+        """The settings of :meth:`to_dict`; a record without ``sensor_pipeline`` was run under ``"ideal"``."""
+        return cls(**{"sensor_pipeline": "ideal", **d, "controllers": tuple(d["controllers"]),
+                      "tasks": tuple(d["tasks"])})
 
 
 @dataclass(frozen=True)
@@ -135,16 +148,19 @@ def controller_job(config: dict[str, Any], name: str, buffer_dir: str | None,
     cfg = TransferConfig.from_dict(config)
     if buffer_dir is not None:
         shutil.rmtree(buffer_dir, ignore_errors=True)
-    rbd = load_nominal(NOMINAL_URDF)
     opts = VideoOptions(**{**video, "controllers": tuple(video["controllers"]),
                            "attempts": tuple(video["attempts"])}) if video else None
     recording = opts is not None and name in opts.controllers
     if recording:
         from cascgp_experiments.video import make_video_env
 
-        env = make_video_env(opts.width, opts.height, shadow_size=opts.shadow_size, n_marbles=cfg.n_marbles)
+        env = make_video_env(opts.width, opts.height, shadow_size=opts.shadow_size, n_marbles=cfg.n_marbles,
+                             sensor_pipeline=cfg.sensor_pipeline)
     else:
         env = cfg.make_env()
+    # The nominal model has the simulated arm's link inertials (the env option link_inertials); the payload stays
+    # unknown to it.
+    rbd = load_nominal(nominal_urdf(env.unwrapped.link_inertials))
     try:
         hooks: list[RunHooks] = [_JobProgress(opts if recording else None, env)]
         if paired:

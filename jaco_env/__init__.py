@@ -35,15 +35,20 @@ from pathlib import Path
 #: Version of the ``cascgp-jaco`` distribution (the same as ``cascgp.__version__``).
 __version__ = "0.2.0"
 
-#: The Jaco 2's nominal rigid-body model shipped with the package: a URDF with a calibration error and no payload
-#: or friction, and its JSON sidecar (armature, limits) beside it; ``cascgp.load_nominal(jaco_env.NOMINAL_URDF)``
-#: reads both. Written by ``python -m scripts.generate_urdf`` (:mod:`cascgp_experiments.nominal_urdf`).
-NOMINAL_URDF = Path(__file__).resolve().parent / "assets" / "jaco2_nominal.urdf"
+_ASSETS = Path(__file__).resolve().parent / "assets"
+
+#: The nominal rigid-body model of the environments' default arm (Kinova's URDF link inertials, those of the
+#: default ``sensor_pipeline="jaco2"``): a URDF with a calibration error and no payload or friction, and its JSON
+#: sidecar (armature, limits) beside it; ``cascgp.load_nominal(jaco_env.NOMINAL_URDF)`` reads both. The same as
+#: ``nominal_urdf("kinova")``; an env made with dm_control's inertials needs ``nominal_urdf("dm_control")``.
+#: Written by ``python -m scripts.generate_urdf`` (:mod:`cascgp_experiments.nominal_urdf`).
+NOMINAL_URDF = _ASSETS / "jaco2_nominal_kinova.urdf"
 
 
-def nominal_urdf(link_inertials: str = "dm_control") -> Path:
-    """The shipped nominal URDF of the arm with the given link inertials (the env option ``link_inertials``:
-    ``"dm_control"``, :data:`NOMINAL_URDF`, or ``"kinova"``, Kinova's URDF values; :mod:`jaco_env.link_inertials`).
+def nominal_urdf(link_inertials: str = "kinova") -> Path:
+    """The shipped nominal URDF of the arm with the given link inertials (the env option ``link_inertials``,
+    resolved as ``env.unwrapped.link_inertials``): ``"kinova"``, Kinova's URDF values, :data:`NOMINAL_URDF` (the
+    default arm's), or ``"dm_control"``, the dm_control assets' (:mod:`jaco_env.link_inertials`).
 
     Example:
         >>> import jaco_env
@@ -53,7 +58,7 @@ def nominal_urdf(link_inertials: str = "dm_control") -> Path:
     from jaco_env.link_inertials import check_link_inertials
 
     suffix = "" if check_link_inertials(link_inertials) == "dm_control" else f"_{link_inertials}"
-    return NOMINAL_URDF.with_name(f"jaco2_nominal{suffix}.urdf")
+    return _ASSETS / f"jaco2_nominal{suffix}.urdf"
 
 
 if sys.platform.startswith("linux") and "MUJOCO_GL" not in os.environ and not (

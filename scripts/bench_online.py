@@ -59,14 +59,13 @@ def main(argv: list[str] | None = None) -> None:
     from cascgp.io import write_json
     from cascgp.models import make_model
     from cascgp.rbd import load_nominal
-    from cascgp_experiments.collect import study_data
-    from cascgp_experiments.common import NOMINAL_URDF
+    from cascgp_experiments.collect import nominal_urdf_for, study_data
 
     out = Path(a.out)
     train, test = study_data(a.data, out, preset="quick" if a.n <= QUICK_ROWS else "full")
     data = train.subsample(10.0)
     data = data.take(np.arange(min(a.n, data.n_samples)))
-    rbd = load_nominal(NOMINAL_URDF)
+    rbd = load_nominal(nominal_urdf_for(train.meta))
     t0 = time.perf_counter()
     model = make_model("sp-inward", 6, rbd).fit(data)
     fit_s = time.perf_counter() - t0

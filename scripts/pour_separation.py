@@ -4,12 +4,13 @@
         [--payload 1.2] [--seed 0] [--n-marbles 30] [--jobs 2]
 
 For every task of ``jaco_env.tasks.DEFAULT_TASKS`` runs one seed-fixed ``JacoPour-v0`` episode
-(torque mode, default sensor noise, payload fixed) with each controller
+(torque mode, the default sensing pipeline and noise, payload fixed) with each controller
 
 * ``oracle``: :class:`jaco_env.oracle.OracleController` (MuJoCo inverse dynamics of the true
   rigid scene, marbles lumped) + PD,
 * ``nominal``: :class:`cascgp.controller.FeedforwardController` with the nominal rigid-body
-  model ``jaco_env/assets/jaco2_nominal.urdf`` (10% calibration error, no payload, no friction) + PD,
+  model ``jaco_env.nominal_urdf`` of the env's link inertials (10% calibration error, no payload, no
+  friction) + PD,
 * ``pd``: the same PD feedback without feedforward,
 
 all with ``jaco_env.DEFAULT_KP/KD``, run by the one episode runner ``cascgp.episodes.run_episode``
@@ -33,12 +34,12 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 
 CONTROLLERS = ("oracle", "nominal", "pd")
-from cascgp_experiments.common import NOMINAL_URDF  # noqa: E402  (numpy and cascgp.io only)
 
 
-def make_controller(controller: str):
-    """The controller named ``controller`` (one of ``CONTROLLERS``), all with ``jaco_env.DEFAULT_KP/KD``."""
-    from jaco_env import DEFAULT_KD, DEFAULT_KP, robot
+def make_controller(controller: str, link_inertials: str = "kinova"):
+    """The controller named ``controller`` (one of ``CONTROLLERS``), all with ``jaco_env.DEFAULT_KP/KD``;
+    ``"nominal"`` with the nominal URDF of the simulated arm's ``link_inertials`` (the env option)."""
+    from jaco_env import DEFAULT_KD, DEFAULT_KP, nominal_urdf, robot
     from jaco_env.oracle import OracleController, PDController
 
     if controller == "oracle":
@@ -49,7 +50,8 @@ def make_controller(controller: str):
         from cascgp.controller import FeedforwardController
         from cascgp.rbd import load_nominal
 
-        return FeedforwardController(load_nominal(str(NOMINAL_URDF)), DEFAULT_KP, DEFAULT_KD, robot.TORQUE_LIMITS)
+        return FeedforwardController(load_nominal(nominal_urdf(link_inertials)), DEFAULT_KP, DEFAULT_KD,
+                                     robot.TORQUE_LIMITS)
     raise ValueError(f"controller must be one of {CONTROLLERS}, got {controller!r}")
 
 
@@ -83,7 +85,8 @@ def run_one(task: str, controller: str, payload: float, seed: int, n_marbles: in
     env = gym.make("JacoPour-v0", n_marbles=n_marbles)
     mouth = MouthError()
     t_start = time.perf_counter()
-    res = run_episode(env, make_controller(controller), seed=seed, options={"task": task, "payload_mass": payload},
+    res = run_episode(env, make_controller(controller, env.unwrapped.link_inertials), seed=seed,
+                      options={"task": task, "payload_mass": payload},
                       callback=mouth)
     wall = time.perf_counter() - t_start
     env.close()
@@ -96,6 +99,15 @@ def run_one(task: str, controller: str, payload: float, seed: int, n_marbles: in
         "in_jar": res.in_jar, "spilled": res.spilled,
         "unstable": res.unstable, "steps": res.steps, "episode_s": float(info["time"]), "wall_s": wall,
     }
+
+
+def gym_make_default():
+    """``JacoPour-v0`` with its default options (the run's env, for the provenance)."""
+    import gymnasium as gym
+
+    import jaco_env  # noqa: F401
+
+    return gym.make("JacoPour-v0", n_marbles=1)
 
 
 def _star(args):
@@ -129,7 +141,14 @@ def main(argv: list[str] | None = None) -> None:
               f"{r['spilled']:8.0%} {r['wall_s']:7.1f}{'  UNSTABLE' if r['unstable'] else ''}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
+    import jaco_env
+
     meta = {k: v for k, v in vars(args).items() if k != "out"}
+    # The env's defaults at the time of the run (the JSON outlives them).
+    env = gym_make_default()
+    meta.update(sensor_pipeline=env.unwrapped.sensor_pipeline.as_dict(), link_inertials=env.unwrapped.link_inertials,
+                nominal_urdf=jaco_env.nominal_urdf(env.unwrapped.link_inertials).name, version=jaco_env.__version__)
+    env.close()
     (out / "pour_separation.json").write_text(json.dumps({"meta": meta, "results": rows}, indent=2))
     print(f"wrote {out / 'pour_separation.json'}")
 

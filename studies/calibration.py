@@ -27,7 +27,7 @@ from cascgp.gp import GPFitConfig
 from cascgp.metrics import interval_coverage, std_scale_for_level
 from cascgp.models import make_model
 from cascgp.rbd import load_nominal
-from cascgp_experiments.common import NOMINAL_URDF
+from cascgp_experiments.collect import nominal_urdf_for
 
 __all__ = ["CASCADES", "BAND", "calibration", "combined_table", "compare_arms", "floor_effect",
            "recalibration_effect", "sensor_input_var", "sensor_torque_var"]
@@ -107,7 +107,7 @@ def calibration(train: DynamicsData, test: DynamicsData, *, seconds: tuple[float
     and ``coverage_propagated`` lists per joint) and ``summary`` (per model and seconds: the median over
     subsets of each joint's coverage, both variances).
     """
-    rbd = load_nominal(NOMINAL_URDF)
+    rbd = load_nominal(nominal_urdf_for(train.meta))  # the nominal model of the arm that recorded the data
     motions = train.split(10)
     subsets = motions[:n_subsets] if train.segments.size >= n_subsets else [train]
     if recalibrate:  # the motion a factor is fitted on must share no segment (motion) with any training subset

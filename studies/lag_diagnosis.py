@@ -183,10 +183,10 @@ def _left_setup(cfg: TransferConfig) -> tuple[Any, np.ndarray, tuple[np.ndarray,
     """The nominal RBD model, the oracle's feedforward along the "left" reference and that reference (10 Hz)."""
     import jaco_env.tasks
     from cascgp.rbd import load_nominal
-    from cascgp_experiments.common import NOMINAL_URDF
+    from cascgp_experiments.common import NOMINAL_URDF_DM_CONTROL
     from jaco_env.oracle import OracleController
 
-    rbd = load_nominal(NOMINAL_URDF)
+    rbd = load_nominal(NOMINAL_URDF_DM_CONTROL)
     oracle = OracleController(*_payload(cfg))
     task = jaco_env.tasks.get_task(DIAGNOSED_TASK)
     q, qd, qdd = task.reference(np.arange(0.0, task.duration, 1.0 / REFERENCE_RATE_HZ))

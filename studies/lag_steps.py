@@ -277,10 +277,10 @@ def episodes_job(config: dict[str, Any]) -> dict[str, Any]:
     import jaco_env.tasks
 
     from cascgp.rbd import load_nominal
-    from cascgp_experiments.common import NOMINAL_URDF
+    from cascgp_experiments.common import NOMINAL_URDF_DM_CONTROL
 
     cfg = TransferConfig.from_dict(config)
-    rbd = load_nominal(NOMINAL_URDF)
+    rbd = load_nominal(NOMINAL_URDF_DM_CONTROL)
     link = link_side_model(*_payload(cfg))
     task = jaco_env.tasks.get_task(DIAGNOSED_TASK)
     last = _last_left(cfg)

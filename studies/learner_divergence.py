@@ -102,14 +102,14 @@ def divergence_job(config: dict[str, Any], label: str) -> list[dict[str, Any]]:
     import jaco_env.tasks
     from cascgp.learning import AttemptContext, run_controller
     from cascgp.rbd import load_nominal
-    from cascgp_experiments.common import NOMINAL_URDF
+    from cascgp_experiments.common import NOMINAL_URDF_DM_CONTROL
     from cascgp_experiments.run_hooks import PairedEpisodes
     from cascgp_experiments.transfer import jaco_feedback
     from studies.hooks import BeforeEachAttempt, Progress
 
     name, paired, offset = LEARNERS[label]
     cfg = replace(TransferConfig.from_dict(config), fit_seed_offset=offset)
-    rbd = load_nominal(NOMINAL_URDF)
+    rbd = load_nominal(NOMINAL_URDF_DM_CONTROL)
     env = cfg.make_env()
 
     def before(ctx: AttemptContext, model: Any) -> dict[str, Any] | None:

@@ -41,7 +41,7 @@ from cascgp_experiments.pooled_stats import holm, identical_joints, scores, wilc
 
 #: The arms: name -> options of ``cascgp_experiments.collect.CollectConfig`` on top of the study's preset.
 ARMS: dict[str, dict[str, Any]] = {
-    "ideal": {},
+    "ideal": {"sensor_pipeline": "ideal"},
     "+skew": {"sensor_pipeline": "ideal+skew"},
     "+velocity": {"sensor_pipeline": "ideal+velocity"},
     "+torque": {"sensor_pipeline": "ideal+torque"},

@@ -18,7 +18,10 @@ pytest.importorskip("jaco_env.excitation")
 from cascgp_experiments.collect import CollectConfig, collect, same_collection
 
 #: A tiny collection: 1 training and 1 test motion of 1.5 s after a 0.2 s warm-up.
-TINY = CollectConfig(n_subsets=1, subset_seconds=1.5, n_test=1, test_seconds=1.5, warmup_seconds=0.2)
+# Under the idealised signal: the options below are compared with their noise alone (the jaco2 pipeline's own
+# behaviour is tested in test_signal_pipeline).
+TINY = CollectConfig(n_subsets=1, subset_seconds=1.5, n_test=1, test_seconds=1.5, warmup_seconds=0.2,
+                     sensor_pipeline="ideal")
 
 
 def test_collect_config_rejects_unknown_options() -> None:
@@ -110,7 +113,8 @@ def test_study_data_rejects_collection_options_with_a_folder(tmp_path: Path) -> 
 
 
 def test_qdd_filter_follows_the_pipeline_unless_given() -> None:
-    assert not CollectConfig().smoothing.causal
+    assert CollectConfig().smoothing.causal  # the default pipeline is "jaco2"
+    assert not CollectConfig(sensor_pipeline="ideal").smoothing.causal
     assert CollectConfig(sensor_pipeline="jaco2").smoothing.causal
     assert not CollectConfig(sensor_pipeline="jaco2", qdd_filter="centred").smoothing.causal
     assert CollectConfig(qdd_filter="causal").smoothing.causal
@@ -146,8 +150,8 @@ def test_pipeline_factor_names_are_accepted_and_bad_ones_refused() -> None:
 
 
 def test_link_inertials_follow_the_pipeline_unless_given(tmp_path: Path) -> None:
-    assert CollectConfig().nominal_link_inertials == "dm_control"
-    assert CollectConfig(sensor_pipeline="jaco2").nominal_link_inertials == "kinova"
+    assert CollectConfig().nominal_link_inertials == "kinova"  # the default pipeline is "jaco2"
+    assert CollectConfig(sensor_pipeline="ideal").nominal_link_inertials == "dm_control"
     assert CollectConfig(sensor_pipeline="jaco2", link_inertials="dm_control").nominal_link_inertials == "dm_control"
     with pytest.raises(ValueError, match="link_inertials: expected None or one of"):
         CollectConfig(link_inertials="urdf")
@@ -164,3 +168,18 @@ def test_link_inertials_follow_the_pipeline_unless_given(tmp_path: Path) -> None
     light, _ = collect(tmp_path / "dm", TINY, workers=1)[:2]
     assert heavy.meta["collection"]["link_inertials"] == "kinova"
     assert np.abs(heavy.tau - light.tau).max() > 0.1
+
+
+def test_nominal_urdf_follows_the_recorded_arm() -> None:
+    from jaco_env import nominal_urdf
+
+    from cascgp_experiments.collect import nominal_urdf_for
+
+    assert nominal_urdf_for({"collection": asdict(CollectConfig())}) == nominal_urdf("kinova")
+    assert nominal_urdf_for({"collection": asdict(TINY)}) == nominal_urdf("dm_control")
+    assert nominal_urdf_for({"collection": asdict(replace(TINY, link_inertials="kinova"))}) == nominal_urdf("kinova")
+    # A file from before the options was recorded under "ideal" with dm_control's inertials.
+    old = {k: v for k, v in asdict(CollectConfig()).items() if k not in ("sensor_pipeline", "link_inertials")}
+    assert nominal_urdf_for({"collection": old}) == nominal_urdf("dm_control")
+    with pytest.raises(ValueError, match=r"meta\['collection'\]"):
+        nominal_urdf_for({})

@@ -112,7 +112,9 @@ def test_info_keys_reward_sum_and_noise(pour_env):
     assert not term and not trunc
 
 
-def test_split_obs_is_the_observation_layout(pour_env):
+def test_split_obs_is_the_observation_layout():
+    # The idealised signal: the measurements differ from the true state by the sensor noise alone.
+    pour_env = gym.make("JacoPour-v0", n_marbles=20, sensor_pipeline="ideal")
     obs, info = pour_env.reset(seed=0, options={"task": "left", "payload_mass": 1.0})
     obs, *_ = pour_env.step(np.zeros(6))
     q, qd, tau, t = jaco_env.split_obs(obs)
@@ -124,6 +126,7 @@ def test_split_obs_is_the_observation_layout(pour_env):
     assert jaco_env.split_obs(batch)[2].shape == (2, robot.N_JOINTS)
     with pytest.raises(ValueError, match="at least"):
         jaco_env.split_obs(obs[:10])
+    pour_env.close()
 
 
 def test_reward_weights_are_constructor_arguments():
@@ -232,9 +235,10 @@ def test_velocity_mode_tracks_command():
 
 
 def test_velocity_mode_torque_is_instantaneous_sample():
-    """The firmware loop's torque at an observation's instant follows its q, qd (noiseless), and the
-    measured (link-side) torque is that torque less the residual rotor inertia, damping and friction."""
-    env = gym.make("JacoPayload-v0", control_mode="velocity", sensor_noise=None)
+    """The firmware loop's torque at an observation's instant follows its q, qd (noiseless, the idealised
+    signal), and the measured (link-side) torque is that torque less the residual rotor inertia, damping and
+    friction."""
+    env = gym.make("JacoPayload-v0", control_mode="velocity", sensor_noise=None, sensor_pipeline="ideal")
     env.reset(seed=0)
     u = env.unwrapped
     for k in range(12):

@@ -59,7 +59,7 @@ def _within_one_percent(meas, ref, spread):
 def test_payload_velocity_mode_measures_link_side_torque(seed):
     """Noise off: measured torque = link-side torque of the same state (sum-of-sinusoids motions)."""
     env = gym.make("JacoPayload-v0", control_mode="velocity", sensor_noise=None, control_freq=100.0,
-                   max_episode_steps=10**6)
+                   max_episode_steps=10**6, sensor_pipeline="ideal")
     cmd = excitation.make_command(seed=seed)
     _run(env, lambda k, obs, u: cmd(k * u.control_dt), 250, _within_one_percent)
     env.close()
@@ -68,7 +68,8 @@ def test_payload_velocity_mode_measures_link_side_torque(seed):
 @pytest.mark.parametrize("payload, link_inertials", [(0.4, "dm_control"), (1.5, "dm_control"), (1.0, "kinova")])
 def test_payload_torque_mode_measures_link_side_torque(payload, link_inertials):
     """Torque mode, other poses/payloads and both link-inertial sets: a PD torque around a drifting pose."""
-    env = gym.make("JacoPayload-v0", sensor_noise=None, payload_mass=payload, link_inertials=link_inertials)
+    env = gym.make("JacoPayload-v0", sensor_noise=None, payload_mass=payload, link_inertials=link_inertials,
+                   sensor_pipeline="ideal")
     q0 = DEFAULT_TASKS["left"].reference(4.0)[0]
 
     def pd(k, obs, u):
@@ -84,7 +85,7 @@ def test_pour_env_measures_link_side_torque_with_marbles():
     """JacoPour-v0 while pouring (marble contacts on the bottle are part of the link torque)."""
     from jaco_env.oracle import OracleController
 
-    env = gym.make("JacoPour-v0", sensor_noise=None, n_marbles=10, task="near")
+    env = gym.make("JacoPour-v0", sensor_noise=None, n_marbles=10, task="near", sensor_pipeline="ideal")
     obs, info = env.reset(seed=0, options={"payload_mass": 1.0})
     u = env.unwrapped
     ctrl = OracleController()
@@ -108,7 +109,7 @@ def test_pour_env_measures_link_side_torque_with_marbles():
 def test_torque_loop_residual():
     """Torque mode: the link torque follows the loop's output up to the documented residual, and
     the loop's output follows the command with the documented first-order lag."""
-    env = gym.make("JacoPayload-v0", sensor_noise=None)
+    env = gym.make("JacoPayload-v0", sensor_noise=None, sensor_pipeline="ideal")
     env.reset(seed=0)
     u = env.unwrapped
     d = u.data

@@ -46,12 +46,14 @@ MODELS = ("np-standard", "np-inward", "sp-standard", "sp-outward", "np-inward-df
 
 
 def _episode_obs(env_id: str, options: dict) -> np.ndarray:
-    """Observations of a seeded 30-step episode under a fixed pseudo-random action sequence."""
+    """Observations of a seeded 30-step episode under a fixed pseudo-random action sequence, read through
+    ``sensor_pipeline="ideal"`` (the pinned file predates the ``"jaco2"`` default; ``"ideal"`` must keep
+    reproducing it draw for draw)."""
     import gymnasium as gym
 
     import jaco_env  # noqa: F401
 
-    env = gym.make(env_id)
+    env = gym.make(env_id, sensor_pipeline="ideal")
     try:
         obs, _ = env.reset(seed=7, options=options)
         rng = np.random.default_rng(3)

@@ -31,13 +31,14 @@ LEARNERS = ("sp-inward", GATED, GATED + "-online")
 
 @pytest.fixture(scope="module")
 def runs():
+    from jaco_env import nominal_urdf
+
     from cascgp.rbd import load_nominal
-    from cascgp_experiments.common import NOMINAL_URDF
 
     cfg = TransferConfig(controllers=("pd", "rbd", "sp-inward"), tasks=(TASK_A, TASK_B), attempts=4,
-                         payload_mass=1.2, seed=0, restarts=2, cap=400)
-    rbd = load_nominal(NOMINAL_URDF)
+                         payload_mass=1.2, seed=0, restarts=2, cap=400, sensor_pipeline="ideal")
     env = cfg.make_env()
+    rbd = load_nominal(nominal_urdf(env.unwrapped.link_inertials))
     once = [(TASK_A, 0, "eval"), (TASK_B, 0, "eval")]
     learn = ([(TASK_A, k, "train") for k in range(4)] + [(TASK_B, k, "train") for k in range(4)]
              + [(TASK_A, 4, "revisit")])

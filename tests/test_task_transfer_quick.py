@@ -20,13 +20,14 @@ LEARNER = "sp-inward-igated-online"
 
 @pytest.fixture(scope="module")
 def runs():
+    from jaco_env import nominal_urdf
+
     from cascgp.rbd import load_nominal
-    from cascgp_experiments.common import NOMINAL_URDF
 
     cfg = TransferConfig(controllers=("pd", "rbd", LEARNER), tasks=(TASK_A, TASK_B), attempts=2,
-                         payload_mass=1.2, seed=0, restarts=2, cap=300)
-    rbd = load_nominal(NOMINAL_URDF)
+                         payload_mass=1.2, seed=0, restarts=2, cap=300, sensor_pipeline="ideal")
     env = cfg.make_env()
+    rbd = load_nominal(nominal_urdf(env.unwrapped.link_inertials))
     try:
         once = [(TASK_A, 0, "eval"), (TASK_B, 0, "eval")]
         learn = [(TASK_A, 0, "train"), (TASK_A, 1, "train"), (TASK_B, 0, "train")]
@@ -77,3 +78,20 @@ def test_no_fallbacks_or_instability(runs):
         for a in attempts:
             assert a["n_fallbacks"] == 0 and not a["unstable"]
             assert np.isfinite(a["tracking_rmse"])
+
+
+def test_transfer_config_sensor_pipeline():
+    """The default is the real arm's pipeline; a bad name is refused naming the field (also by the command);
+    a record from before the option was run under "ideal"."""
+    from cascgp_experiments.cli.transfer import parse_args
+
+    cfg = TransferConfig()
+    assert cfg.sensor_pipeline == "jaco2"
+    assert TransferConfig.from_dict(cfg.to_dict()) == cfg
+    old = {k: v for k, v in cfg.to_dict().items() if k != "sensor_pipeline"}
+    assert TransferConfig.from_dict(old).sensor_pipeline == "ideal"
+    with pytest.raises(ValueError, match="sensor_pipeline: expected"):
+        TransferConfig(sensor_pipeline="real")
+    with pytest.raises(SystemExit):
+        parse_args(["--out", "unused", "--sensor-pipeline", "real"])
+    assert parse_args(["--out", "unused", "--sensor-pipeline", "ideal+torque"])[0].sensor_pipeline == "ideal+torque"

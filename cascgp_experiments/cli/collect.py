@@ -3,7 +3,7 @@
 Usage::
 
     cascgp collect --out out/study/data [--quick|--smoke] [--workers N | --ray ADDRESS] [--vector-env]
-        [--sensor-noise none] [--qdd true] [--sensor-pipeline jaco2] [--qdd-filter causal]
+        [--sensor-noise none] [--qdd true] [--sensor-pipeline ideal] [--qdd-filter causal]
         [--link-inertials kinova]
 
 The protocol and the files: :mod:`cascgp_experiments.collect`.
@@ -33,13 +33,14 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                     help="the env's SensorNoise() (default) or noiseless sensors (an ablation)")
     ap.add_argument("--qdd", default="savgol", choices=("savgol", "true"),
                     help="q̈ from the Savitzky-Golay filter (default) or the simulator's true q̈ (an ablation)")
-    ap.add_argument("--sensor-pipeline", default="ideal",
-                    help="the env's sensing pipeline: ideal (default), jaco2 (the real Jaco 2's; "
-                         "docs/sensing-sources.md) or ideal+FACTOR[+FACTOR...] with factors skew, velocity, torque")
+    ap.add_argument("--sensor-pipeline", default="jaco2",
+                    help="the env's sensing pipeline: jaco2 (default: the real Jaco 2's; "
+                         "docs/sensing-sources.md), ideal or ideal+FACTOR[+FACTOR...] with factors skew, velocity, "
+                         "torque")
     ap.add_argument("--qdd-filter", default=None, choices=("centred", "causal"),
-                    help="the Savitzky-Golay q̈ filter (default: causal with --sensor-pipeline jaco2, else centred)")
+                    help="the Savitzky-Golay q̈ filter (default: causal under jaco2, else centred)")
     ap.add_argument("--link-inertials", default=None, choices=LINK_INERTIALS,
-                    help="the arm's link inertials (default: kinova with --sensor-pipeline jaco2, else dm_control); "
+                    help="the arm's link inertials (default: kinova under jaco2, else dm_control); "
                          "fit with the nominal URDF of the same inertials")
     ap.add_argument("--force", action="store_true", help="collect again even if files exist")
     ap.add_argument("--vector-env", action="store_true",

@@ -42,6 +42,17 @@ from cascgp_experiments.transfer import (FULL_CONTROLLERS, FULL_TASKS, QUICK_CON
                                          write_outputs)
 
 
+def _config(a: argparse.Namespace) -> TransferConfig:
+    """The run's settings from the parsed options (``ValueError`` naming a bad field)."""
+    return TransferConfig(
+        controllers=tuple(a.controllers.split(",")) if a.controllers else
+        (QUICK_CONTROLLERS if a.quick else FULL_CONTROLLERS),
+        tasks=tuple(a.tasks.split(",")) if a.tasks else (QUICK_TASKS if a.quick else FULL_TASKS),
+        attempts=a.attempts,
+        revisit=not a.no_revisit, payload_mass=a.payload, seed=a.seed, rate_hz=a.rate, cap=a.cap,
+        restarts=a.restarts, sensor_pipeline=a.sensor_pipeline)
+
+
 def parse_args(argv: list[str] | None = None, prog: str | None = None
                ) -> tuple[TransferConfig, Path, bool, argparse.Namespace]:
     p = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
@@ -57,6 +68,9 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
     p.add_argument("--rate", type=float, default=10.0, help="training data rate (Hz)")
     p.add_argument("--cap", type=int, default=500, help="maximum training-set size")
     p.add_argument("--restarts", type=int, default=3, help="GP optimiser restarts per retraining")
+    p.add_argument("--sensor-pipeline", default="jaco2",
+                   help="the env's sensing pipeline: jaco2 (default: the real Jaco 2's signal and link inertials), "
+                        "ideal or ideal+FACTOR[+FACTOR...]")
     p.add_argument("--overwrite", action="store_true",
                    help="delete the data buffers and job cache of an earlier run in --out (without it, the same "
                         "command resumes a stopped run)")
@@ -68,13 +82,10 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
                    help="the learned controller shown next to RBD (default: the last controller that learns)")
     add_execution_args(p)
     a = p.parse_args(argv)
-    cfg = TransferConfig(
-        controllers=tuple(a.controllers.split(",")) if a.controllers else
-        (QUICK_CONTROLLERS if a.quick else FULL_CONTROLLERS),
-        tasks=tuple(a.tasks.split(",")) if a.tasks else (QUICK_TASKS if a.quick else FULL_TASKS),
-        attempts=a.attempts,
-        revisit=not a.no_revisit, payload_mass=a.payload, seed=a.seed, rate_hz=a.rate, cap=a.cap,
-        restarts=a.restarts)
+    try:
+        cfg = _config(a)
+    except ValueError as exc:
+        p.error(str(exc))
     if cfg.attempts < 1:
         p.error("--attempts must be at least 1")
     check_args(p, a)

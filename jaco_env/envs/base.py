@@ -247,7 +247,7 @@ class JacoMujocoEnv(MujocoEnv):
 
     def __init__(self, *, control_mode: str, control_freq: float, sensor_noise: SensorNoise | None, n_marbles: int,
                  render_mode: str | None, width: int, height: int, camera_name: str | None,
-                 sensor_pipeline: str | SignalPipeline = "ideal", link_inertials: str | None = None):
+                 sensor_pipeline: str | SignalPipeline, link_inertials: str | None):
         # No defaults here: each environment's signature holds the public defaults.
         if control_mode not in ("torque", "velocity"):
             raise ValueError(f"control_mode must be 'torque' or 'velocity', got {control_mode!r}")

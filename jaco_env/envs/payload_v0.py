@@ -43,7 +43,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
     ## Observation Space
     ``Box(-inf, inf, (19,), float64)``: entries 0-18 of ``JacoPour-v0`` (measured q, qd, tau,
     time since reset), read through ``sensor_pipeline`` as in ``JacoPour-v0`` (read skew, velocity
-    source, torque offset, drift, filter and noise per actuator; ``"ideal"``, the default, or ``"jaco2"``).
+    source, torque offset, drift, filter and noise per actuator; ``"jaco2"``, the default, or ``"ideal"``).
 
     ## Rewards
     Always 0 (this environment is for data collection).
@@ -65,7 +65,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
     ## Arguments
     ``gym.make("JacoPayload-v0", control_mode="torque", control_freq=40.0,
     sensor_noise=SensorNoise(), payload_mass=0.8, render_mode=None, width=480, height=480,
-    camera_name=None, sensor_pipeline="ideal", link_inertials=None)``; ``sensor_pipeline`` (``"ideal"``,
+    camera_name=None, sensor_pipeline="jaco2", link_inertials=None)``; ``sensor_pipeline`` (``"ideal"``,
     ``"jaco2"`` or a :class:`jaco_env.SignalPipeline`) and ``link_inertials`` (``"dm_control"``, ``"kinova"``
     or ``None``: the pipeline's) as in ``JacoPour-v0``.
 
@@ -99,7 +99,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
         width: int = 480,
         height: int = 480,
         camera_name: str | None = None,
-        sensor_pipeline: str | SignalPipeline = "ideal",
+        sensor_pipeline: str | SignalPipeline = "jaco2",
         link_inertials: str | None = None,
     ):
         EzPickle.__init__(self, control_mode, control_freq, sensor_noise, payload_mass, render_mode, width,

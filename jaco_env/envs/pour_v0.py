@@ -76,7 +76,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
     ``Box(-inf, inf, (22,), float64)``; measurements carry Gaussian noise
     (:class:`jaco_env.sensors.SensorNoise`, default q 5e-4 rad, qd 5e-3 rad/s, tau 0.1 N m).
     Joint accelerations are not observed. All measurements are **instantaneous samples at the
-    same instant** (the end of the control period) under the default ``sensor_pipeline="ideal"``. The
+    same instant** (the end of the control period) under ``sensor_pipeline="ideal"``; the default
+    ``"jaco2"`` reads them as the real arm does (table below). The
     measured joint torque is the **link-side** torque of the strain-gauge joint torque sensors,
     read from MuJoCo ``torque`` sensors on the child links and projected on the joint axes: the
     torque passed to the links, without rotor inertia or gear friction. Hence ``(q, qd, tau)`` of
@@ -136,7 +137,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
     ``gym.make("JacoPour-v0", control_mode="torque", control_freq=40.0,
     sensor_noise=SensorNoise(), n_marbles=30, task=None, payload_range=PAYLOAD_RANGE,
     render_mode=None, width=480, height=480, camera_name=None, tracking_cost_weight=W_TRACK,
-    pour_reward_weight=W_POUR, sensor_pipeline="ideal", link_inertials=None)``. ``sensor_pipeline``: ``"ideal"``,
+    pour_reward_weight=W_POUR, sensor_pipeline="jaco2", link_inertials=None)``. ``sensor_pipeline``: ``"ideal"``,
     ``"jaco2"`` or a :class:`jaco_env.SignalPipeline` (see Observation Space). ``link_inertials``: the arm's
     link inertials, ``"dm_control"`` or ``"kinova"`` (Kinova's URDF values, :mod:`jaco_env.link_inertials`);
     ``None`` follows the pipeline (``"kinova"`` under ``"jaco2"``). ``task``: default task name or
@@ -186,7 +187,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         camera_name: str | None = None,
         tracking_cost_weight: float = W_TRACK,
         pour_reward_weight: float = W_POUR,
-        sensor_pipeline: str | SignalPipeline = "ideal",
+        sensor_pipeline: str | SignalPipeline = "jaco2",
         link_inertials: str | None = None,
     ):
         EzPickle.__init__(self, control_mode, control_freq, sensor_noise, n_marbles, task, payload_range,

@@ -160,9 +160,9 @@ def test_calibration_recalibrates_on_an_unseen_training_motion(arms, tmp_path: P
     from cascgp.metrics import std_scale_for_level
     from cascgp.models import make_model
     from cascgp.rbd import load_nominal
-    from cascgp_experiments.common import NOMINAL_URDF
+    from cascgp_experiments.collect import nominal_urdf_for
 
-    rbd = load_nominal(NOMINAL_URDF)
+    rbd = load_nominal(nominal_urdf_for(train.meta))
     motions = train.split(10)
     for k, row in enumerate(res["rows"]):
         m = make_model("sp-inward", 6, rbd, gp_config=GPFitConfig(n_restarts=1)).fit(
