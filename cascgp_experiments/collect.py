@@ -138,7 +138,7 @@ class CollectConfig:
             raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {self.sensor_noise!r}")
         if self.qdd_source not in QDD_SOURCES:
             raise ValueError(f"qdd_source: expected one of {QDD_SOURCES}, got {self.qdd_source!r}")
-        _check_pipeline(self.sensor_pipeline)
+        check_pipeline(self.sensor_pipeline)
         if self.qdd_filter is not None and self.qdd_filter not in QDD_FILTERS:
             raise ValueError(f"qdd_filter: expected None or one of {QDD_FILTERS}, got {self.qdd_filter!r}")
         if self.link_inertials is not None:
@@ -158,7 +158,7 @@ SENSOR_PIPELINES = ("ideal", "jaco2")
 QDD_FILTERS = ("centred", "causal")
 
 
-def _check_pipeline(name: object) -> None:
+def check_pipeline(name: object) -> None:
     """Raise ``ValueError`` naming ``sensor_pipeline`` unless ``name`` is a pipeline name the env accepts."""
     from jaco_env.signal_pipeline import FACTORS, SignalPipeline
 
@@ -235,7 +235,7 @@ def make_env(rate_hz: float, payload_mass: float, sensor_noise: str = "default",
 
     if sensor_noise not in SENSOR_NOISE:
         raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {sensor_noise!r}")
-    _check_pipeline(sensor_pipeline)
+    check_pipeline(sensor_pipeline)
     kw: dict = {"sensor_noise": None} if sensor_noise == "none" else {}
     kw["sensor_pipeline"] = sensor_pipeline
     if link_inertials is not None:

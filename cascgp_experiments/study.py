@@ -75,6 +75,14 @@ class Settings:
     sarcos_subsets: int = 9
     test_hz: float = 10.0
     seed: int = 0
+    #: The collection's ``sensor_pipeline`` (:class:`cascgp_experiments.collect.CollectConfig`); the SP models'
+    #: nominal URDF follows the simulated arm's link inertials.
+    sensor_pipeline: str = "jaco2"
+
+    def __post_init__(self) -> None:
+        from cascgp_experiments.collect import check_pipeline
+
+        check_pipeline(self.sensor_pipeline)
 
 
 PRESETS: dict[str, Settings] = {
@@ -104,7 +112,7 @@ def cached_iteration_counts(out: Path, train, settings: Settings) -> dict[str, A
     from cascgp_experiments.analyses import iteration_counts
 
     key = {"n": settings.iter_n, "n_restarts": settings.iter_restarts, "seed": settings.seed,
-           "collection": settings.collection}
+           "collection": settings.collection, "sensor_pipeline": settings.sensor_pipeline}
     path = Path(out) / "cache" / "iterations.json"
     if path.exists():
         cached = read_json(path)
@@ -152,7 +160,7 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}}}
 
     # 1. data
-    ccfg = replace(col.PRESETS[settings.collection], seed=settings.seed)
+    ccfg = replace(col.PRESETS[settings.collection], seed=settings.seed, sensor_pipeline=settings.sensor_pipeline)
     train, test, cinfo = col.collect(out / "data", ccfg, workers=workers, ray_address=ray_address)
     timings["collect_s"] = cinfo["wall_s"]
     results["meta"]["collection"] = {**asdict(ccfg), "reused": cinfo["reused"],
@@ -166,6 +174,7 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
                      test_hz=settings.test_hz, split_by="segment", urdf=str(col.nominal_urdf_for(train.meta)),
                      n_restarts=settings.n_restarts, warm_start=settings.warm_start, seed=settings.seed,
                      audit_fraction=settings.audit_fraction)
+    results["meta"]["nominal_urdf"] = Path(spec.urdf).name if spec.urdf else None
     jaco = run_curves(spec, models + [RBD], workers=workers, ray_address=ray_address, cache_dir=out / "cache" / "jaco",
                       desc="Jaco fits")
     timings["jaco_curves_s"] = jaco["wall_s"]

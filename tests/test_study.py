@@ -316,6 +316,9 @@ def test_smoke_end_to_end(tmp_path: Path) -> None:
     res = read_json(out / "results.json")
     _check_results(out, res)
     assert res["meta"]["settings"]["grid"] == [1.0, 2.0]
+    # the default sensing, and the SP models' nominal URDF of the simulated arm's link inertials
+    assert res["meta"]["collection"]["sensor_pipeline"] == "jaco2"
+    assert res["meta"]["nominal_urdf"] == "jaco2_nominal_kinova.urdf"
     for name in ("fig_jaco_np.png", "fig_jaco_sp.png", "fig_iterations.png", "fig_correlation.png",
                  "table1.md", "curves_jaco.csv"):
         assert (out / name).stat().st_size > 0
@@ -395,3 +398,16 @@ def test_identical_cells_shown_and_not_counted() -> None:
     rows_t = {m: np.asarray(v["nrmse_all"]).mean(0).T.tolist() for m, v in block["models"].items()}
     rows_t["np-outward"] = rows_t["np-standard"]
     assert list(cascade_vs_standard(rows_t, "np")) == [2, 2, 2]
+
+
+def test_study_sensor_pipeline_option() -> None:
+    """``--sensor-pipeline`` reaches the settings; a bad name is refused naming the field, before any work."""
+    from cascgp_experiments.study import Settings
+
+    assert Settings().sensor_pipeline == "jaco2" and Settings(sensor_pipeline="ideal").sensor_pipeline == "ideal"
+    with pytest.raises(ValueError, match="sensor_pipeline: expected"):
+        Settings(sensor_pipeline="real")
+    r = subprocess.run([str(Path(sys.executable).with_name("cascgp")), "study", "--out", "unused", "--smoke",
+                        "--sensor-pipeline", "real"], env=_env(), cwd=REPO, capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 2 and "sensor_pipeline: expected" in r.stderr

@@ -45,18 +45,24 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                     help="drop grid points above this many seconds (Jaco and SARCOS), e.g. 10 for Table I's "
                          "intervals only: the 14-50 s points cost most of the fitting time")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--sensor-pipeline", default="jaco2",
+                    help="the simulated arm's sensing (CollectConfig.sensor_pipeline): jaco2 (default: the real Jaco "
+                         "2's signal, Kinova's link inertials, causal q̈ filter), ideal or ideal+FACTOR[+FACTOR...]")
     a = ap.parse_args(argv)
 
     preset = "quick" if a.quick else "smoke" if a.smoke else "full"
     st = PRESETS[preset]
-    kw: dict[str, Any] = {"seed": a.seed}
+    kw: dict[str, Any] = {"seed": a.seed, "sensor_pipeline": a.sensor_pipeline}
     if a.restarts is not None:
         kw["n_restarts"] = a.restarts
     if a.subsets is not None:
         kw["n_subsets"] = a.subsets
     if a.grid is not None:
         kw["grid"] = tuple(float(x) for x in a.grid.split(","))
-    st = replace(st, **kw)
+    try:
+        st = replace(st, **kw)
+    except ValueError as exc:
+        ap.error(str(exc))
     if a.max_seconds is not None:
         if not a.max_seconds >= min(st.grid):
             ap.error(f"--max-seconds: expected at least the smallest grid point {min(st.grid)}, got {a.max_seconds}")
