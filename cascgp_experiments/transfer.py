@@ -75,11 +75,9 @@ class TransferConfig:
     sensor_pipeline: str = "jaco2"
 
     def __post_init__(self) -> None:
-        from jaco_env.signal_pipeline import SignalPipeline
+        from cascgp_experiments.collect import check_pipeline
 
-        if not SignalPipeline.is_name(self.sensor_pipeline):
-            raise ValueError(f"sensor_pipeline: expected 'ideal', 'jaco2' or 'ideal+' and factors joined by '+', "
-                             f"got {self.sensor_pipeline!r}")
+        check_pipeline(self.sensor_pipeline)  # the one rule (collection, study, transfer)
 
     def plan(self) -> list[Attempt]:
         """Every attempt, in order (:func:`cascgp.learning.attempt_plan`)."""
