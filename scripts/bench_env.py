@@ -1,6 +1,10 @@
 """Benchmark: env steps per second vs raw MuJoCo stepping of the same model.
 
     python -m scripts.bench_env --out out/bench_env [--steps 400] [--rounds 5] [--env JacoPour-v0]
+        [--sensor-pipeline ideal]
+
+The envs run under their default ``sensor_pipeline="jaco2"`` unless ``--sensor-pipeline`` names another; the
+gravity-holding torque comes from the oracle started on the env (its payload and link inertials).
 
 Both run the same compiled model from the same state for the same number of control
 periods (``frame_skip`` physics steps each) with the same torque: the raw loop only calls
@@ -44,17 +48,21 @@ from jaco_env.oracle import OracleController  # noqa: E402
 CHUNK = 10
 
 
-def bench(env_id: str, steps: int, rounds: int = 5) -> dict:
+def bench(env_id: str, steps: int, rounds: int = 5, sensor_pipeline: str = "jaco2") -> dict:
     kwargs = {} if env_id == "JacoPayload-v0" else {"task": "front"}
+    kwargs["sensor_pipeline"] = sensor_pipeline
     env = gym.make(env_id, **kwargs)
     options = {"payload_mass": 1.0}
-    env.reset(seed=0, options=options)
+    _, info = env.reset(seed=0, options=options)
     u = env.unwrapped
     # A gravity-holding torque keeps both runs in the same regime (arm still, marbles in the bottle):
-    # the oracle's rigid inverse dynamics (marbles lumped at rest) at the current pose, at rest.
+    # the oracle's rigid inverse dynamics (marbles lumped at rest) at the current pose, at rest, built by
+    # start() for this env's payload and link inertials.
     q, _ = u.arm_state()
     zero = np.zeros_like(q)
-    tau = OracleController(u.payload_mass, u.n_marbles, follow_marbles=False).feedforward(q, zero, zero)
+    oracle = OracleController(follow_marbles=False)
+    oracle.start(env, info)
+    tau = oracle.feedforward(q, zero, zero)
     tau = np.clip(tau, -u.torque_limits, u.torque_limits).astype(np.float32)
 
     spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
@@ -118,6 +126,8 @@ def bench(env_id: str, steps: int, rounds: int = 5) -> dict:
                                                              - q_c[marb[:, None] + np.arange(3)]))) if len(marb)
         else 0.0,
         "env_id": env_id,
+        "sensor_pipeline": u.sensor_pipeline.as_dict(),
+        "link_inertials": u.link_inertials,
         "control_steps": steps,
         "physics_steps_per_control_step": u.frame_skip,
         "physics_timestep_s": float(u.model.opt.timestep),
@@ -138,10 +148,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--steps", type=int, default=400, help="control steps per measurement")
     p.add_argument("--rounds", type=int, default=5, help="timing rounds (median ratio reported)")
     p.add_argument("--env", nargs="+", default=["JacoPour-v0", "JacoPayload-v0"])
+    p.add_argument("--sensor-pipeline", default="jaco2", help="the envs' sensor_pipeline (default: theirs, jaco2)")
     args = p.parse_args(argv)
     if args.steps < 1 or args.rounds < 1:
         p.error("--steps and --rounds must be >= 1")
-    rows = [bench(e, args.steps, args.rounds) for e in args.env]
+    rows = [bench(e, args.steps, args.rounds, args.sensor_pipeline) for e in args.env]
     print(f"{'env':16s} {'env steps/s':>12s} {'raw steps/s':>12s} {'cost':>6s} {'cost per round':>24s} "
           f"{'cpu cost':>8s} {'raw Newton':>11s} {'raw CG':>8s} {'CG-Newton arm rad / marbles m':>30s}")
     for r in rows:
