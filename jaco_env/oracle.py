@@ -81,13 +81,14 @@ def _rigid_model_xml(link_inertials: str) -> tuple[str, dict]:
 
 
 def rigid_scene_model(payload_mass: float, n_marbles: int = 0,
-                      link_inertials: str = "dm_control") -> mujoco.MjModel:
+                      link_inertials: str = "kinova") -> mujoco.MjModel:
     """The true arm + hand + bottle with the whole payload (marbles lumped) as one rigid body.
 
     Args:
         payload_mass: total mass in the hand (bottle + marbles + extra, kg).
         n_marbles: number of marbles included in ``payload_mass`` (lumped at their resting centroid).
-        link_inertials: the arm's link inertials, as the environment's option (:mod:`jaco_env.link_inertials`).
+        link_inertials: the arm's link inertials, as the environment's option (:mod:`jaco_env.link_inertials`);
+            the default is the default environments' arm (``sensor_pipeline="jaco2"``).
     """
     xml, assets = _rigid_model_xml(check_link_inertials(link_inertials))
     m = mujoco.MjModel.from_xml_string(xml, assets)
@@ -169,6 +170,8 @@ class OracleController(PDController):
         n_marbles: marbles included in the payload when ``info`` does not say (``JacoPayload-v0``
             has none).
         kp, kd: PD gains.
+        link_inertials: the arm's link inertials of the model built from ``payload_mass`` before :meth:`start`
+            (``"kinova"``: the default environments' arm; :meth:`start` uses the env's own).
         follow_marbles: on a ``JacoPour-v0``, lump only the marbles still in the bottle, at their
             current centroid (privileged state), instead of all of them at rest.
     """
@@ -176,7 +179,7 @@ class OracleController(PDController):
     name = "oracle"
 
     def __init__(self, payload_mass: float | None = None, n_marbles: int = 0, kp: np.ndarray = DEFAULT_KP,
-                 kd: np.ndarray = DEFAULT_KD, *, follow_marbles: bool = True):
+                 kd: np.ndarray = DEFAULT_KD, *, follow_marbles: bool = True, link_inertials: str = "kinova"):
         super().__init__(kp, kd)
         if not isinstance(n_marbles, (int, np.integer)) or isinstance(n_marbles, (bool, np.bool_)) or n_marbles < 0:
             raise ValueError(f"n_marbles must be a non-negative integer, got {n_marbles!r}")
@@ -196,9 +199,9 @@ class OracleController(PDController):
         # Payload body origin in the bottle frame (same orientation as the bottle).
         self._payload_origin = np.array([0.0, 0.0, scene.BOTTLE_BOTTOM - scene.BOTTLE_WALL])
         if payload_mass is not None:
-            self._build(float(payload_mass), self.n_marbles)
+            self._build(float(payload_mass), self.n_marbles, check_link_inertials(link_inertials))
 
-    def _build(self, payload_mass: float, n_marbles: int, link_inertials: str = "dm_control") -> None:
+    def _build(self, payload_mass: float, n_marbles: int, link_inertials: str) -> None:
         self.model = rigid_scene_model(payload_mass, n_marbles, link_inertials)
         self.data = mujoco.MjData(self.model)
         self._payload_b = self.model.body(scene.PAYLOAD_BODY).id

@@ -187,7 +187,7 @@ def _left_setup(cfg: TransferConfig) -> tuple[Any, np.ndarray, tuple[np.ndarray,
     from jaco_env.oracle import OracleController
 
     rbd = load_nominal(NOMINAL_URDF_DM_CONTROL)
-    oracle = OracleController(*_payload(cfg))
+    oracle = OracleController(*_payload(cfg), link_inertials="dm_control")  # the ideal env's arm
     task = jaco_env.tasks.get_task(DIAGNOSED_TASK)
     q, qd, qdd = task.reference(np.arange(0.0, task.duration, 1.0 / REFERENCE_RATE_HZ))
     return rbd, np.array([oracle.feedforward(*r) for r in zip(q, qd, qdd)]), (q, qd, qdd)

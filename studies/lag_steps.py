@@ -251,7 +251,7 @@ def link_side_model(payload_mass: float, n_marbles: int) -> Any:
     joint torque sensors read (``jaco_env.robot``), for the marbles at rest."""
     from jaco_env.oracle import rigid_scene_model
 
-    m = rigid_scene_model(payload_mass, n_marbles)
+    m = rigid_scene_model(payload_mass, n_marbles, "dm_control")  # the ideal env's arm
     m.dof_armature[:6] = 0.0
     m.dof_damping[:6] = 0.0
     m.dof_frictionloss[:6] = 0.0

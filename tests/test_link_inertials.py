@@ -115,3 +115,17 @@ def test_the_oracle_follows_the_env_link_inertials():
         assert ctrl.model is not None
         assert ctrl.model.body_mass[ctrl.model.body("jaco_arm/b_4").id] == pytest.approx(b4)
         env.close()
+
+
+def test_the_oracle_built_before_start_has_the_default_arm_unless_told():
+    """``OracleController(payload_mass)`` builds its model before any env: the default environments' arm
+    (Kinova's inertials), or the one named; a bad name is refused before anything is built."""
+    b4 = {"kinova": 0.426367, "dm_control": 0.221432}
+    ctrl = OracleController(1.0)
+    assert ctrl.model is not None
+    assert ctrl.model.body_mass[ctrl.model.body("jaco_arm/b_4").id] == pytest.approx(b4["kinova"])
+    ctrl = OracleController(1.0, link_inertials="dm_control")
+    assert ctrl.model is not None
+    assert ctrl.model.body_mass[ctrl.model.body("jaco_arm/b_4").id] == pytest.approx(b4["dm_control"])
+    with pytest.raises(ValueError, match="link_inertials must be one of"):
+        OracleController(1.0, link_inertials="urdf")

@@ -156,7 +156,7 @@ def test_link_side_model_is_the_true_scene_without_the_drive() -> None:
     rng = np.random.default_rng(0)
     q, qd, qdd = rng.uniform(-1, 1, (5, 6)), rng.uniform(-0.5, 0.5, (5, 6)), rng.uniform(-1, 1, (5, 6))
     link = steps.link_side_model(1.2, 30)
-    full = rigid_scene_model(1.2, 30)
+    full = rigid_scene_model(1.2, 30, "dm_control")
     assert not link.dof_armature[:6].any() and not link.dof_frictionloss[:6].any() and full.dof_armature[:6].all()
     full.dof_frictionloss[:6] = 0.0
     diff = steps._link_side_torque(full, q, qd, qdd) - steps._link_side_torque(link, q, qd, qdd)
