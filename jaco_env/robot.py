@@ -215,3 +215,27 @@ def add_torque_sensors(arm: mjcf.RootElement) -> None:
         site = joint.parent.add("site", name=f"torque_site_{i + 1}", pos=pos, quat=quat, size=[0.005],
                                 group=5)
         arm.sensor.add("torque", name=TORQUE_SENSOR_NAMES[i], site=site)
+
+
+def read_sensor_name(read: str, joint: int) -> str:
+    """Name of the delayed read sensor ``read`` (a :class:`~jaco_env.signal_pipeline.PipelineState`
+    attribute) of joint ``joint`` (0-based)."""
+    return f"read_{read}_{joint + 1}"
+
+
+def add_delayed_reads(arm: mjcf.RootElement, reads: list[tuple[str, str, int]], timestep: float) -> None:
+    """Add MuJoCo's delayed ``jointpos`` / ``jointvel`` sensors of the six arm joints, one set per read.
+
+    ``reads``: ``(name, sensor type, lead)``, the lead in physics steps (at least 1). Each sensor keeps a
+    history of its last ``lead + 2`` values, one per physics step (the sensor stage of each step), and reports
+    with zero-order hold the newest value at or before ``lead - 0.5`` steps ago: the value after the physics
+    step ``lead`` steps before the current one, exactly (the half step keeps the look-up clear of the sample
+    times' round-off). This is how the sensing pipeline reads q and q̇ ``lead`` steps before the torque without
+    stopping the physics within the control period.
+    """
+    for read, kind, lead in reads:
+        if lead < 1:
+            raise ValueError(f"a delayed read needs a lead of at least 1 physics step, got {lead} for {read!r}")
+        for i, name in enumerate(JOINT_NAMES):
+            arm.sensor.add(kind, name=read_sensor_name(read, i), joint=arm.find("joint", name),
+                           nsample=lead + 2, delay=(lead - 0.5) * timestep, interp="zoh")

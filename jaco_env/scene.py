@@ -179,6 +179,7 @@ def build_scene(
     timestep: float = 0.002,
     jar_pos: np.ndarray | None = None,
     link_inertials: str = "dm_control",
+    delayed_reads: list[tuple[str, str, int]] | None = None,
 ) -> mjcf.RootElement:
     """Compose the scene.
 
@@ -191,6 +192,9 @@ def build_scene(
         jar_pos: initial jar position (m, jar bottom centre); the env moves it per task.
         link_inertials: the arm's link inertials, ``"dm_control"`` or ``"kinova"``
             (:mod:`jaco_env.link_inertials`).
+        delayed_reads: delayed joint sensors of a sensing pipeline, ``(name, sensor type, lead in physics
+            steps)`` (:meth:`jaco_env.signal_pipeline.PipelineState.reads`,
+            :func:`jaco_env.robot.add_delayed_reads`); none by default.
     """
     if kind not in ("pour", "payload"):
         raise ValueError(f"kind must be 'pour' or 'payload', got {kind!r}")
@@ -218,6 +222,8 @@ def build_scene(
 
     arm = robot.build_arm_mjcf(link_inertials=link_inertials)
     robot.add_torque_sensors(arm)
+    if delayed_reads:
+        robot.add_delayed_reads(arm, delayed_reads, timestep)
     _attach_bottle(arm, with_payload=True)
     root.attach(arm)
     if control_mode is not None:

@@ -51,6 +51,7 @@ from jaco_env.checks import is_real_number
 from jaco_env.robot import N_JOINTS
 from jaco_env.sensors import SensorNoise
 
+_ZERO = np.zeros(1)  # the time slot of a measurement (set by the caller)
 #: Allowed ranges of the numeric fields (inclusive), for validation and its messages.
 _RANGES = {
     "q_lead_s": (0.0, 0.05),
@@ -189,6 +190,11 @@ class PipelineState:
     ``timestep`` (s) and ``frame_skip`` describe the control period of ``control_dt`` seconds. The sample
     instants are in physics steps from the start of the period: :attr:`q_step`, :attr:`qd_step` (and
     :attr:`qw_step`, the start of the velocity window); tau is sampled at ``frame_skip``.
+
+    The samples are read by MuJoCo's delayed joint sensors (:meth:`reads`, built into the scene by
+    :func:`jaco_env.robot.add_delayed_reads`), so the physics runs the period in one call; :meth:`attach` points
+    :attr:`q`, :attr:`qd`, :attr:`q_at_qd`, :attr:`q_w` at their readings (a sample at the end of the period
+    reads the state itself). They hold the period's samples after the evaluation at its end.
     """
 
     def __init__(self, pipeline: SignalPipeline, control_dt: float, timestep: float, frame_skip: int):
@@ -202,6 +208,7 @@ class PipelineState:
         w = max(1, min(int(round(p.velocity_window_s / timestep)), self.qd_step))
         self.qw_step = self.qd_step - w
         self.velocity_window = w * timestep
+        self.frame_skip = n
         self.q = np.zeros(N_JOINTS)   # q at q_step
         self.qd = np.zeros(N_JOINTS)  # qd at qd_step
         self.q_at_qd = np.zeros(N_JOINTS)  # q at qd_step (differentiated velocity)
@@ -213,17 +220,28 @@ class PipelineState:
         self.offset = np.zeros(N_JOINTS)
         self.drift = np.zeros(N_JOINTS)
         self.filtered: np.ndarray | None = None
+        self._noise: SensorNoise | None = None  # the noise that _draw_scales' factors are for
 
-    def marks(self, q_arm: np.ndarray, qd_arm: np.ndarray) -> dict[int, list[tuple[np.ndarray, np.ndarray]]]:
-        """The copies :meth:`jaco_env.envs.stepping.ControlPeriod.set_samples` makes within each period."""
-        out: dict[int, list[tuple[np.ndarray, np.ndarray]]] = {}
-        out.setdefault(self.q_step, []).append((self.q, q_arm))
+    def reads(self) -> list[tuple[str, str, int]]:
+        """The samples to read before the end of the period: ``(attribute, MuJoCo sensor type, lead in physics
+        steps)``; a sample at the end of the period (lead 0) is not listed (it is the state)."""
+        n = self.frame_skip
+        out = [("q", "jointpos", n - self.q_step)]
         if self.differentiated:
-            out.setdefault(self.qd_step, []).append((self.q_at_qd, q_arm))
-            out.setdefault(self.qw_step, []).append((self.q_w, q_arm))
+            out += [("q_at_qd", "jointpos", n - self.qd_step), ("q_w", "jointpos", n - self.qw_step)]
         else:
-            out.setdefault(self.qd_step, []).append((self.qd, qd_arm))
-        return out
+            out.append(("qd", "jointvel", n - self.qd_step))
+        return [r for r in out if r[2] > 0]
+
+    def attach(self, delayed: dict[str, np.ndarray], q_arm: np.ndarray, qd_arm: np.ndarray) -> None:
+        """Point the samples at their readings: ``delayed[attribute]``, a live view of the delayed sensors' data
+        (each of :meth:`reads`), else the arm's live ``q_arm`` / ``qd_arm`` (a sample at the end of the period)."""
+        self.q = delayed.get("q", q_arm)
+        if self.differentiated:
+            self.q_at_qd = delayed.get("q_at_qd", q_arm)
+            self.q_w = delayed.get("q_w", q_arm)
+        else:
+            self.qd = delayed.get("qd", qd_arm)
 
     def reset(self, rng: np.random.Generator) -> None:
         """A new episode: the offset drawn (one draw of ``N_JOINTS`` normals), drift 0, filter unprimed."""
@@ -232,6 +250,18 @@ class PipelineState:
         self.drift = np.zeros(N_JOINTS)
         self.filtered = None
 
+    def _draw_scales(self, noise: SensorNoise) -> tuple[np.ndarray, np.ndarray]:
+        """The two factors of one step's draws ``[q, qd, tau noise, drift]`` (``4 N_JOINTS`` normals): the
+        ``SensorNoise`` deviations (and the drift's per-sample deviation), then the torque noise's scale (1
+        elsewhere, an exact product), kept for ``noise``."""
+        if noise is not self._noise:
+            n = N_JOINTS
+            self._first = np.concatenate((np.repeat(noise._std[:, 0], n), self.drift_step))
+            self._second = np.ones(4 * n)
+            self._second[2 * n:3 * n] = self.scale
+            self._noise = noise
+        return self._first, self._second
+
     def measure(self, rng: np.random.Generator, noise: SensorNoise, q: np.ndarray, qd: np.ndarray,
                 tau: np.ndarray, sampled: bool) -> np.ndarray | None:
         """``[q, qd, tau, 0]`` measured (the caller sets the time), or None when not finite.
@@ -239,20 +269,34 @@ class PipelineState:
         ``sampled``: the period's samples (:attr:`q`, ...) were taken (a step); else (the reset observation)
         ``q``, ``qd`` and ``tau`` are used as they are, unfiltered.
         """
+        # The arithmetic of SensorNoise.measurement and the factors in one pass over flat arrays (this runs
+        # every env step): the normals of the noise (3 N) and of the drift (N) in one draw, in the order of
+        # separate draws (a Generator's normals do not depend on how a request is split); the measured torque
+        # is ((filter(tau) + offset) + drift) + noise, entry by entry.
         n = N_JOINTS
+        first, second = self._draw_scales(noise)
+        drift = sampled and self.has_drift
+        k = 4 * n if drift else 3 * n
+        e = rng.standard_normal(k)
+        e *= first[:k]
+        e *= second[:k]
         if sampled:
-            q = self.q
-            qd = (self.q_at_qd - self.q_w) / self.velocity_window if self.differentiated else self.qd
             if self.filtered is None or self.alpha == 1.0:  # no filter: the sample itself, exactly
                 self.filtered = tau.copy()
             else:
                 self.filtered += self.alpha * (tau - self.filtered)
-            tau = self.filtered
-        e = rng.standard_normal((3, n))  # the draws of SensorNoise.measurement
-        e *= noise._std
-        e[2] *= self.scale
-        if sampled and self.has_drift:
-            self.drift += self.drift_step * rng.standard_normal(n)
-        out = np.concatenate((q, qd, tau + self.offset + self.drift, (0.0,)))
-        out[:3 * n] += e.ravel()
+            out = np.concatenate((self.q, self.qd if not self.differentiated else self.q_at_qd, self.filtered,
+                                  _ZERO))
+            if self.differentiated:
+                v = out[n:2 * n]
+                v -= self.q_w
+                v /= self.velocity_window
+            if drift:
+                self.drift += e[3 * n:]
+        else:
+            out = np.concatenate((q, qd, tau, _ZERO))
+        t = out[2 * n:3 * n]
+        t += self.offset
+        t += self.drift
+        out[:3 * n] += e[:3 * n]
         return out if math.isfinite(out.dot(out)) else None

@@ -231,6 +231,42 @@ def test_skewed_reads_and_differentiated_velocity():
     ideal.close()
 
 
+def test_skewed_reads_stay_exact_over_a_long_episode():
+    """The reads are MuJoCo's delayed sensors, looked up by time: after 20 s (800 periods, 10,400 physics
+    steps of accumulated time) they are still the states of their physics steps, and the model of ``ideal``
+    has no such sensors."""
+    from jaco_env.oracle import OracleController
+
+    sp = SignalPipeline(q_lead_s=0.0083, qd_lead_s=0.0028, velocity_source="differentiated")  # jaco2's reads
+    env = gym.make("JacoPayload-v0", sensor_noise=None, sensor_pipeline=sp, max_episode_steps=10**6)
+    _, info = env.reset(seed=0)
+    u = env.unwrapped
+    st = u._signal
+    assert (st.q_step, st.qd_step, st.qw_step) == (9, 12, 7)
+    ideal = gym.make("JacoPayload-v0", sensor_pipeline="ideal")
+    assert u.model.nsensor == ideal.unwrapped.model.nsensor + 18  # q, q at the qd read, q at the window start
+    ideal.close()
+    oracle = OracleController(follow_marbles=False)
+    oracle.start(env, info)
+    rng = np.random.default_rng(5)
+    actions, reads = [], []
+    for _ in range(800):  # gravity held, a small random torque on top: the arm moves and stays in range
+        q, qd = u.arm_state()
+        a = np.clip(oracle.feedforward(q, qd, np.zeros(6)) - 2.0 * qd + rng.normal(0.0, 0.5, 6),
+                    -u.torque_limits, u.torque_limits).astype(np.float32)
+        obs, _, _, trunc, _ = env.step(a)
+        assert not trunc
+        actions.append(a)
+        reads.append(jaco_env.split_obs(obs)[:2])
+    env.close()
+    qs, _ = _fine_run(actions, sp)
+    for k in (0, 1, 399, 798, 799):
+        q, qd = reads[k]
+        np.testing.assert_array_equal(q, qs[13 * k + 9])
+        np.testing.assert_array_equal(qd, (qs[13 * k + 12] - qs[13 * k + 7]) / st.velocity_window)
+    assert np.ptp(qs[:, 0]) > 0.05  # the arm moved
+
+
 def test_skewed_true_velocity_is_read_before_the_torque():
     rng = np.random.default_rng(4)
     actions = [rng.uniform(-3, 3, 6).astype(np.float32) for _ in range(6)]

@@ -275,8 +275,14 @@ class JacoMujocoEnv(MujocoEnv):
         self.torque_limits = robot.TORQUE_LIMITS.copy()
         self.metadata = {**type(self).metadata, "render_fps": int(round(control_freq))}
 
+        # The sensing pipeline (signal_pipeline.py): None for "ideal", whose measurement is the noise alone; its
+        # skewed reads are MuJoCo's delayed joint sensors, part of the scene.
+        self._signal: PipelineState | None = None
+        if not self.sensor_pipeline.is_ideal:
+            self._signal = PipelineState(self.sensor_pipeline, self.control_dt, timestep, n_sub)
         root = scene.build_scene(kind=self._scene_kind, n_marbles=self.n_marbles, control_mode=control_mode,
-                                 timestep=timestep, link_inertials=self.link_inertials)
+                                 timestep=timestep, link_inertials=self.link_inertials,
+                                 delayed_reads=None if self._signal is None else self._signal.reads())
         # MujocoEnv loads from a file: one file per configuration per process (export_scene).
         obs_space = spaces.Box(-np.inf, np.inf, shape=(self._obs_dim,), dtype=np.float64)
         self._exit_closer = None
@@ -307,12 +313,11 @@ class JacoMujocoEnv(MujocoEnv):
         self._act_high = self.action_space.high.astype(np.float64)
         slots = [slice(0, _N)] + ([slice(_N, 2 * _N)] if control_mode == "velocity" else [])
         self._period = ControlPeriod(m, d, self.frame_skip, slots, self._tau_sensor, self.arm_dof_adr)
-        # The sensing pipeline (signal_pipeline.py): None for "ideal", whose measurement is the noise alone.
-        self._signal: PipelineState | None = None
         self._pending: np.ndarray | None = None  # this step's pipeline measurement, time not yet set
-        if not self.sensor_pipeline.is_ideal:
-            self._signal = PipelineState(self.sensor_pipeline, self.control_dt, timestep, self.frame_skip)
-            self._period.set_samples(self._signal.marks(self._q_arm, self._qd_arm))
+        if self._signal is not None:
+            self._signal.attach({read: live_view(d.sensordata, np.array([m.sensor_adr[m.sensor(
+                scene.ARM_PREFIX + robot.read_sensor_name(read, i)).id] for i in range(_N)]))
+                for read, _, _ in self._signal.reads()}, self._q_arm, self._qd_arm)
         self._step_count = 0
         self._unstable = False
         self._last_obs: np.ndarray | None = None

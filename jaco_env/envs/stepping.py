@@ -82,16 +82,7 @@ class ControlPeriod:
         self._arm_is_all = self._qd_arm.size == model.nv  # its speed screen then bounds all of qvel
         self._marble_lin: np.ndarray | None = None
         self.tau = np.zeros(len(np.asarray(tau_adr)))
-        self._marks: list[tuple[int, list[tuple[np.ndarray, np.ndarray]]]] | None = None
         self.forget()
-
-    def set_samples(self, marks: dict[int, list[tuple[np.ndarray, np.ndarray]]] | None) -> None:
-        """Copy each ``src`` into its ``dst`` after ``k`` physics steps of every period (``k`` in ``[0,
-        frame_skip]``): the skewed reads of a sensing pipeline. ``None``: none (the default). The physics is
-        the same: ``mj_step`` in pieces, as ``mj_step(nstep=frame_skip)`` does step by step."""
-        if marks and not all(0 <= k <= self.frame_skip for k in marks):
-            raise ValueError(f"sample steps must be in [0, {self.frame_skip}], got {sorted(marks)}")
-        self._marks = sorted(marks.items()) if marks else None
 
     def watch_marbles(self, marble_dof_adr: np.ndarray) -> None:
         """Also check the linear speed of the free joints at ``marble_dof_adr`` (their first dof each)."""
@@ -104,14 +95,6 @@ class ControlPeriod:
         self._warn_counts = np.zeros(len(self._warn), dtype=np.int64)
         self._warn_seen: bytes | None = None  # the counters' bytes when last compared with _warn_counts
 
-    def _advance(self, n: int, first2: bool) -> None:
-        """``n`` physics steps; the first is ``mj_step2`` alone when ``first2`` (its state already evaluated)."""
-        if first2:
-            mujoco.mj_step2(self.model, self.data)
-            n -= 1
-        if n:
-            mujoco.mj_step(self.model, self.data, nstep=n)
-
     def run(self, a: np.ndarray) -> bool:
         """Apply ``a``, advance one period, sample the torques into :attr:`tau`; True when unstable."""
         m, d, qpos, qvel, act = self.model, self.data, self._qpos, self._qvel, self._act
@@ -121,22 +104,11 @@ class ControlPeriod:
         ev = self._evaluated
         first2 = (ev is not None and qpos.tobytes() == ev[0] and qvel.tobytes() == ev[1]
                   and act.tobytes() == ev[2])
-        if self._marks is None:
-            if first2:
-                mujoco.mj_step2(m, d)
-                n -= 1
-            if n:
-                mujoco.mj_step(m, d, nstep=n)
-        else:
-            pos = 0
-            for k, copies in self._marks:
-                if k > pos:
-                    self._advance(k - pos, first2)
-                    pos, first2 = k, False
-                for dst, src in copies:
-                    np.copyto(dst, src)
-            if n > pos:
-                self._advance(n - pos, first2)
+        if first2:
+            mujoco.mj_step2(m, d)
+            n -= 1
+        if n:
+            mujoco.mj_step(m, d, nstep=n)
         mujoco.mj_forward(m, d)
         self.tau = self._sensordata[self._tau].copy()
 
