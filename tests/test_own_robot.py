@@ -175,3 +175,14 @@ def test_help() -> None:
         h = cascgp(name, "--help", cwd=REPO)
         assert h.returncode == 0 and h.stdout.startswith(f"usage: cascgp {name}"), h.stderr
     assert "RMSE_i / (max_i - min_i)" in cascgp("evaluate", "--help", cwd=REPO).stdout
+
+
+def test_module_form_runs_the_same_command() -> None:
+    """``python -m cascgp_experiments.cli`` is the command without its console script."""
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    r = subprocess.run([sys.executable, "-m", "cascgp_experiments.cli", "--version"], cwd=REPO, env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0 and r.stdout == cascgp("--version", cwd=REPO).stdout and r.stdout.startswith("cascgp ")
+    r = subprocess.run([sys.executable, "-m", "cascgp_experiments.cli", "nonsense"], cwd=REPO, env=env,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 2 and "unknown command 'nonsense'" in r.stderr

@@ -69,6 +69,3 @@ def main(argv: Sequence[str] | None = None) -> int:
     status = getattr(importlib.import_module(module), func)(args[1:], prog=f"cascgp {name}")
     return int(status or 0)
 
-
-if __name__ == "__main__":  # python -m cascgp_experiments.cli
-    sys.exit(main())
