@@ -7,7 +7,9 @@ Fits the 6-joint SP inward cascade (default GP fit) on ``n`` rows of simulated J
 training motion, 360 rows) when it has ``n`` rows, else the full one (600 s, 6,000 rows)), then times on
 queries from the held-out motions: ``predict_one`` (the paper's feedforward), ``predict_one_var`` (mean and
 propagated variance, what the gated controller calls), ``add_sample`` (one online sample into every joint),
-and both single-query paths again with a full online window; and whole controller ticks
+and both single-query paths again with a full online window; the six triangular solves of the variance alone
+and one read of the same factors' triangles packed into one array (the memory floor of an exact variance at this
+n); and whole controller ticks
 (:class:`cascgp.FeedforwardController`, PD plus feedforward): ungated, with the default innovation gate (RBD
 plus ``predict_one`` per tick) and its update per measured sample (``observe``: one more ``predict_one`` and RBD
 call), and with each variance gate (RBD plus ``predict_one_var``). Medians, 90th and 99th percentiles over
@@ -72,6 +74,19 @@ def main(argv: list[str] | None = None) -> None:
     q = [(test.q[i], test.qd[i], test.qdd[i]) for i in range(0, test.n_samples, 7)]
     rows = {"predict_one (offline)": _times(model.predict_one, q, a.reps),
             "predict_one_var (offline)": _times(model.predict_one_var, q, a.reps)}
+    # The variance's core and its memory floor: one triangular solve per joint (reads the lower half of each
+    # (n, n) factor), and one pass over the same triangles packed into one array (the least memory traffic of any
+    # exact O(n^2) read of them), both in the same run.
+    from scipy.linalg.blas import dtrsv
+
+    fv = model.prepare_variance()
+    rhs = [np.random.default_rng(j).standard_normal(L.shape[0]) for j, L in enumerate(fv.L)]
+    rows["six triangular solves alone (variance core)"] = _times(
+        lambda: [dtrsv(L, b, lower=0, trans=1) for L, b in zip(fv.L, rhs)], [()], a.reps)
+    packed = np.concatenate([L[np.triu_indices(L.shape[0])] for L in fv.L])
+    rows[f"one read of the six factors' triangles ({packed.nbytes / 1e6:.1f} MB, memory floor)"] = _times(
+        np.add.reduce, [(packed,)], a.reps)
+    del packed
     import jaco_env
     from cascgp.controller import FeedforwardController
 
