@@ -19,7 +19,9 @@ outlier); each round's ratio of totals is kept, and the ratio of the thread's CP
 beside it. Steps per second are those of the best round. Also compares raw
 stepping with the env's CG solver against MuJoCo's default Newton solver (speed, and the largest
 difference of the arm joints and marble positions after the same steps). BLAS/OpenMP limited to
-one thread. Prints a table and writes ``bench_env.json`` into ``--out``.
+one thread. Then, apart from the timing, where an env step's time goes: the physics, the evaluation at the end of
+the period and the rest (the step's Python), each timed inside the step. Prints a table and writes
+``bench_env.json`` into ``--out``.
 """
 
 from __future__ import annotations
@@ -46,6 +48,58 @@ from jaco_env.oracle import OracleController  # noqa: E402
 #: Control steps per timed chunk: env and raw chunks alternate, so that a change of the machine's load
 #: (other processes on the shared cores) falls on both.
 CHUNK = 10
+
+
+class _TimedMujoco:
+    """``mujoco`` as :mod:`jaco_env.envs.stepping` sees it during :func:`breakdown`: the physics calls
+    (``mj_step``, ``mj_step2``) and the end-of-period evaluation (``mj_forward``) timed, everything else passed
+    through."""
+
+    def __init__(self) -> None:
+        self.physics = self.evaluation = 0.0
+
+    def mj_step(self, *args, **kwargs) -> None:
+        t0 = time.perf_counter()
+        mujoco.mj_step(*args, **kwargs)
+        self.physics += time.perf_counter() - t0
+
+    def mj_step2(self, *args) -> None:
+        t0 = time.perf_counter()
+        mujoco.mj_step2(*args)
+        self.physics += time.perf_counter() - t0
+
+    def mj_forward(self, *args) -> None:
+        t0 = time.perf_counter()
+        mujoco.mj_forward(*args)
+        self.evaluation += time.perf_counter() - t0
+
+    def __getattr__(self, name: str):
+        return getattr(mujoco, name)
+
+
+def breakdown(env, tau: np.ndarray, options: dict, steps: int, rounds: int) -> dict:
+    """Where an env step's time goes (µs per step, median over ``rounds`` runs of ``steps`` steps from the same
+    reset): the physics, the evaluation at the end of the period (the torque sensors' sample), and the rest (the
+    step's Python: action check, measurement, checks, info, the wrappers). Measured after the side-by-side timing,
+    with the physics calls timed one by one (a fraction of a microsecond each)."""
+    from jaco_env.envs import stepping
+
+    timed = _TimedMujoco()
+    runs = []
+    stepping.mujoco = timed
+    try:
+        for _ in range(rounds):
+            env.reset(seed=0, options=options)
+            timed.physics = timed.evaluation = 0.0
+            t0 = time.perf_counter()
+            for _ in range(steps):
+                env.step(tau)
+            runs.append((time.perf_counter() - t0, timed.physics, timed.evaluation))
+    finally:
+        stepping.mujoco = mujoco
+    total, physics, evaluation = 1e6 * np.median(np.array(runs), axis=0) / steps
+    return {"env_step_us": total, "physics_us": physics, "end_of_period_evaluation_us": evaluation,
+            "rest_us": total - physics - evaluation}
 
 
 def bench(env_id: str, steps: int, rounds: int = 5, sensor_pipeline: str = "jaco2") -> dict:
@@ -114,6 +168,8 @@ def bench(env_id: str, steps: int, rounds: int = 5, sensor_pipeline: str = "jaco
         for _ in range(steps):
             mujoco.mj_step(m2, d2, nstep=u.frame_skip)
         solver_cmp[name] = (time.perf_counter() - t0, d2.qpos.copy())
+    parts = breakdown(env, tau, options, steps, rounds)
+    parts["raw_period_us"] = 1e6 * float(np.median(times[:, 1, 0])) / steps  # the median round, as the parts
     q_n, q_c = solver_cmp["newton"][1], solver_cmp["cg"][1]
     arm = u.arm_qpos_adr
     marb = getattr(u, "marble_qpos_adr", np.zeros(0, int))
@@ -139,6 +195,7 @@ def bench(env_id: str, steps: int, rounds: int = 5, sensor_pipeline: str = "jaco
         "env_cost_over_raw_per_round": costs.tolist(),
         "env_cost_over_raw_cpu": float(np.median(costs_cpu)),
         "env_cost_over_raw_cpu_per_round": costs_cpu.tolist(),
+        "breakdown": parts,
     }
 
 
@@ -161,6 +218,11 @@ def main(argv: list[str] | None = None) -> None:
               f"{r['env_cost_over_raw']:6.3f} {per_round:>24s} {r['env_cost_over_raw_cpu']:8.3f} "
               f"{r['newton_raw_steps_per_s']:11.1f} {r['cg_raw_steps_per_s']:8.1f} "
               f"{r['cg_vs_newton_arm_max_diff_rad']:15.2e} / {r['cg_vs_newton_marble_max_diff_m']:.2e}")
+    for r in rows:
+        b = r["breakdown"]
+        print(f"{r['env_id']}: an env step {b['env_step_us']:.1f} us = physics {b['physics_us']:.1f} + end-of-period "
+              f"evaluation {b['end_of_period_evaluation_us']:.1f} + the rest (Python) {b['rest_us']:.1f}; a raw "
+              f"period {b['raw_period_us']:.1f} us (median rounds)")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     head = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
