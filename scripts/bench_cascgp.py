@@ -407,6 +407,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fit-sets", default="D1,D2,D3",
                     help="--fit-accuracy: the protocol's data sets to run, of D1,D2,D3 (default: all; the verdict "
                          "then covers only those run)")
+    ap.add_argument("--fit-arms", default=",".join(FIT_ACCURACY_ARMS),
+                    help="--fit-accuracy: the arms to run (A0 and G0, the references, always run; default: all)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--queries", type=int, default=2000, help="single queries for the cascade latency")
     ap.add_argument("--configs", default=",".join(CONFIGS),
@@ -427,6 +429,9 @@ def main(argv: list[str] | None = None) -> int:
         sets = [x for x in args.fit_sets.split(",") if x]
         if not sets or any(x not in ("D1", "D2", "D3") for x in sets):
             ap.error(f"--fit-sets: expected some of D1,D2,D3 separated by commas, got {args.fit_sets!r}")
+        bad = [x for x in args.fit_arms.split(",") if x and x not in FIT_ACCURACY_ARMS]
+        if bad:
+            ap.error(f"--fit-arms: unknown arm(s) {bad}; expected some of {','.join(FIT_ACCURACY_ARMS)}")
         if not args.sarcos and any(x != "D3" for x in sets):
             ap.error("--fit-accuracy needs --sarcos for D1 and D2")
         return run_fit_accuracy(args, provenance(argv))
@@ -524,6 +529,9 @@ def main(argv: list[str] | None = None) -> int:
 #: The controlled experiment's data sets (docs/studies/fit_accuracy.md): name, n, outputs, Jaco ("quick") or SARCOS.
 FIT_ACCURACY_SETS = (("D1 SARCOS n=300 7 outputs", 300, 7, None), ("D2 SARCOS n=500 6 outputs", 500, 6, None),
                      ("D3 Jaco quick n=500 6 outputs", 500, 6, "quick"))
+#: The protocol's arms, in the order they run (A0 and G0 always run: the others are measured against them).
+FIT_ACCURACY_ARMS = ("A0", "A-gls", "A-floor", "G0", "G0-in-cascgp", "G0-in-cascgp+c", "G-zero", "G-floor", "G-init",
+                     "G0-polish")
 
 
 def bank_with(bank, hypers: list[dict], means) -> object:
@@ -574,8 +582,10 @@ def _cascgp_starts(X: np.ndarray, Y: np.ndarray) -> list[list[dict]]:
     return out
 
 
-def fit_accuracy_one(X: np.ndarray, Y: np.ndarray, Xte: np.ndarray, Yte: np.ndarray, threads: int) -> dict:
-    """Every arm of the protocol on one data set: hyperparameters, NLLs, test nRMSE, time."""
+def fit_accuracy_one(X: np.ndarray, Y: np.ndarray, Xte: np.ndarray, Yte: np.ndarray, threads: int,
+                     arms_to_run: tuple[str, ...] = FIT_ACCURACY_ARMS) -> dict:
+    """The protocol's arms on one data set (``arms_to_run``, A0 and G0 always): hyperparameters, NLLs, test
+    nRMSE, time."""
     import warnings
 
     import torch
@@ -611,18 +621,28 @@ def fit_accuracy_one(X: np.ndarray, Y: np.ndarray, Xte: np.ndarray, Yte: np.ndar
             own_nll_per_restart=[f["nll_per_restart"] for f in fits])
         return [f["hyper"] for f in fits]
 
+    run = set(arms_to_run) | {"A0", "G0"}
     bank0, h0 = cascgp_arm("A0", {})
-    c_gls = [gf.gls_mean(X, Y[:, j], np.asarray(h["lengthscale"]), h["signal_var"], h["noise_var"])
-             for j, h in enumerate(h0)]
-    add("A-gls", h0, bank_with(bank0, h0, c_gls).predict([Xte] * B, return_var=False)[0], 0.0, gls_mean=c_gls)
-    cascgp_arm("A-floor", {"noise_floor": 1e-4})
+    if "A-gls" in run:
+        c_gls = [gf.gls_mean(X, Y[:, j], np.asarray(h["lengthscale"]), h["signal_var"], h["noise_var"])
+                 for j, h in enumerate(h0)]
+        add("A-gls", h0, bank_with(bank0, h0, c_gls).predict([Xte] * B, return_var=False)[0], 0.0, gls_mean=c_gls)
+    if "A-floor" in run:
+        cascgp_arm("A-floor", {"noise_floor": 1e-4})
     hg = gpt_arm("G0")
     cg = [h["mean"] for h in hg]
-    add("G0-in-cascgp", hg, bank_with(bank0, hg, np.zeros(B)).predict([Xte] * B, return_var=False)[0], 0.0)
-    add("G0-in-cascgp+c", hg, bank_with(bank0, hg, cg).predict([Xte] * B, return_var=False)[0], 0.0)
-    gpt_arm("G-zero", mean="zero")
-    gpt_arm("G-floor", noise_lb=1e-6)
-    gpt_arm("G-init", init=_cascgp_starts(X, Y))
+    if "G0-in-cascgp" in run:
+        add("G0-in-cascgp", hg, bank_with(bank0, hg, np.zeros(B)).predict([Xte] * B, return_var=False)[0], 0.0)
+    if "G0-in-cascgp+c" in run:
+        add("G0-in-cascgp+c", hg, bank_with(bank0, hg, cg).predict([Xte] * B, return_var=False)[0], 0.0)
+    if "G-zero" in run:
+        gpt_arm("G-zero", mean="zero")
+    if "G-floor" in run:
+        gpt_arm("G-floor", noise_lb=1e-6)
+    if "G-init" in run:
+        gpt_arm("G-init", init=_cascgp_starts(X, Y))
+    if "G0-polish" not in run:
+        return arms
     t0 = time.perf_counter()
     pol = GPBank(GPFitConfig(n_restarts=1)).fit([X] * B, cols, init=bank_with(bank0, hg, bank0.state_dict()["y_mean"]))
     dt = time.perf_counter() - t0
@@ -639,19 +659,25 @@ def fit_accuracy_verdict(sets: dict[str, dict]) -> dict:
         m = med[k]
         gap = m["A0"] - m["G0"]
         r: dict = {"gap_A0_minus_G0": gap, "G0_better": bool(gap > 0)}
-        if gap > 0:
+        if gap > 0:  # each rule where its arm was run
             r["fraction_closed"] = {a: (m[a] - m["G0"]) / gap for a in ("G-zero", "G-floor", "G-init",
-                                                                          "G0-in-cascgp", "G0-polish")}
-            r["explains"] = {a: bool(r["fraction_closed"][a] >= 0.5) for a in ("G-zero", "G-floor", "G-init")}
-            dnll = np.median(np.subtract(arms["G0-polish"]["nll_zero_mean"], arms["A0"]["nll_zero_mean"]))
-            r["H2_polish_median_nll_minus_A0"] = float(dnll)
-            r["H2_holds"] = bool(dnll <= 0.1 and abs(m["G0-polish"] - m["A0"]) <= 0.25 * gap)
-            r["H3_prediction_holds"] = bool(r["fraction_closed"]["G0-in-cascgp"] >= 0.5)
+                                                                          "G0-in-cascgp", "G0-polish") if a in m}
+            r["explains"] = {a: bool(r["fraction_closed"][a] >= 0.5) for a in ("G-zero", "G-floor", "G-init")
+                             if a in m}
+            if "G0-polish" in m:
+                dnll = np.median(np.subtract(arms["G0-polish"]["nll_zero_mean"], arms["A0"]["nll_zero_mean"]))
+                r["H2_polish_median_nll_minus_A0"] = float(dnll)
+                r["H2_holds"] = bool(dnll <= 0.1 and abs(m["G0-polish"] - m["A0"]) <= 0.25 * gap)
+            if "G0-in-cascgp" in m:
+                r["H3_prediction_holds"] = bool(r["fraction_closed"]["G0-in-cascgp"] >= 0.5)
         lower = np.less(arms["G0"]["nll_zero_mean"], arms["A0"]["nll_zero_mean"])
         r["H1_G0_lower_nll_outputs"] = f"{int(lower.sum())}/{lower.size}"
         r["H1_holds"] = bool(lower.sum() > lower.size / 2)
         out["per_set"][k] = r
     for cand in ("A-floor", "A-gls"):
+        if not all(cand in a for a in sets.values()):
+            out["candidates"][cand] = {"adopt": False, "not_run_on": [k for k, a in sets.items() if cand not in a]}
+            continue
         rel = {k: (med[k]["A0"] - med[k][cand]) / med[k]["A0"] for k in sets}
         better = sum(int(np.sum(np.less(a[cand]["test_nrmse"], a["A0"]["test_nrmse"]))) for a in sets.values())
         total = sum(len(a["A0"]["test_nrmse"]) for a in sets.values())
@@ -673,7 +699,8 @@ def run_fit_accuracy(args: argparse.Namespace, prov: dict) -> int:
         X, Y, Xte, Yte, desc = load_split(n, None if jaco else args.sarcos, jaco, args.seed, k, None, out)
         print(f"{name}: {desc}", flush=True)
         res["data"][name] = desc
-        res["sets"][name] = fit_accuracy_one(X, Y, Xte, Yte, args.threads)
+        res["sets"][name] = fit_accuracy_one(X, Y, Xte, Yte, args.threads,
+                                             tuple(a for a in args.fit_arms.split(",") if a))
         write_json(out / "bench_cascgp_fit_accuracy.json", res)
     res["verdict"] = fit_accuracy_verdict(res["sets"])
     res["provenance"]["load_average_end"] = list(os.getloadavg())

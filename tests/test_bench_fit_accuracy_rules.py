@@ -29,7 +29,19 @@ def test_a_candidate_better_on_every_set_is_adopted_only_from_a_run_of_all_three
     assert not fit_accuracy_verdict(small)["candidates"]["A-floor"]["adopt"]
 
 
+def test_a_run_of_some_arms_applies_only_the_rules_of_those_arms() -> None:
+    name = FIT_ACCURACY_SETS[1][0]
+    arms = {a: v for a, v in _arms(0.1, 0.098).items() if a in ("A0", "A-gls", "G0", "G0-in-cascgp", "G-init",
+                                                               "G0-polish")}
+    v = fit_accuracy_verdict({name: arms})
+    r = v["per_set"][name]
+    assert set(r["fraction_closed"]) == {"G-init", "G0-in-cascgp", "G0-polish"} and set(r["explains"]) == {"G-init"}
+    assert r["explains"]["G-init"] and r["H2_holds"]  # both back at A0's error: the whole gap closed
+    assert v["candidates"]["A-floor"] == {"adopt": False, "not_run_on": [name]}
+
+
 @pytest.mark.parametrize("argv, message", [
+    (["--fit-arms", "G1"], "--fit-arms: unknown arm(s) ['G1']"),
     (["--fit-sets", "D4"], "--fit-sets: expected some of D1,D2,D3"),
     (["--fit-sets", ""], "--fit-sets: expected some of D1,D2,D3"),
     (["--fit-sets", "D1,D3"], "needs --sarcos for D1 and D2"),
