@@ -314,10 +314,12 @@ class JacoMujocoEnv(MujocoEnv):
         slots = [slice(0, _N)] + ([slice(_N, 2 * _N)] if control_mode == "velocity" else [])
         self._period = ControlPeriod(m, d, self.frame_skip, slots, self._tau_sensor, self.arm_dof_adr)
         self._pending: np.ndarray | None = None  # this step's pipeline measurement, time not yet set
-        if self._signal is not None:
-            self._signal.attach({read: live_view(d.sensordata, np.array([m.sensor_adr[m.sensor(
-                scene.ARM_PREFIX + robot.read_sensor_name(read, i)).id] for i in range(_N)]))
-                for read, _, _ in self._signal.reads()}, self._q_arm, self._qd_arm)
+        if self._signal is not None:  # each early read: a live view of its six delayed sensors' data
+            delayed = {}
+            for read, _, _ in self._signal.reads():
+                names = [scene.ARM_PREFIX + robot.read_sensor_name(read, i) for i in range(_N)]
+                delayed[read] = live_view(d.sensordata, np.array([m.sensor_adr[m.sensor(n).id] for n in names]))
+            self._signal.attach(delayed, self._q_arm, self._qd_arm)
         self._step_count = 0
         self._unstable = False
         self._last_obs: np.ndarray | None = None
