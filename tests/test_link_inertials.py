@@ -87,6 +87,16 @@ def test_shipped_nominal_urdfs():
         jaco_env.nominal_urdf("urdf")
 
 
+def test_experiments_name_the_same_nominal_urdfs():
+    # cascgp_experiments.common finds the shipped files without importing jaco_env (MuJoCo); its paths must stay
+    # those of jaco_env.nominal_urdf, the one rule.
+    from cascgp_experiments import common
+
+    assert common.NOMINAL_URDF == jaco_env.nominal_urdf("kinova").resolve()
+    assert common.NOMINAL_URDF_DM_CONTROL == jaco_env.nominal_urdf("dm_control").resolve()
+    assert common.NOMINAL_URDF.is_file() and common.NOMINAL_URDF_DM_CONTROL.is_file()
+
+
 @pytest.mark.parametrize("env_id", ["JacoPayload-v0", "JacoPour-v0"])
 def test_env_option(env_id):
     kw = {"n_marbles": 5} if env_id == "JacoPour-v0" else {}
