@@ -24,6 +24,8 @@ def runs():
 
     from cascgp.rbd import load_nominal
 
+    # Under the idealised signal, where these thresholds were measured; under the default "jaco2" the same seeded
+    # run's second attempt on task A is 0.62 of RBD's error (above the 0.5 tested here), the other claims hold.
     cfg = TransferConfig(controllers=("pd", "rbd", LEARNER), tasks=(TASK_A, TASK_B), attempts=2,
                          payload_mass=1.2, seed=0, restarts=2, cap=300, sensor_pipeline="ideal")
     env = cfg.make_env()
