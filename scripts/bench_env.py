@@ -16,7 +16,9 @@ steps (the same physics, so a change of the machine's load falls on both). The c
 time / raw time) is the median over all chunk pairs (a chunk slowed by another process is an
 outlier); each round's ratio of totals is kept, and the ratio of the thread's CPU time
 (``time.thread_time``: time the core was taken by another process is not counted) is reported
-beside it. Steps per second are those of the best round. Also compares raw
+beside it. Steps per second are those of the best round. A third loop in the same alternation is a bare Gymnasium
+``MujocoEnv`` on the same model (:class:`BareGymnasiumEnv`: ``do_simulation`` and one read of the arm's q, qd and
+torque sensors, nothing of ours), the cost of any Gymnasium MuJoCo env over the raw loop. Also compares raw
 stepping with the env's CG solver against MuJoCo's default Newton solver (speed, and the largest
 difference of the arm joints and marble positions after the same steps). BLAS/OpenMP limited to
 one thread. Then, apart from the timing, where an env step's time goes: the physics, the evaluation at the end of
@@ -42,12 +44,38 @@ import gymnasium as gym  # noqa: E402
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from gymnasium import spaces  # noqa: E402
+from gymnasium.envs.mujoco.mujoco_env import MujocoEnv  # noqa: E402
+
 import jaco_env  # noqa: E402
 from jaco_env.oracle import OracleController  # noqa: E402
 
 #: Control steps per timed chunk: env and raw chunks alternate, so that a change of the machine's load
 #: (other processes on the shared cores) falls on both.
 CHUNK = 10
+
+
+class BareGymnasiumEnv(MujocoEnv):
+    """Gymnasium's ``MujocoEnv`` with nothing of ours, on a model file: a step is ``do_simulation`` (the action
+    into ``ctrl``, ``frame_skip`` physics steps, ``mj_rnePostConstraint``) and one read of the arm's q, qd and
+    torque sensor entries (``arm``: the env's ``arm_qpos_adr``, ``arm_dof_adr`` and torque sensor addresses). The
+    reference for what a Gymnasium MuJoCo env costs over the raw loop; stepped without ``reset`` (the benchmark
+    sets its state)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 40}
+
+    def __init__(self, path: str, frame_skip: int, arm: tuple[np.ndarray, np.ndarray, np.ndarray]):
+        self._arm = arm
+        obs = spaces.Box(-np.inf, np.inf, shape=(sum(len(a) for a in arm),), dtype=np.float64)
+        MujocoEnv.__init__(self, path, frame_skip, observation_space=obs)
+
+    def step(self, action):
+        self.do_simulation(action, self.frame_skip)
+        d, (qa, va, ta) = self.data, self._arm
+        return np.concatenate((d.qpos[qa], d.qvel[va], d.sensordata[ta])), 0.0, False, False, {}
+
+    def reset_model(self) -> np.ndarray:
+        return np.zeros(self.observation_space.shape)
 
 
 class _TimedMujoco:
@@ -123,36 +151,43 @@ def bench(env_id: str, steps: int, rounds: int = 5, sensor_pipeline: str = "jaco
     state0 = np.empty(mujoco.mj_stateSize(u.model, spec))
     mujoco.mj_getState(u.model, u.data, state0, spec)
     d = mujoco.MjData(u.model)
+    bare = BareGymnasiumEnv(u.fullpath, u.frame_skip, (u.arm_qpos_adr, u.arm_dof_adr, u._tau_sensor))
+    bare.model.body_mass[:], bare.model.body_inertia[:] = u.model.body_mass, u.model.body_inertia  # the payload
 
-    def one_round(first_env: bool) -> np.ndarray:
-        """Wall and CPU time (s) of each chunk of the ``steps`` control steps, env and raw, timed in
-        alternation: (chunks, env/raw, wall/cpu)."""
+    def one_round(r: int) -> np.ndarray:
+        """Wall and CPU time (s) of each chunk of the ``steps`` control steps, env, raw and bare Gymnasium env,
+        timed in alternation (the order rotates from chunk to chunk): (chunks, env/raw/bare, wall/cpu)."""
         env.reset(seed=0, options=options)  # the same state0 (seeded)
         mujoco.mj_setState(u.model, d, state0, spec)
+        mujoco.mj_setState(bare.model, bare.data, state0, spec)
         d.ctrl[:jaco_env.robot.N_JOINTS] = tau
         starts = range(0, steps, CHUNK)
-        t = np.zeros((len(starts), 2, 2))
+        t = np.zeros((len(starts), 3, 2))
         for c, start in enumerate(starts):
             n = min(CHUNK, steps - start)
-            for which in ((0, 1) if first_env else (1, 0)):
+            for k in range(3):
+                which = (c + r + k) % 3
                 w0, c0 = time.perf_counter(), time.thread_time()
                 if which == 0:
                     for _ in range(n):
                         env.step(tau)
-                else:
+                elif which == 1:
                     for _ in range(n):
                         mujoco.mj_step(u.model, d, nstep=u.frame_skip)
+                else:
+                    for _ in range(n):
+                        bare.step(tau)
                 t[c, which] = time.perf_counter() - w0, time.thread_time() - c0
-            first_env = not first_env
         return t
 
-    chunks = np.array([one_round(r % 2 == 0) for r in range(rounds)])  # (rounds, chunks, env/raw, wall/cpu)
+    chunks = np.array([one_round(r) for r in range(rounds)])  # (rounds, chunks, env/raw/bare, wall/cpu)
     times = chunks.sum(axis=1)  # (rounds, env/raw, wall/cpu)
     t_env, t_raw = times[:, 0, 0].min(), times[:, 1, 0].min()
     costs = times[:, 0, 0] / times[:, 1, 0]
     costs_cpu = times[:, 0, 1] / times[:, 1, 1]
     # the median over all chunk pairs (the same physics each): a chunk slowed by another process is an outlier
     cost_chunks = float(np.median(chunks[:, :, 0, 0] / chunks[:, :, 1, 0]))
+    cost_bare = float(np.median(chunks[:, :, 2, 0] / chunks[:, :, 1, 0]))
 
     # The env uses MuJoCo's CG solver (scene.py); compare with the default Newton solver: time,
     # and how far the arm and the marbles drift apart over the same steps (physics unchanged
@@ -174,6 +209,7 @@ def bench(env_id: str, steps: int, rounds: int = 5, sensor_pipeline: str = "jaco
     arm = u.arm_qpos_adr
     marb = getattr(u, "marble_qpos_adr", np.zeros(0, int))
     env.close()
+    bare.close()
     return {
         "newton_raw_steps_per_s": steps / solver_cmp["newton"][0],
         "cg_raw_steps_per_s": steps / solver_cmp["cg"][0],
@@ -195,6 +231,8 @@ def bench(env_id: str, steps: int, rounds: int = 5, sensor_pipeline: str = "jaco
         "env_cost_over_raw_per_round": costs.tolist(),
         "env_cost_over_raw_cpu": float(np.median(costs_cpu)),
         "env_cost_over_raw_cpu_per_round": costs_cpu.tolist(),
+        "bare_gymnasium_cost_over_raw": cost_bare,
+        "bare_gymnasium_steps_per_s": steps / times[:, 2, 0].min(),
         "breakdown": parts,
     }
 
@@ -211,11 +249,13 @@ def main(argv: list[str] | None = None) -> None:
         p.error("--steps and --rounds must be >= 1")
     rows = [bench(e, args.steps, args.rounds, args.sensor_pipeline) for e in args.env]
     print(f"{'env':16s} {'env steps/s':>12s} {'raw steps/s':>12s} {'cost':>6s} {'cost per round':>24s} "
-          f"{'cpu cost':>8s} {'raw Newton':>11s} {'raw CG':>8s} {'CG-Newton arm rad / marbles m':>30s}")
+          f"{'cpu cost':>8s} {'bare Gym cost':>13s} {'raw Newton':>11s} {'raw CG':>8s} "
+          f"{'CG-Newton arm rad / marbles m':>30s}")
     for r in rows:
         per_round = " ".join(f"{c:.2f}" for c in r["env_cost_over_raw_per_round"])
         print(f"{r['env_id']:16s} {r['env_steps_per_s']:12.1f} {r['raw_steps_per_s']:12.1f} "
               f"{r['env_cost_over_raw']:6.3f} {per_round:>24s} {r['env_cost_over_raw_cpu']:8.3f} "
+              f"{r['bare_gymnasium_cost_over_raw']:13.3f} "
               f"{r['newton_raw_steps_per_s']:11.1f} {r['cg_raw_steps_per_s']:8.1f} "
               f"{r['cg_vs_newton_arm_max_diff_rad']:15.2e} / {r['cg_vs_newton_marble_max_diff_m']:.2e}")
     for r in rows:
@@ -234,7 +274,10 @@ def main(argv: list[str] | None = None) -> None:
                     "env_cost_over_raw = env wall time / raw wall time of the same chunk, median over all chunks "
                     "(1 = no overhead), ratio_env_over_raw = its inverse, per_round = the ratio of each round's "
                     "totals; env_cost_over_raw_cpu = the median over rounds of the ratio of the thread's CPU time "
-                    "(time the core was taken by other processes not counted); steps/s of the best round"}
+                    "(time the core was taken by other processes not counted); steps/s of the best round; "
+                    "bare_gymnasium_cost_over_raw: the same median for a bare Gymnasium MujocoEnv on the same "
+                    "model (do_simulation and one read of the arm's q, qd, torque), timed in the same alternation "
+                    "(env, raw, bare; the order rotates per chunk)"}
     (out / "bench_env.json").write_text(json.dumps({"meta": meta, "results": rows}, indent=2))
     print(f"wrote {out / 'bench_env.json'}")
 
