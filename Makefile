@@ -7,7 +7,7 @@ comma := ,
 STAMP := $(VENV)/.installed-$(subst $(comma),-,$(EXTRAS))
 export MUJOCO_GL ?= egl
 
-.PHONY: setup demo test test-slow test-all test-studies bench wheel
+.PHONY: setup demo test test-slow test-all test-studies wheel
 
 setup: $(STAMP)
 
@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/cascgp transfer --quick --overwrite --out out/demo --video out/demo/video
 
-# The default suite (about 4 min on 2 quiet cores): everything but the tests marked slow.
+# The default suite (about 5-9 min on 2 cores): everything but the tests marked slow.
 test: $(STAMP)
 	$(VENV)/bin/python -m pytest
 

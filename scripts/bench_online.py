@@ -1,4 +1,4 @@
-"""Cost of the uncertainty-aware feedforward per control tick and of an online sample (issue 10).
+"""Cost of the uncertainty-aware feedforward per control tick and of an online sample.
 
     python -m scripts.bench_online --out out/bench [--data out/study/data] [--n 500] [--window 150]
 

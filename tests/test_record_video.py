@@ -1,6 +1,6 @@
 """Gymnasium's ``RecordVideo`` wrapper on ``JacoPour-v0`` (``rgb_array``, headless): an MP4 of the episode.
 
-``RecordVideo`` writes its clips with MoviePy (the ``video`` extra: ``pip install 'cascgp-jaco[video]'``);
+``RecordVideo`` writes its clips with MoviePy (the ``video`` extra: ``the video extra, pip install '.[video]'``);
 without it the test is skipped. Small frames and a truncated episode keep it to a few seconds.
 """
 
@@ -14,7 +14,7 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering (set before MuJoCo is imported)
 
-pytest.importorskip("moviepy", reason="gymnasium.wrappers.RecordVideo needs MoviePy: pip install 'cascgp-jaco[video]'")
+pytest.importorskip("moviepy", reason="gymnasium.wrappers.RecordVideo needs MoviePy: the video extra, pip install '.[video]'")
 
 import gymnasium as gym
 from gymnasium.wrappers import RecordVideo
