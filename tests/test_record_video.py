@@ -14,7 +14,7 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")  # headless rendering (set before MuJoCo is imported)
 
-pytest.importorskip("moviepy", reason="gymnasium.wrappers.RecordVideo needs MoviePy: the video extra (pip install '.[video]')")
+pytest.importorskip("moviepy", reason="RecordVideo needs MoviePy: the video extra (pip install '.[video]')")
 
 import gymnasium as gym
 from gymnasium.wrappers import RecordVideo
