@@ -181,7 +181,7 @@ def bench(env_id: str, steps: int, rounds: int = 5, sensor_pipeline: str = "jaco
         return t
 
     chunks = np.array([one_round(r) for r in range(rounds)])  # (rounds, chunks, env/raw/bare, wall/cpu)
-    times = chunks.sum(axis=1)  # (rounds, env/raw, wall/cpu)
+    times = chunks.sum(axis=1)  # (rounds, env/raw/bare, wall/cpu)
     t_env, t_raw = times[:, 0, 0].min(), times[:, 1, 0].min()
     costs = times[:, 0, 0] / times[:, 1, 0]
     costs_cpu = times[:, 0, 1] / times[:, 1, 1]
