@@ -69,6 +69,13 @@ class BareGymnasiumEnv(MujocoEnv):
         obs = spaces.Box(-np.inf, np.inf, shape=(sum(len(a) for a in arm),), dtype=np.float64)
         MujocoEnv.__init__(self, path, frame_skip, observation_space=obs)
 
+    @classmethod
+    def like(cls, u) -> "BareGymnasiumEnv":
+        """On the model file of the unwrapped Jaco env ``u``, with its frame skip, arm addresses and payload."""
+        bare = cls(u.fullpath, u.frame_skip, (u.arm_qpos_adr, u.arm_dof_adr, u._tau_sensor))
+        bare.model.body_mass[:], bare.model.body_inertia[:] = u.model.body_mass, u.model.body_inertia
+        return bare
+
     def step(self, action):
         self.do_simulation(action, self.frame_skip)
         d, (qa, va, ta) = self.data, self._arm
@@ -151,8 +158,7 @@ def bench(env_id: str, steps: int, rounds: int = 5, sensor_pipeline: str = "jaco
     state0 = np.empty(mujoco.mj_stateSize(u.model, spec))
     mujoco.mj_getState(u.model, u.data, state0, spec)
     d = mujoco.MjData(u.model)
-    bare = BareGymnasiumEnv(u.fullpath, u.frame_skip, (u.arm_qpos_adr, u.arm_dof_adr, u._tau_sensor))
-    bare.model.body_mass[:], bare.model.body_inertia[:] = u.model.body_mass, u.model.body_inertia  # the payload
+    bare = BareGymnasiumEnv.like(u)
 
     def one_round(r: int) -> np.ndarray:
         """Wall and CPU time (s) of each chunk of the ``steps`` control steps, env, raw and bare Gymnasium env,

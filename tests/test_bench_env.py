@@ -16,9 +16,8 @@ def test_bare_gymnasium_env_steps_the_raw_loops_physics():
     env = gym.make("JacoPayload-v0")
     env.reset(seed=0)
     u = env.unwrapped
-    bare = BareGymnasiumEnv(u.fullpath, u.frame_skip, (u.arm_qpos_adr, u.arm_dof_adr, u._tau_sensor))
+    bare = BareGymnasiumEnv.like(u)
     try:
-        bare.model.body_mass[:], bare.model.body_inertia[:] = u.model.body_mass, u.model.body_inertia
         spec = mujoco.mjtState.mjSTATE_FULLPHYSICS
         state = np.empty(mujoco.mj_stateSize(u.model, spec))
         mujoco.mj_getState(u.model, u.data, state, spec)
