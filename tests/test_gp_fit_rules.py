@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import warnings
 
 import numpy as np
 import pytest
@@ -37,6 +38,30 @@ def test_nll_and_grad_independent_of_chunk(kernel):
         f, g, _ = nll_and_grad(theta, X, y, kernel=kernel, chunk=ch)
         np.testing.assert_allclose(f.numpy(), f1.numpy(), rtol=1e-13, atol=1e-12)
         np.testing.assert_allclose(g.numpy(), g1.numpy(), rtol=1e-11, atol=1e-11 * float(g1.abs().max()))
+
+
+def test_nll_and_grad_block_with_failed_members_equals_members_alone():
+    """The gradient is computed for a whole block at once: members that fail (a non-finite value, a trial point
+    far out) or need jitter must not change their neighbours' results, and get NLL inf and a zero gradient."""
+    rng = np.random.default_rng(5)
+    k, n, D = 5, 12, 3
+    X, y = rng.normal(size=(k, n, D)), rng.normal(size=(k, n))
+    theta = np.concatenate([rng.uniform(-0.5, 1.0, (k, D)), rng.uniform(-1, 1, (k, 1)), rng.uniform(-5, -1, (k, 1))],
+                           1)
+    y[1, 3] = np.nan  # a non-finite NLL
+    theta[2, 0] = -1e6  # a lengthscale of exp(-1e6): skipped before the factor
+    theta[3, :D], theta[3, D + 1] = 6.0, -60.0  # K numerically singular: the factor needs jitter
+    kw = {"kernel": "rbf", "noise_floor": 0.0}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the failed members' junk must not raise NumPy warnings either
+        f, g, jit = nll_and_grad(torch.tensor(theta), torch.tensor(X), torch.tensor(y), **kw)
+    assert math.isinf(float(f[1])) and math.isinf(float(f[2])) and np.all(g[1:3].numpy() == 0)
+    assert float(jit[3]) > 0 and math.isfinite(float(f[3]))
+    for m in (0, 3, 4):
+        f1, g1, j1 = nll_and_grad(torch.tensor(theta[m:m + 1]), torch.tensor(X[m:m + 1]), torch.tensor(y[m:m + 1]),
+                                  **kw)
+        assert float(f1[0]) == pytest.approx(float(f[m]), rel=1e-13) and float(j1[0]) == float(jit[m])
+        np.testing.assert_allclose(g[m].numpy(), g1[0].numpy(), rtol=1e-11, atol=1e-11 * float(g1.abs().max()))
 
 
 def test_snr_bound_gradient_matches_finite_differences():
