@@ -34,11 +34,11 @@ two triangular solves for :math:`\alpha`, :math:`K^{-1}` from the factor (``dpot
 :math:`P`). The element-wise work runs on cache-sized blocks with reused buffers (no ``(n, n)`` temporaries), and
 OpenBLAS runs on one thread during a fit (:func:`blas_threads`). Only the three LAPACK calls and the NLL run member
 by member; the kernel and the gradient are batched over the block, which matters at small n where a block holds
-many members (measured at n = 8, d = 18: 56 us per start and evaluation, against 297 us with the gradient's ~15
-tensor operations issued per member). Measured at n = 500, d = 18, one thread (SARCOS
-bench, ``docs/bench``): 7.2 ms per start and evaluation (kernel 1.6, Cholesky 1.5, inverse 2.8, gradient 1.2,
-optimiser 0.1), against 22.8 ms for the earlier all-batch torch version (``torch.cholesky_inverse`` on a
-``(60, 500, 500)`` batch, memory-bound).
+many members (a fit at n = 8 and 28 costs about half as much per evaluation as with the gradient's tensor
+operations issued member by member: ``docs/bench/bench_scaling_block_gradient.json``). Measured at n = 500,
+d = 18, one thread (SARCOS bench, ``docs/bench``): 7.2 ms per start and evaluation (kernel 1.6, Cholesky 1.5,
+inverse 2.8, gradient 1.2, optimiser 0.1), against 22.8 ms for the earlier all-batch torch version
+(``torch.cholesky_inverse`` on a ``(60, 500, 500)`` batch, memory-bound).
 
 Memory
 ------
@@ -271,8 +271,8 @@ def nll_and_grad(
         alphas = np.zeros((c_, n))
         done = np.zeros(c_, dtype=bool)  # members whose gradient the block computes below
         # Per member only the LAPACK calls and the NLL (n x n factorisations, one call each); everything else is
-        # batched over the block, so a small n pays a few calls per member rather than ~20 (measured: ~300 us of
-        # Python and torch dispatch per member and evaluation at n = 8, against a few us of LAPACK).
+        # batched over the block, so a small n pays a few calls per member rather than ~20 (at n = 8 those cost
+        # ~0.2 ms per member and evaluation, against a few us of LAPACK).
         for i in range(c_):
             if prof is not None:
                 t1 = clock()
