@@ -1,0 +1,93 @@
+"""Two runs of the data-efficiency study side by side: how far apart their numbers are.
+
+Used to check a change that should leave the study's numbers alone, or change them only through the fit (round-off
+in the optimiser's path): per data set the largest change of any nRMSE (every subset, grid point and joint), how
+many changed by more than 1 %, the largest change of a Table I cell, every pooled test whose verdict changed, and
+both runs' fit audits (:func:`cascgp_experiments.curves.audit_summary`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["compare_results", "format_comparison"]
+
+
+def _verdict(test: dict[str, Any], alpha: float = 0.05) -> str:
+    if test["p_holm"] >= alpha:
+        return "n.s."
+    return "first better" if test["ratio"] < 1 else "first worse"
+
+
+def compare_results(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
+    """Compare two ``results.json`` of :func:`cascgp_experiments.study.run_study` (``a`` the reference).
+
+    Returns per data set (``"jaco"``, ``"sarcos"``, those in both): ``max_abs_nrmse_change``, ``rel_change``
+    (median, 99th percentile, max of :math:`|b - a| / a` over every subset, grid point and joint),
+    ``n_cells``, ``n_cells_over_1pct``, ``max_abs_table_change``, ``pooled`` (per family: ``n_tests``,
+    ``max_abs_ratio_change``, ``changed_verdicts``) and ``audit`` (both runs' summaries, records left out).
+    ``ValueError`` names a data set or model present in one run only.
+    """
+    out: dict[str, Any] = {}
+    for blk in ("jaco", "sarcos"):
+        if blk not in a or blk not in b:
+            continue
+        A, B = a[blk], b[blk]
+        if set(A["models"]) != set(B["models"]):
+            raise ValueError(f"{blk}: the runs have different models: {sorted(A['models'])} / {sorted(B['models'])}")
+        diffs, rels = [], []
+        for m in A["models"]:
+            x, y = np.asarray(A["models"][m]["nrmse_all"], float), np.asarray(B["models"][m]["nrmse_all"], float)
+            if x.shape != y.shape:
+                raise ValueError(f"{blk} {m}: nrmse_all shapes differ: {x.shape} / {y.shape}")
+            diffs.append(float(np.abs(y - x).max()))
+            rels.append((np.abs(y - x) / np.abs(x)).ravel())
+        rel = np.concatenate(rels)
+        res: dict[str, Any] = {
+            "max_abs_nrmse_change": max(diffs),
+            "rel_change": {"median": float(np.median(rel)), "p99": float(np.percentile(rel, 99)),
+                           "max": float(rel.max())},
+            "n_cells": int(rel.size), "n_cells_over_1pct": int((rel > 0.01).sum())}
+        if "table" in A and "table" in B:
+            ta = np.array(list(A["table"]["rows"].values()), float)
+            tb = np.array(list(B["table"]["rows"].values()), float)
+            res["max_abs_table_change"] = float(np.abs(tb - ta).max())
+        res["pooled"] = {}
+        for fam, tests_a in A.get("pooled", {}).items():
+            tests_b = B["pooled"][fam]
+            res["pooled"][fam] = {
+                "n_tests": len(tests_a),
+                "max_abs_ratio_change": max((abs(t["ratio"] - u["ratio"]) for t, u in zip(tests_a, tests_b)),
+                                            default=0.0),
+                "changed_verdicts": [{"a": t["a"], "b": t["b"], "interval": t["interval"], "before": _verdict(t),
+                                      "after": _verdict(u)}
+                                     for t, u in zip(tests_a, tests_b) if _verdict(t) != _verdict(u)]}
+        res["audit"] = {k: {kk: v for kk, v in R["audit"].items() if kk != "records"}
+                        for k, R in (("reference", A), ("other", B))}
+        out[blk] = res
+    return out
+
+
+def format_comparison(c: dict[str, Any]) -> str:
+    """A Markdown summary of :func:`compare_results`."""
+    lines = []
+    for blk, r in c.items():
+        rel = r["rel_change"]
+        lines.append(f"**{blk}**: largest nRMSE change {r['max_abs_nrmse_change']:.2e}; relative change median "
+                     f"{rel['median']:.1e}, 99th percentile {rel['p99']:.1e}, largest {rel['max']:.1e}; "
+                     f"{r['n_cells_over_1pct']} of {r['n_cells']} values changed by more than 1 %"
+                     + (f"; largest Table I change {r['max_abs_table_change']:.4f}" if "max_abs_table_change" in r
+                        else ""))
+        for fam, p in r["pooled"].items():
+            lines.append(f"- pooled tests, {fam}: {p['n_tests']} tests, largest ratio change "
+                         f"{p['max_abs_ratio_change']:.4f}, verdicts changed: {len(p['changed_verdicts'])}"
+                         + "".join(f"; {v['a']} vs {v['b']} {v['interval']}: {v['before']} -> {v['after']}"
+                                   for v in p["changed_verdicts"]))
+        for k, s in r["audit"].items():
+            within, gap = s.get("within_tol", float("nan")), s.get("gap_max", float("nan"))
+            lines.append(f"- fit audit ({k}): {s.get('n_gps')} GPs, within {s.get('tol_nats')} nat: {within:.3f}, "
+                         f"largest gap {gap:.2f} nat")
+        lines.append("")
+    return "\n".join(lines)
