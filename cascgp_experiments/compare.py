@@ -1,9 +1,11 @@
-"""Two runs of the data-efficiency study side by side: how far apart their numbers are.
+"""Two runs of an experiment side by side: how far apart their numbers are.
 
-Used to check a change that should leave the study's numbers alone, or change them only through the fit (round-off
-in the optimiser's path): per data set the largest change of any nRMSE (every subset, grid point and joint), how
-many changed by more than 1 %, the largest change of a Table I cell, every pooled test whose verdict changed, and
-both runs' fit audits (:func:`cascgp_experiments.curves.audit_summary`).
+Used to check a change that should leave the numbers alone, or change them only through the fit (round-off in the
+optimiser's path). For the data-efficiency study (:func:`compare_results`): per data set the largest change of any
+nRMSE (every subset, grid point and joint), how many changed by more than 1 %, the largest change of a Table I
+cell, every pooled test whose verdict changed, and both runs' fit audits
+(:func:`cascgp_experiments.curves.audit_summary`). For the task transfer (:func:`compare_transfer`): per controller,
+attempt by attempt, how far the tracking RMSE and the marbles in the jar moved.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["compare_results", "format_comparison"]
+__all__ = ["compare_results", "format_comparison", "compare_transfer", "format_transfer_comparison"]
 
 
 def _verdict(test: dict[str, Any], alpha: float = 0.05) -> str:
@@ -90,4 +92,57 @@ def format_comparison(c: dict[str, Any]) -> str:
             lines.append(f"- fit audit ({k}): {s.get('n_gps')} GPs, within {s.get('tol_nats')} nat: {within:.3f}, "
                          f"largest gap {gap:.2f} nat")
         lines.append("")
+    return "\n".join(lines)
+
+
+def _attempt_key(a: dict[str, Any]) -> tuple[Any, ...]:
+    return a["task"], a["task_attempt"], a["phase"]
+
+
+def compare_transfer(a: dict[str, Any], b: dict[str, Any], pour: float = 0.5) -> dict[str, Any]:
+    """Compare two ``results.json`` of the task transfer (``cascgp transfer``; ``a`` the reference), attempt by
+    attempt.
+
+    Returns per controller in both runs: ``n_attempts``; ``identical`` (every attempt's tracking RMSE and share of
+    marbles in the jar equal); ``rmse_abs_change`` (median and max over the attempts of :math:`|b - a|`, rad);
+    ``rmse_ratio`` (min and max of :math:`b / a`); ``in_jar_abs_change_max``; ``pour_flips``, the attempts that
+    poured at least ``pour`` of the marbles in one run and less in the other; and ``mean_in_jar`` of both runs.
+    ``ValueError`` names a controller present in one run only or one whose attempts (task, attempt, phase) differ.
+    """
+    A, B = a["controllers"], b["controllers"]
+    if set(A) != set(B):
+        raise ValueError(f"the runs have different controllers: {sorted(A)} / {sorted(B)}")
+    out: dict[str, Any] = {}
+    for name in A:
+        xa, xb = A[name], B[name]
+        if [_attempt_key(t) for t in xa] != [_attempt_key(t) for t in xb]:
+            raise ValueError(f"{name}: the runs' attempts differ (task, attempt, phase)")
+        ra = np.array([t["tracking_rmse"] for t in xa], float)
+        rb = np.array([t["tracking_rmse"] for t in xb], float)
+        ja = np.array([t["in_jar"] for t in xa], float)
+        jb = np.array([t["in_jar"] for t in xb], float)
+        d = np.abs(rb - ra)
+        out[name] = {
+            "n_attempts": len(xa),
+            "identical": bool(np.array_equal(ra, rb) and np.array_equal(ja, jb)),
+            "rmse_abs_change": {"median": float(np.median(d)), "max": float(d.max())},
+            "rmse_ratio": {"min": float((rb / ra).min()), "max": float((rb / ra).max())},
+            "in_jar_abs_change_max": float(np.abs(jb - ja).max()),
+            "pour_flips": [{"task": t["task"], "task_attempt": t["task_attempt"], "phase": t["phase"],
+                            "in_jar": [float(p), float(q)]}
+                           for t, p, q in zip(xa, ja, jb) if (p >= pour) != (q >= pour)],
+            "mean_in_jar": [float(ja.mean()), float(jb.mean())]}
+    return out
+
+
+def format_transfer_comparison(c: dict[str, Any]) -> str:
+    """A Markdown table of :func:`compare_transfer`."""
+    lines = ["| controller | attempts | identical | RMSE change, median / max (rad) | RMSE ratio, min-max | "
+             "largest in-jar change | attempts poured (>= half) in one run only | mean in jar |",
+             "|---|---|---|---|---|---|---|---|"]
+    for name, r in c.items():
+        ch, ra = r["rmse_abs_change"], r["rmse_ratio"]
+        lines.append(f"| {name} | {r['n_attempts']} | {'yes' if r['identical'] else 'no'} | {ch['median']:.3f} / "
+                     f"{ch['max']:.3f} | {ra['min']:.2f}-{ra['max']:.2f} | {r['in_jar_abs_change_max']:.2f} | "
+                     f"{len(r['pour_flips'])} | {r['mean_in_jar'][0]:.2f} -> {r['mean_in_jar'][1]:.2f} |")
     return "\n".join(lines)

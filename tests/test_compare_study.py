@@ -1,4 +1,4 @@
-"""Comparison of two study runs: zero for a run against itself, every kind of change found and named."""
+"""Two runs compared (study, task transfer): zero for a run against itself, every kind of change found and named."""
 
 from __future__ import annotations
 
@@ -73,3 +73,56 @@ def test_command_prints_and_writes_json(tmp_path):
                           str(tmp_path / "a.json")], cwd=Path(__file__).resolve().parents[1], capture_output=True,
                          text=True, timeout=120)
     assert bad.returncode == 2 and "missing.json" in bad.stderr
+
+
+def _transfer() -> dict:
+    att = [{"task": t, "task_attempt": k, "phase": ph, "tracking_rmse": r, "in_jar": j}
+           for t, k, ph, r, j in (("front", 0, "train", 0.43, 0.0), ("front", 1, "train", 0.15, 1.0),
+                                  ("left", 0, "train", 0.12, 0.6), ("front", 2, "revisit", 0.14, 1.0))]
+    return {"config": {}, "controllers": {"rbd": copy.deepcopy(att), "sp-inward": copy.deepcopy(att)}}
+
+
+def test_transfer_against_itself_is_identical_and_changes_are_counted():
+    from cascgp_experiments.compare import compare_transfer, format_transfer_comparison
+
+    a = _transfer()
+    same = compare_transfer(a, copy.deepcopy(a))
+    assert all(r["identical"] and r["rmse_abs_change"]["max"] == 0 and r["pour_flips"] == [] for r in same.values())
+    b = copy.deepcopy(a)
+    b["controllers"]["sp-inward"][2].update(tracking_rmse=0.09, in_jar=0.4)  # tracked better, poured less than half
+    c = compare_transfer(a, b)
+    assert c["rbd"]["identical"] and not c["sp-inward"]["identical"]
+    s = c["sp-inward"]
+    assert s["rmse_abs_change"]["max"] == pytest.approx(0.03) and s["rmse_ratio"]["min"] == pytest.approx(0.75)
+    assert s["in_jar_abs_change_max"] == pytest.approx(0.2)
+    assert s["pour_flips"] == [{"task": "left", "task_attempt": 0, "phase": "train", "in_jar": [0.6, 0.4]}]
+    assert s["mean_in_jar"] == pytest.approx([0.65, 0.6])
+    assert "| sp-inward | 4 | no | 0.000 / 0.030 | 0.75-1.00 | 0.20 | 1 | 0.65 -> 0.60 |" in \
+        format_transfer_comparison(c)
+
+
+def test_transfer_runs_that_differ_in_controllers_or_attempts_are_refused(tmp_path):
+    from cascgp_experiments.compare import compare_transfer
+
+    a = _transfer()
+    b = copy.deepcopy(a)
+    del b["controllers"]["rbd"]
+    with pytest.raises(ValueError, match="different controllers"):
+        compare_transfer(a, b)
+    b = copy.deepcopy(a)
+    b["controllers"]["sp-inward"][3]["phase"] = "train"
+    with pytest.raises(ValueError, match="sp-inward: the runs' attempts differ"):
+        compare_transfer(a, b)
+    (tmp_path / "a.json").write_text(json.dumps(a))
+    (tmp_path / "b.json").write_text(json.dumps(b))
+    (tmp_path / "study.json").write_text(json.dumps(_results()))
+    root = Path(__file__).resolve().parents[1]
+    for other, says in (("b.json", "attempts differ"), ("study.json", "no 'controllers'")):
+        r = subprocess.run([sys.executable, "-m", "scripts.compare_transfer", str(tmp_path / "a.json"),
+                            str(tmp_path / other)], cwd=root, capture_output=True, text=True, timeout=120)
+        assert r.returncode == 2 and says in r.stderr
+    ok = subprocess.run([sys.executable, "-m", "scripts.compare_transfer", str(tmp_path / "a.json"),
+                         str(tmp_path / "a.json"), "--json", str(tmp_path / "c.json")], cwd=root,
+                        capture_output=True, text=True, timeout=120)
+    assert ok.returncode == 0 and "| rbd | 4 | yes |" in ok.stdout
+    assert json.loads((tmp_path / "c.json").read_text())["controllers"]["sp-inward"]["identical"]
