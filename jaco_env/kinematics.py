@@ -13,11 +13,17 @@ compiled once per process) and everything computed from it alone:
 Why hand-written IK: MuJoCo offers Jacobians but no IK solver; a 6-DOF DLS loop is a dozen
 lines and needs no further dependency. The trajectories built from these poses are in
 :mod:`jaco_env.trajectory`, the tasks in :mod:`jaco_env.tasks`.
+
+The same on every CPU: the IK's products, factorisation and norms are MuJoCo's ``mju_*`` routines and
+element-wise arithmetic, not NumPy's BLAS/LAPACK, whose kernels (chosen at run time for the CPU, with or without
+FMA) round differently from one CPU to another. A task's reference is then the same bit for bit everywhere, and so
+is a seeded episode under a controller that tracks it.
 """
 
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 
@@ -55,7 +61,7 @@ def target_rotation(approach: np.ndarray, tilt: float) -> np.ndarray:
     Bottle frame: z = bottle axis (towards the mouth), x = minus the hand approach axis.
     """
     a = np.asarray(approach, float)
-    a = a / np.linalg.norm(a)
+    a = a / math.hypot(*a)
     up = np.array([0.0, 0.0, 1.0])
     side = np.cross(a, up)
     z = np.cos(tilt) * up + np.sin(tilt) * side
@@ -83,6 +89,9 @@ def solve_ik(p_target: np.ndarray, R_target: np.ndarray, q0: np.ndarray, *, iter
     limited = m.jnt_limited[:_N].astype(bool)
     jacp = np.zeros((3, m.nv))
     jacr = np.zeros((3, m.nv))
+    A = np.empty((6, 6))
+    x = np.empty(6)
+    dq = np.empty(_N)
     err = np.inf
     for _ in range(iters):
         d.qpos[:_N] = q
@@ -90,14 +99,20 @@ def solve_ik(p_target: np.ndarray, R_target: np.ndarray, q0: np.ndarray, *, iter
         mujoco.mj_comPos(m, d)
         R = d.xmat[bid].reshape(3, 3)
         e_p = p_target - d.site_xpos[sid]
-        e_r = 0.5 * sum(np.cross(R[:, k], R_target[:, k]) for k in range(3))
+        e_r = 0.5 * (np.cross(R[:, 0], R_target[:, 0]) + np.cross(R[:, 1], R_target[:, 1])
+                     + np.cross(R[:, 2], R_target[:, 2]))
         e = np.concatenate([e_p, e_r])
-        err = float(np.linalg.norm(e_p) + np.linalg.norm(e_r))
+        err = math.hypot(*e_p) + math.hypot(*e_r)
         if err < tol:
             break
         mujoco.mj_jacSite(m, d, jacp, jacr, sid)
         J = np.vstack([jacp[:, :_N], jacr[:, :_N]])  # (6, N): 6-D pose error (position, orientation)
-        dq = J.T @ np.linalg.solve(J @ J.T + damping**2 * np.eye(len(e)), e)
+        # dq = J^T (J J^T + damping^2 I)^-1 e, by MuJoCo's routines (see the module docstring)
+        mujoco.mju_mulMatMatT(A, J, J)
+        A[np.diag_indices(6)] += damping**2
+        mujoco.mju_cholFactor(A, 0.0)
+        mujoco.mju_cholSolve(x, A, e)
+        mujoco.mju_mulMatTVec(dq, J, x)
         step = np.max(np.abs(dq))
         if step > 0.2:
             dq *= 0.2 / step

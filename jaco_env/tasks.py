@@ -138,8 +138,11 @@ class PouringTask:
         for lam in np.linspace(0.0, 1.0, 9)[1:]:
             ang = lam * phi
             a = np.array([-np.sin(ang), np.cos(ang), 0.0])
-            rot = np.array([[np.cos(ang), -np.sin(ang), 0], [np.sin(ang), np.cos(ang), 0], [0, 0, 1]])
-            p = (1 - lam) * (rot @ p_home) + lam * p_pre
+            ca, sa = np.cos(ang), np.sin(ang)
+            # p_home rotated by ang about z, element-wise (a matrix product's BLAS kernel rounds differently
+            # from one CPU to another; jaco_env.kinematics)
+            rot_home = np.array([ca * p_home[0] - sa * p_home[1], sa * p_home[0] + ca * p_home[1], p_home[2]])
+            p = (1 - lam) * rot_home + lam * p_pre
             guess, _ = solve_ik(p, target_rotation(a, 0.0), guess)
         sols = []
         for th in tilts:

@@ -241,7 +241,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         p = self.marble_positions()
         xb = self.data.xpos[self._bottle_body]
         Rb = self.data.xmat[self._bottle_body].reshape(3, 3)
-        loc = (p - xb) @ Rb
+        d = p - xb
+        loc = d[:, 0:1] * Rb[0] + d[:, 1:2] * Rb[1] + d[:, 2:3] * Rb[2]  # (p - xb) @ Rb, without BLAS
         in_bottle = (np.linalg.norm(loc[:, :2], axis=1) < scene.BOTTLE_INNER_RADIUS + 0.003) & (
             loc[:, 2] > scene.BOTTLE_BOTTOM - 0.003) & (loc[:, 2] < scene.BOTTLE_TOP)
         return loc, in_bottle
@@ -276,7 +277,11 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
             layer += 1
         local = np.array(spots[: self.n_marbles])
         local[:, :2] += self.np_random.uniform(-3e-4, 3e-4, size=(self.n_marbles, 2))
-        world = xb + local @ Rb.T
+        # world = xb + local @ Rb.T, written out element-wise: a matrix product goes to the BLAS kernel this CPU
+        # picks (with or without FMA), whose last bits differ between CPUs, and the marbles' contacts amplify a
+        # last-bit difference of their start into a different episode. Element-wise products and sums round the
+        # same everywhere, so a seed gives the same episode on every CPU.
+        world = xb + local[:, 0:1] * Rb[:, 0] + local[:, 1:2] * Rb[:, 1] + local[:, 2:3] * Rb[:, 2]
         for k in range(self.n_marbles):
             a = self.marble_qpos_adr[k]
             d.qpos[a:a + 3] = world[k]
@@ -368,7 +373,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
             self._unstable = True
             return self._last_obs.copy(), 0.0, False, True, self._info(no_reward, 0.0)
         e = self.task.reference_position(self.time) - self._q_arm
-        err = math.sqrt(e.dot(e))  # float(np.linalg.norm(e)), as numpy computes it
+        err = math.hypot(*e)  # not e.dot(e): BLAS rounds differently from one CPU to another (see _place_marbles)
         counts = self.marble_counts()
         reward, reward_info = self._get_rew(err, counts[0])
         self._in_jar = counts[0]
