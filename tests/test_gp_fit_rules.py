@@ -64,6 +64,30 @@ def test_nll_and_grad_block_with_failed_members_equals_members_alone():
         np.testing.assert_allclose(g[m].numpy(), g1[0].numpy(), rtol=1e-11, atol=1e-11 * float(g1.abs().max()))
 
 
+def test_jitter_retry_does_not_repeat_the_failed_factor(monkeypatch):
+    """A member whose factor fails is factorised again with growing jitter, starting at the first non-zero one:
+    the failed zero-jitter factor is not computed twice. Counted on a member that needs jitter, with the LAPACK
+    call wrapped; the jitter each call saw is read from the matrix's diagonal."""
+    import cascgp.gp.likelihood as lik
+
+    rng = np.random.default_rng(5)
+    n, D = 12, 3
+    X, y = rng.normal(size=(1, n, D)), rng.normal(size=(1, n))
+    theta = np.concatenate([np.full(D, 6.0), [0.0], [-60.0]])[None]  # K numerically singular (as above)
+    diagonals = []
+    real = lik._dpotrf
+
+    def counting(a, **kw):
+        diagonals.append(float(np.diagonal(a).mean()))
+        return real(a, **kw)
+
+    monkeypatch.setattr(lik, "_dpotrf", counting)
+    f, _, jit = nll_and_grad(torch.tensor(theta), torch.tensor(X), torch.tensor(y), kernel="rbf", noise_floor=0.0)
+    assert float(jit[0]) > 0 and math.isfinite(float(f[0]))
+    assert len(diagonals) >= 2 and len(set(diagonals)) == len(diagonals)  # every call a new jitter
+    assert diagonals[-1] == pytest.approx(diagonals[0] + float(jit[0]), rel=1e-12)
+
+
 def test_snr_bound_gradient_matches_finite_differences():
     rng = np.random.default_rng(4)
     n, D = 30, 2

@@ -140,26 +140,27 @@ _CACHE_CHUNK_BYTES = 1 << 20
 
 def _potrf_jitter(kk: torch.Tensor, K: torch.Tensor, sf2: float, sn2: float,
                   jitter_max: float) -> tuple[np.ndarray | None, float]:
-    """Cholesky (LAPACK ``dpotrf``) of ``sf2 * kk + sn2 I`` written into the buffer ``K``; jitter only if it fails.
+    """Cholesky (LAPACK ``dpotrf``) of ``sf2 * kk + (sn2 + jitter) I`` written into the buffer ``K``, after the
+    factor without jitter has failed: the jitter grows tenfold from ``1e-8`` of the mean diagonal until the factor
+    succeeds.
 
     ``kk`` and ``K`` are C-contiguous ``(n, n)``; ``K``'s memory read as an F-ordered array is the same symmetric
     matrix, so LAPACK works in place. Returns the F-ordered factor (lower triangle = L, strict upper = junk) and
     the jitter, or ``(None, jitter)`` when even ``jitter_max`` (relative to the mean diagonal) fails.
     """
-    jit = 0.0
     scale = sf2 + sn2  # mean diagonal of K (unit kernel diagonal)
     j = 1e-8
     Kf = K.numpy().T
     while True:
+        jit = j * scale
         torch.mul(kk, sf2, out=K)
         K.diagonal().add_(sn2 + jit)
         c, info = _dpotrf(Kf, lower=1, overwrite_a=1, clean=0)
         if info == 0:
             return c, jit
+        j *= 10.0
         if j > jitter_max * (1 + 1e-12):
             return None, jit
-        jit = j * scale
-        j *= 10.0
 
 
 #: When a dict, :func:`nll_and_grad` adds the seconds spent per phase (``kernel``: distances and kernel values,
@@ -282,7 +283,7 @@ def nll_and_grad(
             if not (row_ok[m] and math.isfinite(sn2) and math.isfinite(sf2)):
                 continue  # a trial point far out (huge step): NLL inf, the line search backs off
             cf, info = _dpotrf(C[i].numpy().T, lower=1, overwrite_a=1, clean=0)
-            if info != 0:  # the factor failed: retry from the kernel with jitter (only this member)
+            if info != 0:  # the factor failed: again from the kernel, with jitter (only this member)
                 cf, jit = _potrf_jitter(A[i], C[i], sf2, sn2, jitter_max)
                 jitter[m] = jit
                 if cf is None:
