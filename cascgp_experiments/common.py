@@ -35,6 +35,14 @@ NOMINAL_URDF_DM_CONTROL = _jaco_env_dir() / "assets" / "jaco2_nominal.urdf"
 #: Environment variable naming the IAS SARCOS ``.mat`` file used when a command is given no ``--sarcos``.
 SARCOS_ENV = "CASCGP_SARCOS"
 
+#: The distribution's name on the package index (``pip install`` it; extras as ``cascgp-jaco[EXTRA]``).
+DISTRIBUTION = "cascgp-jaco"
+
+
+def install_hint(extra: str) -> str:
+    """How to install an optional extra, installed from the index or from a source checkout."""
+    return f"pip install '{DISTRIBUTION}[{extra}]' (in a source checkout: pip install -e '.[{extra}]')"
+
 
 def default_sarcos() -> Path | None:
     """The SARCOS file to use when the user names none: ``$CASCGP_SARCOS`` if set, else, in a source checkout that

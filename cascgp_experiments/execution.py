@@ -16,7 +16,7 @@ Backends (the same jobs, the same results):
 * ``ray_address``: the jobs become Ray tasks of one CPU each on the cluster at that address
   (``ray.init(address=...)``); ``"local"`` starts a new local Ray instance with ``num_cpus=workers``
   (never a cluster already running here, nor ``RAY_ADDRESS``); ``"auto"``: the cluster this machine
-  belongs to. Ray is an optional extra (``pip install -e '.[ray]'``); nothing else imports it. On a
+  belongs to. Ray is an optional extra (``ray``); nothing else imports it. On a
   cluster, every node needs the project installed and the jobs' input files (and the transfer's buffer
   folders) at the same paths, e.g. on a shared file system; only this process writes the cache.
 
@@ -55,6 +55,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from tqdm import tqdm
 
+from cascgp_experiments.common import install_hint
 from cascgp_experiments.job_cache import canonical_json, job_key, read_cached, write_cached
 from cascgp_experiments.ray_backend import RayAuthenticationError, import_ray, ray_connect, run_ray
 
@@ -114,7 +115,7 @@ def add_execution_args(parser: Any) -> None:
     parser.add_argument("--ray", default=None, metavar="ADDRESS",
                         help="submit the jobs to the Ray cluster at ADDRESS ('local': start a local Ray instance "
                              "with --workers CPUs; 'auto': the cluster this machine belongs to); needs the extra: "
-                             "pip install -e '.[ray]'")
+                             f"{install_hint('ray')}")
 
 
 def check_args(parser: Any, args: Any) -> None:
@@ -131,7 +132,7 @@ def check_args(parser: Any, args: Any) -> None:
         try:
             import ray  # noqa: F401
         except ImportError:
-            parser.error("--ray needs Ray, an optional extra: pip install -e '.[ray]'")
+            parser.error(f"--ray needs Ray, an optional extra: {install_hint('ray')}")
         if args.ray != "local":
             try:
                 ray_connect(args.ray, check_workers(args.workers))

@@ -1,5 +1,5 @@
 """The Ray backend of :mod:`cascgp_experiments.execution`: connecting to a cluster (and its token
-authentication) and running the jobs as Ray tasks. Ray is an optional extra (``pip install -e '.[ray]'``);
+authentication) and running the jobs as Ray tasks. Ray is an optional extra (``ray``);
 nothing here imports it until a run asks for it.
 
 Ray token authentication (as in Ray 2.60, the version the extra pins): ``ray start --head`` turns it on when a
@@ -22,6 +22,8 @@ from typing import Any, Callable, Sequence
 
 from tqdm import tqdm
 
+from cascgp_experiments.common import install_hint
+
 __all__ = ["RayAuthenticationError", "RAY_AUTH_MODE_VAR", "RAY_TOKEN_PLACES", "import_ray", "ray_connect", "run_ray"]
 
 
@@ -42,7 +44,7 @@ def import_ray():
     try:
         import ray
     except ImportError as exc:
-        raise ImportError("--ray needs Ray, an optional extra: pip install -e '.[ray]'") from exc
+        raise ImportError(f"--ray needs Ray, an optional extra: {install_hint('ray')}") from exc
     return ray
 
 

@@ -24,8 +24,8 @@ Frame rate: the recorder renders ticks ``every, 2 every, ...``; a video plays in
 ``fps = 1 / (control_dt * every)`` (20 fps for ``every=2`` at the Jaco's 40 Hz control,
 :func:`every_for_fps`). An episode of ``steps`` ticks gives ``steps // every`` frames.
 
-Writing MP4 needs the optional packages ``imageio`` and ``imageio-ffmpeg`` (``pip install -e
-'.[video]'``; ffmpeg comes bundled with imageio-ffmpeg). This module imports them only when a
+Writing MP4 needs the optional packages ``imageio`` and ``imageio-ffmpeg`` (the ``video`` extra,
+:data:`INSTALL_HINT`; ffmpeg comes bundled with imageio-ffmpeg). This module imports them only when a
 file is written, so recording and composing work without them; :func:`write_mp4` raises an
 ``ImportError`` naming the install command when they are missing. Rendering is headless with
 ``MUJOCO_GL=egl`` (set by default here, as in :mod:`cascgp_experiments.transfer`).
@@ -45,13 +45,14 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 from cascgp.episodes import EpisodeResult, run_episode
 from cascgp.io import atomic_write
+from cascgp_experiments.common import install_hint
 
 __all__ = ["DEFAULT_FPS", "INSTALL_HINT", "EpisodeRecorder", "caption_frame", "every_for_fps", "side_by_side",
-           "write_mp4", "record_episode", "record_comparison", "make_video_env", "VIDEO_CAMERA"]
+           "write_mp4", "check_video_writer", "record_episode", "record_comparison", "make_video_env", "VIDEO_CAMERA"]
 
 #: Default frame rate of the videos (frames per second of simulated time, played in real time).
 DEFAULT_FPS = 20.0
-INSTALL_HINT = "pip install -e '.[video]'"
+INSTALL_HINT = install_hint("video")
 _BAND_ALPHA = 0.6  # opacity of the dark band behind the caption
 
 
@@ -228,6 +229,12 @@ def side_by_side(*recordings: Sequence[np.ndarray]) -> list[np.ndarray]:
             parts.append(f)
         out.append(np.concatenate(parts, axis=1))
     return out
+
+
+def check_video_writer() -> None:
+    """``ImportError`` naming the install command (:data:`INSTALL_HINT`) unless MP4 files can be written, e.g.
+    before a run that records video, so that it fails at once rather than after its episodes."""
+    _imageio()
 
 
 def _imageio() -> Any:

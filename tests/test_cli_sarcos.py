@@ -58,3 +58,31 @@ def test_fit_refuses_a_urdf_for_np_models(tmp_path: Path) -> None:
     r = cascgp("fit", "--data", "x.csv", "--urdf", "robot.urdf", "--model", "np-standard", "--out", "m.npz",
                cwd=tmp_path)
     assert r.returncode == 2 and "--urdf" in r.stderr and "non-parametric" in r.stderr
+
+
+def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_path: Path, capsys) -> None:
+    """``cascgp sarcos`` passes the study preset's SARCOS settings (``--quick``: the quick preset's), so that it
+    computes the block ``cascgp study`` does; ``--restarts`` and ``--seed`` override them; it prints the table."""
+    import cascgp_experiments.cli.sarcos as cli
+    from cascgp_experiments.study import PRESETS
+
+    seen: list[dict] = []
+
+    def fake_run(path, out, **kw):
+        seen.append(kw)
+        return {"grid_s": list(kw["grid"]), "models": {
+            m: {"nrmse_median": np.full((len(kw["grid"]), 7), v)} for m, v in (("np-standard", 0.1), ("np-inward", 0.2))}}
+
+    monkeypatch.setattr(cli, "run_sarcos", fake_run)
+    mat = tmp_path / "x.mat"
+    mat.write_bytes(b"")
+    for args, preset in ((["--quick"], PRESETS["quick"]), ([], PRESETS["full"])):
+        cli.main(["--sarcos", str(mat), "--out", str(tmp_path / "o"), "--workers", "1", *args])
+        kw = seen[-1]
+        assert (kw["grid"], kw["n_subsets"], kw["n_restarts"], kw["seed"]) == (
+            preset.sarcos_grid, preset.sarcos_subsets, preset.n_restarts, preset.seed)
+        out = capsys.readouterr().out
+        assert f"| {preset.sarcos_grid[-1]:g} | 0.1000 | 0.2000 |" in out
+        assert json.loads((tmp_path / "o" / "sarcos.json").read_text())["grid_s"] == list(preset.sarcos_grid)
+    cli.main(["--sarcos", str(mat), "--out", str(tmp_path / "o"), "--workers", "1", "--restarts", "2", "--seed", "7"])
+    assert (seen[-1]["n_restarts"], seen[-1]["seed"]) == (2, 7)

@@ -174,7 +174,12 @@ def test_help() -> None:
         assert f"  {name} " in top.stdout
         h = cascgp(name, "--help", cwd=REPO)
         assert h.returncode == 0 and h.stdout.startswith(f"usage: cascgp {name}"), h.stderr
-    assert "RMSE_i / (max_i - min_i)" in cascgp("evaluate", "--help", cwd=REPO).stdout
+    assert "RMSE_i / (max_i - min_i)" in " ".join(cascgp("evaluate", "--help", cwd=REPO).stdout.split())
+    for name in ("evaluate", "predict", "fit"):  # the description wrapped to the terminal's usual width
+        assert max(map(len, cascgp(name, "--help", cwd=REPO).stdout.splitlines())) <= 100
+    from cascgp.gp import GPFitConfig
+
+    assert f"(default: {GPFitConfig().n_restarts}, the library's" in " ".join(cascgp("fit", "--help", cwd=REPO).stdout.split())
 
 
 def test_module_form_runs_the_same_command() -> None:

@@ -135,11 +135,30 @@ def test_missing_imageio_fails_only_when_writing(monkeypatch, tmp_path):
     mod = importlib.reload(video)  # imports fine without imageio
     try:
         frames = mod.side_by_side([np.zeros((4, 4, 3), np.uint8)], [np.zeros((4, 4, 3), np.uint8)])
-        with pytest.raises(ImportError, match=r"pip install -e '\.\[video\]'"):
+        with pytest.raises(ImportError, match=r"pip install 'cascgp-jaco\[video\]' \(in a source checkout: pip install -e '\.\[video\]'\)"):
             mod.write_mp4(frames, tmp_path / "x.mp4")
     finally:
         monkeypatch.undo()
         importlib.reload(video)
+
+
+def test_transfer_video_without_imageio_stops_before_any_episode(tmp_path):
+    """``cascgp transfer --video`` without the video extra: a one-line ``error:`` (status 2) naming the install
+    command, before any episode runs (nothing written to --out)."""
+    import subprocess
+    from pathlib import Path
+
+    fake = tmp_path / "noimageio" / "imageio"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text("raise ImportError('no imageio here')\n")
+    repo = Path(__file__).resolve().parents[1]
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(tmp_path / "noimageio"), str(repo)])}
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, "-m", "cascgp_experiments.cli", "transfer", "--out", str(out), "--quick",
+                          "--video", str(out / "video")], env=env, capture_output=True, text=True, timeout=300)
+    assert run.returncode == 2, run.stderr[-2000:]
+    assert "--video" in run.stderr and "pip install 'cascgp-jaco[video]'" in run.stderr
+    assert "Traceback" not in run.stderr and not out.exists()
 
 
 class _FakeEnv:

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import hashlib
 import sys
+import textwrap
 import time
 import warnings
 from datetime import datetime, timezone
@@ -59,7 +60,9 @@ def _run(prog: str, body: Callable[[], int | None]) -> int:
 
 
 def _parser(prog: str, description: str) -> argparse.ArgumentParser:
-    return argparse.ArgumentParser(prog=prog, description=description, epilog="examples:\n" + __doc__.split("\n\n")[2],
+    # the raw formatter keeps the examples' lines; the description is wrapped here (it would print as one line)
+    return argparse.ArgumentParser(prog=prog, description=textwrap.fill(description, 79),
+                                   epilog="examples:\n" + __doc__.split("\n\n")[2],
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
 
 
@@ -99,6 +102,7 @@ def _check_dof(model: Any, data: Any, path: Path) -> None:
 # --------------------------------------------------------------------------- fit
 def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
     """``cascgp fit``: fit a model to a log and save it; returns the exit status."""
+    from cascgp.gp import GPFitConfig  # cascgp.models imports it anyway
     from cascgp.models import MODEL_NAMES
 
     prog = prog or "cascgp fit"
@@ -110,7 +114,8 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
                    help="the robot's URDF (sp-* models only; a sidecar JSON next to it is optional)")
     p.add_argument("--out", type=Path, required=True, help="model file to write (.npz; replaced atomically)")
     p.add_argument("--restarts", type=int, default=None,
-                   help="optimiser starts per joint's GP (default: the library's GPFitConfig.n_restarts)")
+                   help=f"optimiser starts per joint's GP (default: {GPFitConfig().n_restarts}, the library's "
+                        "GPFitConfig.n_restarts)")
     p.add_argument("--max-samples", type=int, default=1000,
                    help="keep at most this many training rows, evenly spaced over the log (default 1000; exact "
                         "GPs cost O(n^3)); -df models build their position history from the rows kept, so thin "

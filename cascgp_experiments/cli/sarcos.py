@@ -5,7 +5,10 @@ Usage::
     cascgp sarcos --sarcos PATH/ias_sarcos_data.mat --out out/sarcos
     ... [--workers N | --ray ADDRESS]     # parallel fits (default: every core); same numbers
 
-Data, subsets and models: :mod:`cascgp_experiments.study` (SARCOS block). Writes ``<out>/sarcos.json``.
+The same SARCOS block as ``cascgp study`` (its preset's grid, subsets, restarts and seed: ``--quick`` the quick
+preset's); data, subsets and models: :mod:`cascgp_experiments.study` (SARCOS block). Writes ``<out>/sarcos.json``
+(per model the nRMSE of every subset, grid point and joint, and their summaries) and prints each model's nRMSE
+per grid point (median over subsets, mean over the 7 joints).
 """
 
 from __future__ import annotations
@@ -13,10 +16,12 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import numpy as np
+
 from cascgp.io import write_json
 from cascgp_experiments.common import SARCOS_ENV, default_sarcos, limit_threads
 from cascgp_experiments.execution import add_execution_args, check_args
-from cascgp_experiments.study import SARCOS_FULL_GRID, SARCOS_QUICK_GRID, run_sarcos
+from cascgp_experiments.study import PRESETS, run_sarcos
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> None:
@@ -25,19 +30,47 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     found = default_sarcos()
     ap.add_argument("--sarcos", default=None if found is None else str(found), required=found is None,
                     help=f"path of ias_sarcos_data.mat (default: ${SARCOS_ENV}, or a source checkout's ../shared copy)")
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--restarts", type=int, default=1)
+    ap.add_argument("--out", required=True, metavar="DIR",
+                    help="output folder: sarcos.json, the prepared data and the job cache (a rerun resumes)")
+    full, quick = PRESETS["full"], PRESETS["quick"]
+    ap.add_argument("--quick", action="store_true",
+                    help=f"the study's quick preset: {_preset(quick)}; default: the full preset: {_preset(full)}")
+    ap.add_argument("--restarts", type=int, default=None,
+                    help=f"optimiser starts per GP fit (default: the preset's, {full.n_restarts} or "
+                         f"{quick.n_restarts} with --quick)")
+    ap.add_argument("--seed", type=int, default=None,
+                    help=f"seed of the random starts (default: the preset's, {full.seed})")
     add_execution_args(ap)
     a = ap.parse_args(argv)
     if not Path(a.sarcos).is_file():
         ap.error(f"--sarcos: file not found: {a.sarcos}")
+    if a.restarts is not None and a.restarts < 1:
+        ap.error(f"--restarts: expected an integer >= 1, got {a.restarts}")
     check_args(ap, a)
     limit_threads(1)
-    block = run_sarcos(a.sarcos, a.out, grid=SARCOS_QUICK_GRID if a.quick else SARCOS_FULL_GRID,
-                       n_restarts=a.restarts, workers=a.workers, ray_address=a.ray)
+    preset = PRESETS["quick" if a.quick else "full"]
+    block = run_sarcos(a.sarcos, a.out, grid=preset.sarcos_grid, n_subsets=preset.sarcos_subsets,
+                       n_restarts=preset.n_restarts if a.restarts is None else a.restarts,
+                       seed=preset.seed if a.seed is None else a.seed, workers=a.workers, ray_address=a.ray)
     write_json(Path(a.out) / "sarcos.json", block)
+    print(summary_table(block))
     print(f"wrote {Path(a.out) / 'sarcos.json'}")
+
+
+def _preset(p) -> str:
+    return (f"{len(p.sarcos_grid)} grid points ({p.sarcos_grid[0]:g}-{p.sarcos_grid[-1]:g} s of data), "
+            f"{p.sarcos_subsets} subsets, {p.n_restarts} restarts")
+
+
+def summary_table(block: dict) -> str:
+    """Each model's nRMSE per grid point of a SARCOS block: the median over subsets, averaged over the joints."""
+    models = list(block["models"])
+    lines = ["nRMSE (median over subsets, mean over joints)", "| seconds | " + " | ".join(models) + " |",
+             "|---" * (len(models) + 1) + "|"]
+    for g, sec in enumerate(block["grid_s"]):
+        cells = [f"{float(np.mean(np.asarray(block['models'][m]['nrmse_median'])[g])):.4f}" for m in models]
+        lines.append(f"| {sec:g} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

@@ -74,10 +74,10 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
     p.add_argument("--overwrite", action="store_true",
                    help="delete the data buffers and job cache of an earlier run in --out (without it, the same "
                         "command resumes a stopped run)")
-    p.add_argument("--video", type=Path, default=None,
-                   help="write MP4 clips (pip install 'cascgp-jaco[video]'): the first and last attempt of every task "
-                        "and the revisit, RBD and the learned controller side by side, with RMSE and marbles on the "
-                        "frame")
+    p.add_argument("--video", type=Path, default=None, metavar="DIR",
+                   help="write MP4 clips into the folder DIR (needs the video extra: pip install "
+                        "'cascgp-jaco[video]'): the first and last attempt of every task and the revisit, RBD and the "
+                        "learned controller side by side, with RMSE and marbles on the frame")
     p.add_argument("--video-controller", type=str, default=None,
                    help="the learned controller shown next to RBD (default: the last controller that learns)")
     add_execution_args(p)
@@ -93,6 +93,12 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
         learned = a.video_controller or next((c for c in reversed(cfg.controllers) if c not in ("pd", "rbd")), None)
         if learned is None or learned not in cfg.controllers or "rbd" not in cfg.controllers:
             p.error("--video needs 'rbd' and a learning controller among --controllers")
+        from cascgp_experiments.video import check_video_writer
+
+        try:
+            check_video_writer()  # now, not after the episodes
+        except ImportError as exc:
+            p.error(f"--video: {exc}")
         a.video_options = VideoOptions(str(a.video.resolve()), ("rbd", learned), video_attempts(cfg.plan()))
     else:
         a.video_options = None
@@ -104,8 +110,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     cfg, out, overwrite, a = parse_args(argv, prog)
     try:
         state = claim_output(cfg, out, overwrite)
-    except ValueError as exc:
-        sys.exit(f"error: {exc}")
+    except ValueError as exc:  # an --out folder of another run: an argument error, as argparse reports one
+        print(f"{prog or Path(sys.argv[0]).name}: error: {exc}", file=sys.stderr)
+        sys.exit(2)
     if state == "resume":
         print(f"resuming the run in {out} (finished controllers come from its job cache)", file=sys.stderr)
     t0 = time.perf_counter()
