@@ -31,6 +31,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from cascgp.data import all_finite
 from cascgp.gates import (GATE_RULES, GATE_SUFFIXES, INNOVATION_HALF_LIFE_S, GateRule, InnovationGate, gate_weights,
                           innovation_weights, make_gate)
 
@@ -222,7 +223,7 @@ class FeedforwardController:
         if self.model is None:
             return np.zeros(self.dof)
         tau = self._model_torque(t, q_d, qd_d, qdd_d, reference)
-        if tau is not None and tau.shape == (self.dof,) and np.all(np.isfinite(tau)):
+        if tau is not None and tau.shape == (self.dof,) and all_finite(tau):
             return tau
         self.n_fallbacks += 1
         if self.fallback is not None and self.fallback is not self.model:
@@ -231,7 +232,7 @@ class FeedforwardController:
             except Exception as exc:  # noqa: BLE001 - the fallback must not stop the loop either
                 self.last_model_error = f"fallback: {type(exc).__name__}: {exc}"
                 tau = None
-            if tau is not None and tau.shape == (self.dof,) and np.all(np.isfinite(tau)):
+            if tau is not None and tau.shape == (self.dof,) and all_finite(tau):
                 return tau
         return np.zeros(self.dof)
 
@@ -273,7 +274,7 @@ class FeedforwardController:
         q_d, qd_d, qdd_d = self._reference(reference, t)  # once per tick; shared with the feedforward
         with np.errstate(over="ignore", invalid="ignore"):
             feedback = self.kp * (q_d - q) + self.kd * (qd_d - qd)
-        if not np.isfinite(feedback).all():
+        if not all_finite(feedback):
             # A finite feedback needs all four inputs finite and no overflow: then it equals the general form
             # below, which this tick needs only for a non-finite measurement or an absurd error.
             feedback = self._feedback_nonfinite(q, qd, q_d, qd_d)

@@ -34,6 +34,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from cascgp.data import all_finite
+
 __all__ = ["GateRule", "InnovationGate", "WienerGate", "FloorGate", "VarianceGate", "GATE_RULES", "GATE_SUFFIXES",
            "INNOVATION_HALF_LIFE_S", "default_rule", "make_gate", "gate_weights", "innovation_weights"]
 
@@ -194,8 +196,8 @@ class InnovationGate:
             e_model = (tau - np.asarray(self.model.predict_one(q, qd, qdd, **_rbd_kw(self._share, nominal)),
                                         dtype=float)) ** 2
             e_nominal = (tau - nominal) ** 2
-        if not (e_model.shape == e_nominal.shape == (self.dof,) and np.all(np.isfinite(e_model))
-                and np.all(np.isfinite(e_nominal)) and np.isfinite(t)):
+        if not (e_model.shape == e_nominal.shape == (self.dof,) and all_finite(e_model)
+                and all_finite(e_nominal) and np.isfinite(t)):
             return
         dt = 0.0 if self._t is None else max(t - self._t, 0.0)
         decay = 0.5 ** (dt / INNOVATION_HALF_LIFE_S)

@@ -40,6 +40,8 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from cascgp.data import all_finite
+
 __all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
            "SUPPORTED_SIDECAR_VERSIONS", "SIDECAR_REQUIRED_FIELDS"]
 
@@ -209,7 +211,7 @@ class RigidBodyModel:
             # only if the torque is not finite (a NaN or inf input always gives one), so that bad input still
             # raises the checks' error below and good input skips their cost.
             tau = pin.rnea(model, data, q, qd, qdd)
-            if np.isfinite(tau).all():
+            if all_finite(tau):
                 return tau.copy()
         q, qd, qdd = self._check_states(q, qd, qdd)
         if q.ndim == 1:

@@ -236,3 +236,20 @@ def test_thin_keeps_evenly_spaced_rows_with_both_ends() -> None:
     assert d.thin(T) is d and d.thin(500) is d
     with pytest.raises(ValueError, match="thin: max_samples"):
         d.thin(1)
+
+
+def test_all_finite_equals_numpys_check_without_warnings() -> None:
+    """The per-tick finiteness check (cascgp.data.all_finite) answers as np.isfinite(x).all() for every kind of
+    entry, overflowing squares included, and raises no floating-point warning."""
+    import warnings
+
+    from cascgp.data import all_finite
+
+    big, tiny = np.finfo(np.float64).max, np.finfo(np.float64).tiny
+    cases = [np.zeros(0), np.zeros(19), np.array([1.0, -2.0]), np.array([big, -big]), np.array([tiny, 5e-324]),
+             np.array([np.nan]), np.array([1.0, np.inf]), np.array([-np.inf, np.inf]), np.array([1e200, np.nan]),
+             np.array([1.0, np.nan], dtype=np.float32), np.arange(10.0)[::3]]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        for x in cases:
+            assert all_finite(x) is bool(np.isfinite(x).all()), x

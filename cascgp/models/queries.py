@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cascgp.data import as_real_array
+from cascgp.data import all_finite, as_real_array
 from cascgp.models.fastpath import ZCLIP, FastPath
 
 if TYPE_CHECKING:
@@ -96,7 +96,7 @@ def load_query(model: "CascadedGPModel", q: Any, qd: Any, qdd: Any, q_hist: Any,
         qdd = one_real("qdd", qdd)
         if qd.shape != (N,) or qdd.shape != (N,):
             raise ValueError(f"qd/qdd: expected shape ({N},), got {qd.shape} and {qdd.shape}")
-        if model.feature_kind == "df" and not (np.isfinite(qd).all() and np.isfinite(qdd).all()):
+        if model.feature_kind == "df" and not (all_finite(qd) and all_finite(qdd)):
             raise ValueError("qd/qdd: non-finite value (NaN or inf) in the query")
     if model.feature_kind == "db":
         buf[1:3 * N:3] = qd
@@ -109,7 +109,7 @@ def load_query(model: "CascadedGPModel", q: Any, qd: Any, qdd: Any, q_hist: Any,
             raise ValueError(f"q_hist: expected shape (2, {N}), got {h.shape}")
         buf[1:3 * N:3] = h[0]
         buf[2:3 * N:3] = h[1]
-    if not np.isfinite(buf).all():
+    if not all_finite(buf):
         raise ValueError("q/qd/qdd/q_hist: non-finite value (NaN or inf) in the query")
     if model.parametric != "sp":
         return f, None
@@ -118,7 +118,7 @@ def load_query(model: "CascadedGPModel", q: Any, qd: Any, qdd: Any, q_hist: Any,
     tau = one_real("rbd_torque", rbd_torque)
     if tau.shape != (N,):
         raise ValueError(f"rbd_torque: expected shape ({N},), got {tau.shape}")
-    if not np.isfinite(tau).all():
+    if not all_finite(tau):
         raise ValueError("rbd: the rigid-body model returned non-finite torques")
     return f, tau
 
