@@ -302,8 +302,11 @@ def test_pool_workers_exit_when_the_run_is_killed_alone(tmp_path: Path) -> None:
 
 # --------------------------------------------------------------------------- experiments: helpers
 def _cli(module: str, *args: str, timeout: float = 1200) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", module, *args], env=_env(), cwd=REPO, capture_output=True,
-                          text=True, timeout=timeout, check=True)
+    """Run ``python -m module args``; a failure shows the end of the command's stderr."""
+    run = subprocess.run([sys.executable, "-m", module, *args], env=_env(), cwd=REPO, capture_output=True,
+                         text=True, timeout=timeout)
+    assert run.returncode == 0, f"{module} {' '.join(args)}: exit status {run.returncode}\n{run.stderr[-4000:]}"
+    return run
 
 
 def _study_numbers(out: Path) -> dict:
