@@ -17,7 +17,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from cascgp.data import DynamicsData
+from cascgp.data import DynamicsData, all_finite
 from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
 from cascgp.gp import GPBank, GPFitConfig
 from cascgp.gp.config import check_target_floor
@@ -120,7 +120,7 @@ class CascadedGPModel:
             raise ValueError(f"qd/qdd: the semi-parametric model {self.name!r} needs velocities and "
                              "accelerations for its rigid-body mean")
         tau = np.asarray(self.rbd.inverse_dynamics(q, qd, qdd), dtype=np.float64).reshape(q.shape)
-        if not np.isfinite(tau).all():
+        if not (all_finite(tau) if tau.ndim == 1 else np.isfinite(tau).all()):  # one query: every control tick
             raise ValueError("rbd: the rigid-body model returned non-finite torques")
         return tau
 
