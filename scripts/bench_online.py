@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import subprocess
 import time
 from pathlib import Path
 
@@ -112,7 +113,10 @@ def main(argv: list[str] | None = None) -> None:
 
     res = {"n_train": model.n_train, "window": a.window, "fit_s": fit_s, "reps": a.reps, "rows": rows,
            "compiled": jit_enabled(),
-           "control_period_us": 25_000.0, "command": "python -m scripts.bench_online " + " ".join(argv or [])}
+           "control_period_us": 25_000.0, "command": "python -m scripts.bench_online " + " ".join(argv or []),
+           "git_commit": subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                                        cwd=Path(__file__).parent).stdout.strip() or None,
+           "load_average_end": list(os.getloadavg()), "cpu_count": os.cpu_count()}
     write_json(out / "bench_online.json", res)
     print(f"SP inward, 6 joints, n = {model.n_train}, online window {a.window}, one thread, "
           f"compiled single-query loop: {'yes' if res['compiled'] else 'no'}")
