@@ -18,6 +18,12 @@ value over the seeds does not reach stays; else it becomes that largest value ti
 of 0.05, if that is still at most 0.75 (a learner no better than RBD gives about 1, so the test still fails for a
 broken learner); else the test asserts only that the learner beats RBD (< 1) and the write-up says so.
 
+Addendum (fixed before its run, after the runs above): the same configuration, seeds and decision rule under the
+default sensing, ``--sensor-pipeline jaco2`` (the real Jaco 2's signal and link inertials), over seeds 0-7 and seed
+0 under ``.ci/other_kernels``; the bounds the rule gives are then those of the quick test, which moves from the
+idealised signal to the default sensing, the path the package ships. ``--sensor-pipeline`` defaults to
+``ideal``, the protocol's first population.
+
 Writes ``quick_transfer_spread.json`` (every attempt, the ratios per seed, their range) to ``--out`` and prints a
 table.
 """
@@ -34,8 +40,9 @@ LEARNER = "sp-inward-igated-online"
 RATIOS = ("rbd_over_pd_front", "rbd_over_pd_left", "learner_front_1_over_rbd", "learner_left_0_over_rbd")
 
 
-def run_seed(seed: int) -> dict:
-    """The test fixture's runs for one seed: every attempt's tracking RMSE and share of marbles in the jar."""
+def run_seed(seed: int, sensor_pipeline: str = "ideal") -> dict:
+    """The test fixture's runs for one seed (under ``sensor_pipeline``): every attempt's tracking RMSE and share of
+    marbles in the jar."""
     import torch
 
     from cascgp.learning import run_controller
@@ -45,7 +52,7 @@ def run_seed(seed: int) -> dict:
 
     torch.set_num_threads(1)
     cfg = TransferConfig(controllers=("pd", "rbd", LEARNER), tasks=(TASK_A, TASK_B), attempts=2, payload_mass=1.2,
-                         seed=seed, restarts=2, cap=300, sensor_pipeline="ideal")
+                         seed=seed, restarts=2, cap=300, sensor_pipeline=sensor_pipeline)
     env = cfg.make_env()
     rbd = load_nominal(nominal_urdf(env.unwrapped.link_inertials))
     try:
@@ -59,7 +66,7 @@ def run_seed(seed: int) -> dict:
         env.close()
     attempts = {name: [{k: a[k] for k in ("task", "task_attempt", "tracking_rmse", "in_jar")} for a in run.attempts]
                 for name, run in runs.items()}
-    return {"seed": seed, "attempts": attempts, "ratios": ratios(attempts)}
+    return {"seed": seed, "sensor_pipeline": sensor_pipeline, "attempts": attempts, "ratios": ratios(attempts)}
 
 
 def _rmse(attempts: list[dict], task: str, k: int = 0) -> float:
@@ -91,6 +98,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--seeds", default="0-7", help="e.g. 0-7 or 0,3,5")
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--sensor-pipeline", default="ideal", choices=("ideal", "jaco2"),
+                   help="the env's sensing (default ideal: the protocol's first population; jaco2: its addendum)")
     a = p.parse_args(argv)
     try:
         seeds = _seeds(a.seeds)
@@ -98,10 +107,10 @@ def main(argv: list[str] | None = None) -> int:
         p.error(f"--seeds: expected integers and ranges like 0-7, got {a.seeds!r}")
     a.out.mkdir(parents=True, exist_ok=True)
     with ProcessPoolExecutor(a.workers) as ex:
-        per_seed = list(ex.map(run_seed, seeds))
+        per_seed = list(ex.map(run_seed, seeds, [a.sensor_pipeline] * len(seeds)))
     spread = {r: {"min": min(s["ratios"][r] for s in per_seed), "max": max(s["ratios"][r] for s in per_seed)}
               for r in RATIOS}
-    out = {"seeds": seeds, "per_seed": per_seed, "spread": spread}
+    out = {"seeds": seeds, "sensor_pipeline": a.sensor_pipeline, "per_seed": per_seed, "spread": spread}
     tmp = a.out / "quick_transfer_spread.json.tmp"
     tmp.write_text(json.dumps(out, indent=1))
     tmp.replace(a.out / "quick_transfer_spread.json")
