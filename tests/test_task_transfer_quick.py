@@ -1,8 +1,9 @@
 """Fast sibling of ``tests/test_task_transfer.py``: the task-transfer loop on a short seeded run (default suite).
 
-PD and the nominal RBD feedforward attempt tasks A and B once. The default learning controller of the demo
-(SP inward cascade, innovation gate, learning online) attempts task A twice, retrained after each attempt,
-then task B once: its first attempt there uses a model that has seen task A only. About 35 s on one core.
+Under the default sensing (``"jaco2"``), PD and the nominal RBD feedforward attempt tasks A and B once. The default
+learning controller of the demo (SP inward cascade, innovation gate, learning online) attempts task A twice,
+retrained after each attempt, then task B once: its first attempt there uses a model that has seen task A only.
+About 45 s on one core.
 The full run, with more attempts, the revisit and the paired gate comparisons, is under ``-m slow``.
 """
 
@@ -24,11 +25,12 @@ def runs():
 
     from cascgp.rbd import load_nominal
 
-    # Under the idealised signal, where these bounds were measured: over seeds 0-7 and seed 0 under another CPU's
-    # kernels (.ci/other_kernels) the learner's ratios to RBD were 0.19-0.44, RBD's to PD 0.79-0.81
-    # (docs/studies/quick_transfer_spread.md). The learner's attempts move with the CPU's kernels as with the seed.
+    # Under the default sensing (jaco2), where the bounds below were set: over seeds 0-7 and seed 0 under another
+    # CPU's kernels (.ci/other_kernels) RBD's ratio to PD was 0.72-0.74, the learner's second attempt on task A
+    # 0.27-0.60 of RBD's error and its first attempt on task B 0.15-0.47 (docs/studies/quick_transfer_spread.md,
+    # its addendum). The learner's attempts move with the CPU's kernels as with the seed.
     cfg = TransferConfig(controllers=("pd", "rbd", LEARNER), tasks=(TASK_A, TASK_B), attempts=2,
-                         payload_mass=1.2, seed=0, restarts=2, cap=300, sensor_pipeline="ideal")
+                         payload_mass=1.2, seed=0, restarts=2, cap=300)
     env = cfg.make_env()
     rbd = load_nominal(nominal_urdf(env.unwrapped.link_inertials))
     try:
@@ -51,7 +53,7 @@ def _rmse(attempts: list[dict], task: str, k: int = 0) -> float:
 
 @pytest.mark.parametrize("task", [TASK_A, TASK_B])
 def test_rbd_feedforward_tracks_better_than_pd(runs, task):
-    # RBD's RMSE is about 0.80 of PD's on both tasks (the full run's test); a 10 % margin keeps it meaningful.
+    # RBD's RMSE is 0.72-0.74 of PD's on both tasks over nine draws; the bound 0.9 keeps a margin.
     assert _rmse(runs["rbd"], task) < 0.9 * _rmse(runs["pd"], task)
 
 
@@ -62,7 +64,8 @@ def test_first_attempt_without_data_is_the_nominal_model(runs):
 
 
 def test_one_retraining_beats_rbd_on_the_task_it_has_seen(runs):
-    assert _rmse(runs[LEARNER], TASK_A, 1) < 0.5 * _rmse(runs["rbd"], TASK_A)
+    # 0.27-0.60 over nine draws; the study's rule: 0.60 x 1.25 (a learner that did not learn gives about 1)
+    assert _rmse(runs[LEARNER], TASK_A, 1) < 0.75 * _rmse(runs["rbd"], TASK_A)
 
 
 def test_first_attempt_on_a_new_task_beats_rbd(runs):
