@@ -28,3 +28,14 @@ def test_seed_lists_and_ranges_parse_and_nonsense_is_refused(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["--out", str(tmp_path), "--seeds", "a-b"])
     assert "--seeds: expected integers" in capsys.readouterr().err
+
+
+def test_sensor_pipeline_option_is_checked_and_defaults_to_the_first_population(tmp_path, capsys):
+    import inspect
+
+    from studies.commands.quick_transfer_spread import run_seed
+
+    assert inspect.signature(run_seed).parameters["sensor_pipeline"].default == "ideal"
+    with pytest.raises(SystemExit):
+        main(["--out", str(tmp_path), "--seeds", "0", "--sensor-pipeline", "real"])
+    assert "--sensor-pipeline" in capsys.readouterr().err
