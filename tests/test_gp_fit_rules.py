@@ -86,6 +86,10 @@ def test_jitter_retry_does_not_repeat_the_failed_factor(monkeypatch):
     assert float(jit[0]) > 0 and math.isfinite(float(f[0]))
     assert len(diagonals) >= 2 and len(set(diagonals)) == len(diagonals)  # every call a new jitter
     assert diagonals[-1] == pytest.approx(diagonals[0] + float(jit[0]), rel=1e-12)
+    diagonals.clear()  # jitter_max below the first jitter step: no jitter at all, one factorisation
+    f, _, jit = nll_and_grad(torch.tensor(theta), torch.tensor(X), torch.tensor(y), kernel="rbf", noise_floor=0.0,
+                             jitter_max=0.0)
+    assert math.isinf(float(f[0])) and float(jit[0]) == 0.0 and len(diagonals) == 1
 
 
 def test_snr_bound_gradient_matches_finite_differences():

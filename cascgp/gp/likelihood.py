@@ -150,6 +150,8 @@ def _potrf_jitter(kk: torch.Tensor, K: torch.Tensor, sf2: float, sn2: float,
     """
     scale = sf2 + sn2  # mean diagonal of K (unit kernel diagonal)
     j = 1e-8
+    if j > jitter_max * (1 + 1e-12):  # no jitter allowed (jitter_max below the first step): the factor has failed
+        return None, 0.0
     Kf = K.numpy().T
     while True:
         jit = j * scale
