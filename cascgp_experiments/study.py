@@ -210,8 +210,6 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
     if sarcos is not None:
         s = run_sarcos(sarcos, out / "sarcos", grid=settings.sarcos_grid, n_subsets=settings.sarcos_subsets,
                        n_restarts=settings.n_restarts, workers=workers, ray_address=ray_address, seed=settings.seed)
-        s["labels"] = {m: label(m) for m in s["models"]}
-        s["pooled"] = pooled_block(s, SARCOS_FAMILIES)
         results["sarcos"] = s
         timings["sarcos_s"] = s["wall_s_total"]
 
@@ -255,7 +253,8 @@ def prepare_files(sarcos_path: str | Path, out: str | Path) -> tuple[Path, Path,
 def run_sarcos(sarcos_path: str | Path, out: str | Path, *, grid=SARCOS_FULL_GRID, n_subsets: int = 9,
                n_restarts: int = 1, workers: int | None = None, ray_address: str | None = None, seed: int = 0,
                gp_overrides: dict | None = None) -> dict[str, Any]:
-    """The SARCOS block of the results JSON (curves of NP standard / inward / outward)."""
+    """The SARCOS block of the results JSON (curves of NP standard / inward / outward, their labels and pooled
+    tests), for ``cascgp study`` and ``cascgp sarcos``."""
     t0 = time.perf_counter()
     out = Path(out)
     tr, te, info = prepare_files(sarcos_path, out / "data")
@@ -266,6 +265,8 @@ def run_sarcos(sarcos_path: str | Path, out: str | Path, *, grid=SARCOS_FULL_GRI
                        cache_dir=out / "cache" / "sarcos", desc="SARCOS fits")
     block.update(info)
     block["dof"] = 7
+    block["labels"] = {m: label(m) for m in block["models"]}
+    block["pooled"] = pooled_block(block, SARCOS_FAMILIES)
     block["wall_s_total"] = time.perf_counter() - t0
     return block
 

@@ -5,10 +5,10 @@ Usage::
     cascgp sarcos --sarcos PATH/ias_sarcos_data.mat --out out/sarcos
     ... [--workers N | --ray ADDRESS]     # parallel fits (default: every core); same numbers
 
-The same SARCOS block as ``cascgp study`` (its preset's grid, subsets, restarts and seed: ``--quick`` the quick
-preset's); data, subsets and models: :mod:`cascgp_experiments.study` (SARCOS block). Writes ``<out>/sarcos.json``
-(per model the nRMSE of every subset, grid point and joint, and their summaries) and prints each model's nRMSE
-per grid point (median over subsets, mean over the 7 joints).
+The SARCOS block of ``cascgp study`` (its preset's grid, subsets, restarts and seed: ``--quick`` the quick
+preset's; the pooled tests included); data, subsets and models: :mod:`cascgp_experiments.study` (SARCOS block).
+Writes ``<out>/sarcos.json`` (per model the nRMSE of every subset, grid point and joint, their summaries, the
+pooled tests) and prints each model's nRMSE per grid point (median over subsets, mean over the 7 joints).
 """
 
 from __future__ import annotations
