@@ -70,10 +70,12 @@ def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_pat
 
     def fake_run(path, out, **kw):
         seen.append(kw)
-        return {"grid_s": list(kw["grid"]), "models": {
-            m: {"nrmse_median": np.full((len(kw["grid"]), 7), v)} for m, v in (("np-standard", 0.1), ("np-inward", 0.2))}}
+        scores = (("np-standard", 0.1), ("np-inward", 0.2))
+        return {"grid_s": list(kw["grid"]),
+                "models": {m: {"nrmse_median": np.full((len(kw["grid"]), 7), v)} for m, v in scores}}
 
     monkeypatch.setattr(cli, "run_sarcos", fake_run)
+    monkeypatch.setattr(cli, "limit_threads", lambda n=1: None)  # the command's; not for the rest of the session
     mat = tmp_path / "x.mat"
     mat.write_bytes(b"")
     for args, preset in ((["--quick"], PRESETS["quick"]), ([], PRESETS["full"])):

@@ -179,7 +179,8 @@ def test_help() -> None:
         assert max(map(len, cascgp(name, "--help", cwd=REPO).stdout.splitlines())) <= 100
     from cascgp.gp import GPFitConfig
 
-    assert f"(default: {GPFitConfig().n_restarts}, the library's" in " ".join(cascgp("fit", "--help", cwd=REPO).stdout.split())
+    fit_help = " ".join(cascgp("fit", "--help", cwd=REPO).stdout.split())
+    assert f"(default: {GPFitConfig().n_restarts}, the library's" in fit_help
 
 
 def test_module_form_runs_the_same_command() -> None:

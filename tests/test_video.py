@@ -135,7 +135,8 @@ def test_missing_imageio_fails_only_when_writing(monkeypatch, tmp_path):
     mod = importlib.reload(video)  # imports fine without imageio
     try:
         frames = mod.side_by_side([np.zeros((4, 4, 3), np.uint8)], [np.zeros((4, 4, 3), np.uint8)])
-        with pytest.raises(ImportError, match=r"pip install 'cascgp-jaco\[video\]' \(in a source checkout: pip install -e '\.\[video\]'\)"):
+        hint = r"pip install 'cascgp-jaco\[video\]' \(in a source checkout: pip install -e '\.\[video\]'\)"
+        with pytest.raises(ImportError, match=hint):
             mod.write_mp4(frames, tmp_path / "x.mp4")
     finally:
         monkeypatch.undo()
