@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from cascgp.io import write_json
-from cascgp_experiments.common import SARCOS_ENV, default_sarcos, limit_threads
+from cascgp_experiments.common import SARCOS_ENV, default_sarcos, limit_threads, median_curves
 from cascgp_experiments.execution import add_execution_args, check_args
-from cascgp_experiments.study import PRESETS, run_sarcos
+from cascgp_experiments.study import PRESETS, Settings, run_sarcos
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> None:
@@ -57,18 +57,18 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     print(f"wrote {Path(a.out) / 'sarcos.json'}")
 
 
-def _preset(p) -> str:
+def _preset(p: Settings) -> str:
     return (f"{len(p.sarcos_grid)} grid points ({p.sarcos_grid[0]:g}-{p.sarcos_grid[-1]:g} s of data), "
             f"{p.sarcos_subsets} subsets, {p.n_restarts} restarts")
 
 
 def summary_table(block: dict) -> str:
     """Each model's nRMSE per grid point of a SARCOS block: the median over subsets, averaged over the joints."""
-    models = list(block["models"])
-    lines = ["nRMSE (median over subsets, mean over joints)", "| seconds | " + " | ".join(models) + " |",
-             "|---" * (len(models) + 1) + "|"]
+    curves = {m: np.asarray(c, dtype=float).mean(axis=1) for m, c in median_curves(block).items()}  # (G,) each
+    lines = ["nRMSE (median over subsets, mean over joints)", "| seconds | " + " | ".join(curves) + " |",
+             "|---" * (len(curves) + 1) + "|"]
     for g, sec in enumerate(block["grid_s"]):
-        cells = [f"{float(np.mean(np.asarray(block['models'][m]['nrmse_median'])[g])):.4f}" for m in models]
+        cells = [f"{c[g]:.4f}" for c in curves.values()]
         lines.append(f"| {sec:g} | " + " | ".join(cells) + " |")
     return "\n".join(lines)
 

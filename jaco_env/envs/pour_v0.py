@@ -23,6 +23,14 @@ from jaco_env.sensors import POUR_OBS_DIM, SensorNoise
 from jaco_env.signal_pipeline import SignalPipeline
 from jaco_env.tasks import DEFAULT_TASKS, PouringTask, get_task
 
+
+def _rows_times(v: np.ndarray, M: np.ndarray, start: Any = 0.0) -> np.ndarray:
+    """``start + v @ M`` for (n, 3) rows ``v``, written out element-wise: a matrix product goes to the BLAS kernel
+    this CPU picks (with or without FMA), whose last bits differ between CPUs, and the marbles' contacts amplify a
+    last-bit difference of their start into a different episode. Element-wise products and sums round the same
+    everywhere, so a seed gives the same episode on every CPU."""
+    return start + v[:, 0:1] * M[0] + v[:, 1:2] * M[1] + v[:, 2:3] * M[2]
+
 #: Default range (kg) of the total payload in the hand (bottle + marbles + extra rigid mass),
 #: drawn uniformly per episode unless the task or ``reset(options=...)`` fixes it.
 PAYLOAD_RANGE = (0.6, 1.5)
@@ -241,8 +249,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         p = self.marble_positions()
         xb = self.data.xpos[self._bottle_body]
         Rb = self.data.xmat[self._bottle_body].reshape(3, 3)
-        d = p - xb
-        loc = d[:, 0:1] * Rb[0] + d[:, 1:2] * Rb[1] + d[:, 2:3] * Rb[2]  # (p - xb) @ Rb, without BLAS
+        loc = _rows_times(p - xb, Rb)
         in_bottle = (np.linalg.norm(loc[:, :2], axis=1) < scene.BOTTLE_INNER_RADIUS + 0.003) & (
             loc[:, 2] > scene.BOTTLE_BOTTOM - 0.003) & (loc[:, 2] < scene.BOTTLE_TOP)
         return loc, in_bottle
@@ -277,11 +284,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
             layer += 1
         local = np.array(spots[: self.n_marbles])
         local[:, :2] += self.np_random.uniform(-3e-4, 3e-4, size=(self.n_marbles, 2))
-        # world = xb + local @ Rb.T, written out element-wise: a matrix product goes to the BLAS kernel this CPU
-        # picks (with or without FMA), whose last bits differ between CPUs, and the marbles' contacts amplify a
-        # last-bit difference of their start into a different episode. Element-wise products and sums round the
-        # same everywhere, so a seed gives the same episode on every CPU.
-        world = xb + local[:, 0:1] * Rb[:, 0] + local[:, 1:2] * Rb[:, 1] + local[:, 2:3] * Rb[:, 2]
+        world = _rows_times(local, Rb.T, xb)  # xb + local @ Rb.T, the same on every CPU
         for k in range(self.n_marbles):
             a = self.marble_qpos_adr[k]
             d.qpos[a:a + 3] = world[k]
