@@ -181,8 +181,11 @@ class InnovationGate:
 
     def correction(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, q_hist: np.ndarray | None,
                    nominal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        d = np.asarray(self.model.predict_one(q, qd, qdd, q_hist=q_hist, **_rbd_kw(self._share, nominal)),
-                       dtype=float) - nominal
+        if self._share:  # what _rbd_kw passes, without a dict per tick
+            mean = self.model.predict_one(q, qd, qdd, q_hist=q_hist, rbd_torque=nominal)
+        else:
+            mean = self.model.predict_one(q, qd, qdd, q_hist=q_hist)
+        d = np.asarray(mean, dtype=float) - nominal
         return d, self._w.copy()  # the copy is the caller's
 
     @property

@@ -166,6 +166,48 @@ def test_the_feedback_shortcut_equals_the_general_form() -> None:
     assert ctrl.n_bad_measurements == 1
 
 
+def test_the_controllers_feedback_in_python_floats_is_numpys_bit_for_bit() -> None:
+    """The tick's feedback is computed in Python floats (no np.errstate): the same value as the NumPy form, bit
+    for bit, from tiny to huge errors; where NumPy would overflow, the general form takes over as before."""
+    rng = np.random.default_rng(3)
+    kp, kd = rng.uniform(0, 1e4, 3), rng.uniform(0, 1e3, 3)
+    lim = np.full(3, 1e300)
+    ctrl = FeedforwardController(None, kp, kd, lim)
+    ctrl.start(None, {})
+    for scale in (1e-310, 1e-8, 1.0, 1e3, 1e150, 1e300):
+        for _ in range(50):
+            q, qd, q_d, qd_d = (rng.normal(scale=scale, size=3) for _ in range(4))
+            with np.errstate(over="ignore", invalid="ignore"):
+                ref = kp * (q_d - q) + kd * (qd_d - qd)
+            tau = ctrl(0.0, q, qd, lambda t, a=q_d, b=qd_d: (a, b, np.zeros(3)))
+            if np.all(np.isfinite(ref)):
+                np.testing.assert_array_equal(tau, np.minimum(np.maximum(ref, -lim), lim))
+                assert ctrl.n_bad_measurements == 0
+            else:  # overflowed: saturated with its sign by the general form, no warning
+                np.testing.assert_array_equal(tau, np.clip(ctrl._feedback_nonfinite(q, qd, q_d, qd_d), -lim, lim))
+
+
+def test_a_float64_query_and_the_general_form_give_the_same_answer_and_errors(models) -> None:
+    """``predict_one`` on three float64 ``(N,)`` arrays (the controller's tick) skips the general form's
+    conversions: same output bit for bit as lists or float32 input, same errors."""
+    for key in ("sp-inward", "np-outward"):
+        model = models[key]
+        for q, qd, qdd, _, _ in _queries(4):
+            fast = model.predict_one(q, qd, qdd)
+            np.testing.assert_array_equal(fast, model.predict_one(q.tolist(), qd.tolist(), qdd.tolist()))
+            if model.parametric == "sp":
+                tau = model.rbd.inverse_dynamics(q, qd, qdd)
+                np.testing.assert_array_equal(model.predict_one(q, qd, qdd, rbd_torque=tau), fast)
+                np.testing.assert_array_equal(model.predict_one(q, qd, qdd, rbd_torque=tau.tolist()), fast)
+        bad = q.copy()
+        bad[1] = np.nan
+        for args in ((bad, qd, qdd), (bad.tolist(), qd.tolist(), qdd.tolist()), (q, qd, np.full(3, np.inf))):
+            with pytest.raises(ValueError, match="non-finite"):
+                model.predict_one(*args)
+        with pytest.raises(ValueError, match="shape"):
+            model.predict_one(q, qd, np.zeros(4))
+
+
 def test_a_compiled_loop_that_fails_to_build_leaves_the_numpy_path(models, monkeypatch) -> None:
     import cascgp.models.fastkernel as fk
 

@@ -189,7 +189,12 @@ def jit_mean(args: tuple, buf: np.ndarray, tau: np.ndarray | None, out: np.ndarr
     fn = _compiled.get("mean")
     if fn is None:
         return False
-    t = out if tau is None else np.ascontiguousarray(tau, dtype=np.float64)
+    if tau is None:
+        t = out
+    elif type(tau) is np.ndarray and tau.dtype == _F64 and tau.flags.c_contiguous:
+        t = tau  # what np.ascontiguousarray returns for it
+    else:
+        t = np.ascontiguousarray(tau, dtype=np.float64)
     if var_out is None:
         fn(*args, buf, t, tau is not None, out, False, _NO_K, out)
     else:
@@ -198,3 +203,4 @@ def jit_mean(args: tuple, buf: np.ndarray, tau: np.ndarray | None, out: np.ndarr
 
 
 _NO_K = np.zeros((1, 1))
+_F64 = np.dtype(np.float64)

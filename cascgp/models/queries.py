@@ -23,6 +23,8 @@ from cascgp.models.fastpath import ZCLIP, FastPath
 if TYPE_CHECKING:
     from cascgp.models.cascade import CascadedGPModel
 
+_F64 = np.dtype(np.float64)
+
 __all__ = ["one_real", "as_query", "check_queries", "load_query", "state_cols", "clipped"]
 
 
@@ -84,10 +86,21 @@ def load_query(model: "CascadedGPModel", q: Any, qd: Any, qdd: Any, q_hist: Any,
     model checks its own)."""
     f = model._require_fitted()
     N = model.dof
+    buf = f.buf
+    if (type(q) is np.ndarray and type(qd) is np.ndarray and type(qdd) is np.ndarray and q.dtype == _F64
+            and qd.dtype == _F64 and qdd.dtype == _F64 and q.shape == qd.shape == qdd.shape == (N,)
+            and model.feature_kind == "db"):
+        # three float64 (N,) arrays (what a controller passes every tick): what the general form below writes,
+        # without its conversions and shape checks
+        buf[0:3 * N:3] = q
+        buf[1:3 * N:3] = qd
+        buf[2:3 * N:3] = qdd
+        if not all_finite(buf):
+            raise ValueError("q/qd/qdd/q_hist: non-finite value (NaN or inf) in the query")
+        return f, _rbd_part(model, q, qd, qdd, rbd_torque)
     q = one_real("q", q)
     if q.shape != (N,):
         raise ValueError(f"q: expected shape ({N},), got {q.shape}")
-    buf = f.buf
     buf[0:3 * N:3] = q
     if model.feature_kind == "db" or model.parametric == "sp":
         if qd is None or qdd is None:
@@ -111,16 +124,26 @@ def load_query(model: "CascadedGPModel", q: Any, qd: Any, qdd: Any, q_hist: Any,
         buf[2:3 * N:3] = h[1]
     if not all_finite(buf):
         raise ValueError("q/qd/qdd/q_hist: non-finite value (NaN or inf) in the query")
+    return f, _rbd_part(model, q, qd, qdd, rbd_torque)
+
+
+def _rbd_part(model: "CascadedGPModel", q: np.ndarray, qd: Any, qdd: Any, rbd_torque: Any) -> np.ndarray | None:
+    """The RBD torque of a checked query (:func:`load_query`): None for NP models, ``rbd_torque`` checked when
+    given, else the model's own."""
     if model.parametric != "sp":
-        return f, None
+        return None
     if rbd_torque is None:
-        return f, model._rbd_torque(q, qd, qdd)
-    tau = one_real("rbd_torque", rbd_torque)
-    if tau.shape != (N,):
-        raise ValueError(f"rbd_torque: expected shape ({N},), got {tau.shape}")
+        return model._rbd_torque(q, qd, qdd)
+    N = model.dof
+    if type(rbd_torque) is np.ndarray and rbd_torque.dtype == _F64 and rbd_torque.shape == (N,):
+        tau = rbd_torque  # what one_real returns for it
+    else:
+        tau = one_real("rbd_torque", rbd_torque)
+        if tau.shape != (N,):
+            raise ValueError(f"rbd_torque: expected shape ({N},), got {tau.shape}")
     if not all_finite(tau):
         raise ValueError("rbd: the rigid-body model returned non-finite torques")
-    return f, tau
+    return tau
 
 
 def state_cols(sflat: np.ndarray, state_joints: tuple[int, ...]) -> np.ndarray:
