@@ -13,7 +13,7 @@ import pytest
 from cascgp.controller import FeedforwardController
 from cascgp.gp import GPFitConfig
 from cascgp.models import MODEL_NAMES, make_model
-from cascgp.models.fastkernel import jit_enabled
+from cascgp.models.fastkernel import JIT_WT, jit_enabled
 from cascgp.models.fastpath import FastPath
 from cascgp.models.queries import load_query
 from tests.conftest import make_arm, sinusoid_data
@@ -86,7 +86,7 @@ def test_online_window_compiled_and_numpy_paths_agree_as_the_window_wraps(models
             model.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
             f, m1, m_np, (mv1, v1), (mv_np, v_np) = _both(model, *query)
             if f.jit is not None:
-                np.testing.assert_array_equal(f.jit[4], f.W.transpose(0, 2, 1))  # set_rows keeps the copy
+                np.testing.assert_array_equal(f.jit[JIT_WT], f.W.transpose(0, 2, 1))  # set_rows keeps the copy
             tol = 1e-12 * _scale(f, m_np)
             assert np.all(np.abs(m1 - m_np) <= tol)
             assert np.all(np.abs(mv1 - mv_np) <= tol)

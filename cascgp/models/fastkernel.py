@@ -55,18 +55,18 @@ def kernel_id(name: str) -> int:
     return _KERNEL_IDS.get(name, -1)
 
 
-def _source(idx: np.ndarray, ncol: np.ndarray, xm: np.ndarray, xsi: np.ndarray, WT: np.ndarray, W2: np.ndarray,
-            tfrom: np.ndarray, order: np.ndarray, tmean: np.ndarray, tsi: np.ndarray, Zt: np.ndarray,
-            alpha: np.ndarray, ymean: np.ndarray, zc: float, kid: int, buf: np.ndarray, tau: np.ndarray,
-            has_tau: bool, out: np.ndarray, want_var: bool, K: np.ndarray, G: np.ndarray
-            ) -> None:  # pragma: no cover - runs compiled (tests compare it)
+def _source(ints: np.ndarray, flts: np.ndarray, WT: np.ndarray, W2: np.ndarray, Zt: np.ndarray, alpha: np.ndarray,
+            zc: float, kid: int, buf: np.ndarray, tau: np.ndarray, has_tau: bool, out: np.ndarray, want_var: bool,
+            K: np.ndarray, G: np.ndarray) -> None:  # pragma: no cover - runs compiled (tests compare it)
     """The loop Numba compiles: :meth:`FastPath.mean_numpy` fused over the joints, with the training inputs
     transposed (``WT``: ``(N, D, n)``) so that the distance loops run along the training points (SIMD). With
     ``want_var`` also each joint's kernel row ``K[j]`` and the derivative of its mean in the torque input
-    ``G[j]`` (0 without one), what :meth:`FastVariance.mean_var` needs besides the solves."""
-    N = idx.shape[0]
+    ``G[j]`` (0 without one), what :meth:`FastVariance.mean_var` needs besides the solves. The fast path's small
+    fixed arrays come packed in two (:func:`pack_fixed`): fewer arguments to convert per call."""
+    N = ints.shape[0]
+    D = ints.shape[1] - 3
     n = WT.shape[2]
-    z = np.empty(idx.shape[1])
+    z = np.empty(D)
     dot = np.empty(n)
     a = np.empty(n)
     s = np.empty(n)
@@ -75,11 +75,11 @@ def _source(idx: np.ndarray, ncol: np.ndarray, xm: np.ndarray, xsi: np.ndarray, 
     ib = np.empty(n, dtype=np.int64)
     eb = ib.view(np.float64)
     for jj in range(N):
-        j = order[jj]
-        nc = ncol[j]
+        j = ints[jj, D + 2]  # the cascade's order
+        nc = ints[j, D]  # state columns of joint j
         zz = 0.0
         for d in range(nc):
-            v = (buf[idx[j, d]] - xm[j, d]) * xsi[j, d]
+            v = (buf[ints[j, d]] - flts[j, d]) * flts[j, D + d]
             v = min(max(v, -zc), zc)
             z[d] = v
             zz += v * v
@@ -88,10 +88,10 @@ def _source(idx: np.ndarray, ncol: np.ndarray, xm: np.ndarray, xsi: np.ndarray, 
             z0, z1, z2 = z[d], z[d + 1], z[d + 2]
             for k in range(n):
                 dot[k] += WT[j, d, k] * z0 + WT[j, d + 1, k] * z1 + WT[j, d + 2, k] * z2
-        tj = tfrom[j]
+        tj = ints[j, D + 1]
         tq = 0.0
         if tj >= 0:  # chain: the neighbour's PREDICTED torque
-            tq = (out[tj] - tmean[j]) * tsi[j]
+            tq = (out[tj] - flts[j, 2 * D]) * flts[j, 2 * D + 1]
             tq = min(max(tq, -zc), zc)
             for k in range(n):
                 dt = Zt[j, k] - tq
@@ -143,8 +143,8 @@ def _source(idx: np.ndarray, ncol: np.ndarray, xm: np.ndarray, xsi: np.ndarray, 
                     for k in range(n):
                         gacc -= e[k] * (tq - Zt[j, k]) * alpha[j, k]
         if want_var:
-            G[j] = 2.0 * tsi[j] * gacc
-        m = ymean[j] + acc
+            G[j] = 2.0 * flts[j, 2 * D + 1] * gacc
+        m = flts[j, 2 * D + 2] + acc
         if has_tau:
             m += tau[j]
         out[j] = m
@@ -161,15 +161,37 @@ def _kernel() -> Callable[..., Any] | None:
     return _compiled["mean"]
 
 
+#: Position of the transposed training inputs ``WT`` in :func:`jit_args`' tuple (online samples write into it).
+JIT_WT = 2
+
+
+def pack_fixed(idx: np.ndarray, ncol: np.ndarray, xm: np.ndarray, xsi: np.ndarray, tfrom: np.ndarray,
+               order: np.ndarray, tmean: np.ndarray, tsi: np.ndarray, ymean: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """The fast path's small arrays that never change after the build, packed for :func:`_source`: integers
+    ``(N, D + 3)`` = ``[idx | ncol | tfrom | order]``, floats ``(N, 2 D + 3)`` = ``[xm | xsi | tmean | tsi |
+    ymean]`` (the same values, copied)."""
+    N, D = idx.shape
+    ints = np.empty((N, D + 3), dtype=np.int64)
+    ints[:, :D], ints[:, D], ints[:, D + 1], ints[:, D + 2] = idx, ncol, tfrom, order
+    flts = np.empty((N, 2 * D + 3))
+    flts[:, :D], flts[:, D:2 * D] = xm, xsi
+    flts[:, 2 * D], flts[:, 2 * D + 1], flts[:, 2 * D + 2] = tmean, tsi, ymean
+    return ints, flts
+
+
 def jit_args(kernel: str, arrays: tuple) -> tuple | None:
-    """The compiled mean's leading arguments (the fast path's arrays, ``arrays`` in :func:`_source`'s order up to
-    ``zc``, plus the kernel's code), compiled and run once now so that the first control tick does not pay for
-    it; None when the compiled path is not enabled (:func:`jit_enabled`) or the kernel has no compiled form."""
+    """The compiled mean's leading arguments, compiled and run once now so that the first control tick does not
+    pay for it: from the fast path's ``(idx, ncol, xm, xsi, WT, W2, tfrom, order, tmean, tsi, Zt, alpha, ymean,
+    zc)``, the packed fixed arrays (:func:`pack_fixed`), ``WT``, ``W2``, ``Zt``, ``alpha`` (the same objects:
+    online samples write into them), ``zc`` and the kernel's code. None when the compiled path is not enabled
+    (:func:`jit_enabled`) or the kernel has no compiled form."""
     kid = kernel_id(kernel)
     if kid < 0 or not jit_enabled():
         return None
-    args = (*arrays, kid)
-    N, D = arrays[0].shape
+    idx, ncol, xm, xsi, WT, W2, tfrom, order, tmean, tsi, Zt, alpha, ymean, zc = arrays
+    args = (*pack_fixed(idx, ncol, xm, xsi, tfrom, order, tmean, tsi, ymean), WT, W2, Zt, alpha, zc, kid)
+    N, D = idx.shape
     out = np.zeros(N)
     try:
         jit_mean(args, np.zeros(D + 1), None, out)

@@ -28,7 +28,7 @@ from scipy.linalg.blas import dtrsv
 
 from cascgp.gp.kernels import Kernel, get_kernel
 from cascgp.gp.posterior import GPPosterior
-from cascgp.models.fastkernel import jit_args, jit_mean
+from cascgp.models.fastkernel import JIT_WT, jit_args, jit_mean
 
 __all__ = ["FastPath", "FastVariance", "ZCLIP"]
 
@@ -126,7 +126,7 @@ class FastPath:
         self.W[j, lo:hi] = W
         self.W2[j, lo:hi] = np.einsum("nd,nd->n", W, W)
         if self.jit is not None:
-            self.jit[4][j, :, lo:hi] = W.T
+            self.jit[JIT_WT][j, :, lo:hi] = W.T
 
     def state_r2(self) -> np.ndarray:
         """Scaled squared distances ``(N, n)`` of the state part of every joint's input (from ``buf``) to its
