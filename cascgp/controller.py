@@ -77,7 +77,10 @@ class InverseDynamics(Protocol):
 
 
 def _as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
-    gain = np.broadcast_to(np.asarray(value, dtype=float), (dof,)).copy()
+    try:
+        gain = np.broadcast_to(np.asarray(value, dtype=float), (dof,)).copy()
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be one real number or {dof} of them (one per joint), got {value!r}") from None
     if not np.all(np.isfinite(gain)) or np.any(gain < 0):
         raise ValueError(f"{name} must be finite and non-negative, got {gain}")
     return gain
@@ -206,6 +209,26 @@ class FeedforwardController:
         self.last_model_error: str | None = None
 
     @property
+    def kp(self) -> np.ndarray:
+        """Proportional gains (N m / rad), one per joint. Assigning a scalar or per-joint values (gain scheduling)
+        validates them as the constructor does (``ValueError`` for a negative or non-finite gain, nothing
+        changed)."""
+        return self._kp
+
+    @kp.setter
+    def kp(self, value: float | np.ndarray) -> None:
+        self._kp = _as_gain(value, self.dof, "kp")
+
+    @property
+    def kd(self) -> np.ndarray:
+        """Derivative gains (N m s / rad), one per joint; assignment as for :attr:`kp`."""
+        return self._kd
+
+    @kd.setter
+    def kd(self, value: float | np.ndarray) -> None:
+        self._kd = _as_gain(value, self.dof, "kd")
+
+    @property
     def name(self) -> str:
         """Short description of the feedforward source."""
         if self.model is None:
@@ -277,7 +300,7 @@ class FeedforwardController:
         # NumPy's, bit for bit, but an overflow or inf - inf gives inf or NaN without a floating-point warning,
         # so the usual tick needs neither np.errstate (a third of this form's cost) nor array temporaries.
         fb = [p * (a - b) + d * (c - e) for p, a, b, d, c, e in
-              zip(self.kp.tolist(), q_d.tolist(), q.tolist(), self.kd.tolist(), qd_d.tolist(), qd.tolist())]
+              zip(self._kp.tolist(), q_d.tolist(), q.tolist(), self._kd.tolist(), qd_d.tolist(), qd.tolist())]
         if all(map(math.isfinite, fb)):
             feedback = np.array(fb)
         else:
