@@ -78,9 +78,14 @@ class InverseDynamics(Protocol):
 
 def _as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
     try:
-        gain = np.broadcast_to(np.asarray(value, dtype=float), (dof,)).copy()
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be one real number or {dof} of them (one per joint), got {value!r}") from None
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:  # the class NumPy raises: TypeError for None or a dict, ValueError for "a"
+        raise type(exc)(f"{name} must be one real number or {dof} of them (one per joint), got {value!r}") from None
+    try:
+        gain = np.broadcast_to(arr, (dof,)).copy()
+    except ValueError:
+        raise ValueError(f"{name} must be one real number or {dof} of them (one per joint), got shape "
+                         f"{arr.shape}") from None
     if not np.all(np.isfinite(gain)) or np.any(gain < 0):
         raise ValueError(f"{name} must be finite and non-negative, got {gain}")
     return gain
@@ -166,8 +171,7 @@ class FeedforwardController:
         self.torque_limits = limits.astype(float)
         self._neg_limits = -self.torque_limits
         self.dof = int(self.torque_limits.shape[0])
-        self.kp = _as_gain(kp, self.dof, "kp")
-        self.kd = _as_gain(kd, self.dof, "kd")
+        self.kp, self.kd = kp, kd  # the properties' setters check them
         self.model: Any = model  # duck-typed (predict_one / inverse_dynamics); None: PD only
         if model is not None:
             model_dof = getattr(model, "dof", self.dof)

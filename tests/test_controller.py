@@ -136,10 +136,11 @@ def test_gains_can_be_scheduled_by_assignment_and_are_validated():
     np.testing.assert_allclose(ctrl(0.3, q, qd, reference), 2.0 * 0.01 - np.arange(6.0) * 0.02, atol=1e-12)
     ctrl.kp[0] = 5.0  # in place, as before: the next tick reads it
     assert ctrl(0.3, q, qd, reference)[0] == pytest.approx(5.0 * 0.01)
-    for bad in (-1.0, np.nan, np.ones(5), "stiff", [1.0, None, 1.0, 1.0, 1.0, 1.0]):
+    for bad, err in ((-1.0, ValueError), (np.nan, ValueError), (np.ones(5), ValueError), ("stiff", ValueError),
+                     ([1.0, None, 1.0, 1.0, 1.0, 1.0], ValueError), ({}, TypeError), (1j, TypeError)):
         for name in ("kp", "kd"):
             before = getattr(ctrl, name).copy()
-            with pytest.raises(ValueError, match=name):
+            with pytest.raises(err, match=name):
                 setattr(ctrl, name, bad)
             np.testing.assert_array_equal(getattr(ctrl, name), before)  # a rejected gain changes nothing
     with pytest.raises(ValueError, match="kd: |kd must"):

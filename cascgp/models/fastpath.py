@@ -53,8 +53,8 @@ class FastPath:
         y_mean: per joint target mean.
         zclip: clip bound of the scaled inputs.
         buf: ``(D + 1,)`` work buffer for the state vector (last entry stays 0).
-        jit: the compiled mean's arguments (:mod:`cascgp.models.fastkernel`; its ``[4]`` is ``W`` transposed,
-            ``(N, D, n)``, a copy that :meth:`set_rows` keeps equal), None when it is not used.
+        jit: the compiled mean's arguments (:mod:`cascgp.models.fastkernel`; its ``[JIT_WT]`` is ``W``
+            transposed, ``(N, D, n)``, a copy that :meth:`set_rows` keeps equal), None when it is not used.
     """
 
     kernel: Kernel
