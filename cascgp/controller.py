@@ -32,6 +32,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
+from cascgp.data import F64 as _F64
 from cascgp.data import all_finite
 from cascgp.gates import (GATE_RULES, GATE_SUFFIXES, INNOVATION_HALF_LIFE_S, GateRule, InnovationGate, gate_weights,
                           innovation_weights, make_gate)
@@ -39,7 +40,6 @@ from cascgp.gates import (GATE_RULES, GATE_SUFFIXES, INNOVATION_HALF_LIFE_S, Gat
 __all__ = ["Controller", "InverseDynamics", "FeedforwardController", "GateRule", "GATE_RULES", "GATE_SUFFIXES",
            "INNOVATION_HALF_LIFE_S", "gate_weights", "innovation_weights"]
 
-_F64 = np.dtype(np.float64)
 _BIG = 1e300  # stands in for an overflowed feedback term; far beyond any actuator limit
 
 Reference = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]

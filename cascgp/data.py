@@ -53,6 +53,11 @@ _ARRAY_FIELDS = ("q", "qd", "qdd", "tau")
 
 
 # --------------------------------------------------------------------------- validation
+#: The float64 dtype, for the control tick's ``x.dtype == F64`` tests of its float64 arrays (cheaper than
+#: comparing with ``np.float64``, which builds a dtype each time).
+F64 = np.dtype(np.float64)
+
+
 def all_finite(x: np.ndarray) -> bool:
     """Whether every entry of the short 1-D float vector ``x`` is finite: ``np.isfinite(x).all()`` in about a
     fifth of its time for the few-entry vectors checked every control tick (a list of a few Python floats instead

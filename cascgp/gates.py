@@ -99,8 +99,15 @@ def _shares_rbd(model: Any, nominal: Any) -> bool:
     return isinstance(model, CascadedGPModel) and model.parametric == "sp" and model.rbd is nominal
 
 
-def _rbd_kw(share: bool, nominal: np.ndarray) -> dict[str, Any]:
-    return {"rbd_torque": nominal} if share else {}
+def _with_nominal(predict: Any, share: bool, nominal: np.ndarray, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray,
+                  q_hist: np.ndarray | None = None) -> Any:
+    """``predict(q, qd, qdd, q_hist=q_hist)`` (a model's ``predict_one`` or ``predict_one_var``), given the
+    controller's ``nominal`` torque as ``rbd_torque`` when the model shares it (:func:`_shares_rbd`); a model that
+    does not is called without the keyword, which it need not accept. Two calls rather than a keyword dict: this
+    runs every control tick."""
+    if share:
+        return predict(q, qd, qdd, q_hist=q_hist, rbd_torque=nominal)
+    return predict(q, qd, qdd, q_hist=q_hist)
 
 
 def innovation_weights(err_nominal: np.ndarray, err_model: np.ndarray) -> np.ndarray:
@@ -181,10 +188,7 @@ class InnovationGate:
 
     def correction(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, q_hist: np.ndarray | None,
                    nominal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        if self._share:  # what _rbd_kw passes, without a dict per tick
-            mean = self.model.predict_one(q, qd, qdd, q_hist=q_hist, rbd_torque=nominal)
-        else:
-            mean = self.model.predict_one(q, qd, qdd, q_hist=q_hist)
+        mean = _with_nominal(self.model.predict_one, self._share, nominal, q, qd, qdd, q_hist)
         d = np.asarray(mean, dtype=float) - nominal
         return d, self._w.copy()  # the copy is the caller's
 
@@ -196,7 +200,7 @@ class InnovationGate:
     def observe(self, t: float, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, tau: np.ndarray) -> None:
         with np.errstate(all="ignore"):
             nominal = np.asarray(self.nominal.inverse_dynamics(q, qd, qdd), dtype=float)
-            e_model = (tau - np.asarray(self.model.predict_one(q, qd, qdd, **_rbd_kw(self._share, nominal)),
+            e_model = (tau - np.asarray(_with_nominal(self.model.predict_one, self._share, nominal, q, qd, qdd),
                                         dtype=float)) ** 2
             e_nominal = (tau - nominal) ** 2
         if not (e_model.shape == e_nominal.shape == (self.dof,) and all_finite(e_model)
@@ -239,7 +243,7 @@ class _VarianceRule:
 
     def correction(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, q_hist: np.ndarray | None,
                    nominal: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        mean, var = self.model.predict_one_var(q, qd, qdd, q_hist=q_hist, **_rbd_kw(self._share, nominal))
+        mean, var = _with_nominal(self.model.predict_one_var, self._share, nominal, q, qd, qdd, q_hist)
         d = mean - nominal
         return d, self.weights(d, var, self.prior)
 

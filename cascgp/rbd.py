@@ -40,7 +40,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
-from cascgp.data import all_finite
+from cascgp.data import F64, all_finite
 
 __all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
            "SUPPORTED_SIDECAR_VERSIONS", "SIDECAR_REQUIRED_FIELDS"]
@@ -205,7 +205,7 @@ class RigidBodyModel:
         """
         model, data = self.pin_model, self._data
         if (type(q) is np.ndarray and type(qd) is np.ndarray and type(qdd) is np.ndarray
-                and q.dtype == qd.dtype == qdd.dtype == np.float64 and q.shape == qd.shape == qdd.shape == (self.dof,)
+                and q.dtype == qd.dtype == qdd.dtype == F64 and q.shape == qd.shape == qdd.shape == (self.dof,)
                 and q.flags.c_contiguous and qd.flags.c_contiguous and qdd.flags.c_contiguous):
             # One configuration of float64 arrays (what a controller passes every tick): RNEA first, the checks
             # only if the torque is not finite (a NaN or inf input always gives one), so that bad input still

@@ -268,12 +268,12 @@ def load_split(n: int, sarcos: str | None, jaco: str | None, seed: int, outputs:
 def provenance(argv: list[str] | None) -> dict:
     """Command, versions, git commit and load average of this run."""
     import platform
-    import subprocess
 
     import scipy
     import torch
 
     import cascgp
+    from scripts.provenance import git
 
     vers = {"python": platform.python_version(), "numpy": np.__version__, "scipy": scipy.__version__,
             "torch": torch.__version__, "cascgp": getattr(cascgp, "__version__", "?")}
@@ -283,13 +283,7 @@ def provenance(argv: list[str] | None) -> dict:
         except ImportError:
             vers[mod] = None
 
-    def git(*a: str) -> str | None:
-        try:
-            return subprocess.run(["git", *a], capture_output=True, text=True, check=True,
-                                  cwd=Path(__file__).resolve().parent).stdout.strip()
-        except (OSError, subprocess.CalledProcessError):
-            return None
-    dirty = git("status", "--porcelain", "--", "scripts/bench_cascgp.py", "scripts/gpytorch_fit.py", "cascgp")
+    dirty = git("status", "--porcelain", "--", ":/scripts/bench_cascgp.py", ":/scripts/gpytorch_fit.py", ":/cascgp")
     return {"command": "python -m scripts.bench_cascgp " + " ".join(sys.argv[1:] if argv is None else argv),
             "versions": vers, "git_commit": git("rev-parse", "HEAD"),
             "git_dirty_relevant_files": None if dirty is None else dirty.splitlines(),

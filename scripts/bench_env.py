@@ -32,7 +32,6 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -49,6 +48,7 @@ from gymnasium.envs.mujoco.mujoco_env import MujocoEnv  # noqa: E402
 
 import jaco_env  # noqa: E402
 from jaco_env.oracle import OracleController  # noqa: E402
+from scripts.provenance import git_commit  # noqa: E402
 
 #: Control steps per timed chunk: env and raw chunks alternate, so that a change of the machine's load
 #: (other processes on the shared cores) falls on both.
@@ -271,8 +271,7 @@ def main(argv: list[str] | None = None) -> None:
               f"period {b['raw_period_us']:.1f} us (median rounds)")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    head = subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                          cwd=Path(__file__).resolve().parent).stdout.strip() or None
+    head = git_commit()
     meta = {"mujoco": mujoco.__version__, "python": platform.python_version(), "machine": platform.machine(),
             "command": "python -m scripts.bench_env " + " ".join(sys.argv[1:] if argv is None else argv),
             "git_commit": head, "load_average_end": list(os.getloadavg()), "cpu_count": os.cpu_count(),

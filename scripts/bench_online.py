@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import time
 from pathlib import Path
 
@@ -30,6 +29,8 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
 import numpy as np  # noqa: E402
+
+from scripts.provenance import git_commit  # noqa: E402
 
 
 #: Training rows at 10 Hz of the quick collection preset (3 motions of 12 s).
@@ -114,8 +115,7 @@ def main(argv: list[str] | None = None) -> None:
     res = {"n_train": model.n_train, "window": a.window, "fit_s": fit_s, "reps": a.reps, "rows": rows,
            "compiled": jit_enabled(),
            "control_period_us": 25_000.0, "command": "python -m scripts.bench_online " + " ".join(argv or []),
-           "git_commit": subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
-                                        cwd=Path(__file__).parent).stdout.strip() or None,
+           "git_commit": git_commit(),
            "load_average_end": list(os.getloadavg()), "cpu_count": os.cpu_count()}
     write_json(out / "bench_online.json", res)
     print(f"SP inward, 6 joints, n = {model.n_train}, online window {a.window}, one thread, "

@@ -26,6 +26,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from cascgp.data import F64 as _F64
+
 __all__ = ["jit_mean", "jit_enabled"]
 
 _KERNEL_IDS = {"matern52": 0, "rbf": 1}
@@ -225,4 +227,3 @@ def jit_mean(args: tuple, buf: np.ndarray, tau: np.ndarray | None, out: np.ndarr
 
 
 _NO_K = np.zeros((1, 1))
-_F64 = np.dtype(np.float64)

@@ -17,13 +17,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from cascgp.data import F64 as _F64
 from cascgp.data import all_finite, as_real_array
 from cascgp.models.fastpath import ZCLIP, FastPath
 
 if TYPE_CHECKING:
     from cascgp.models.cascade import CascadedGPModel
-
-_F64 = np.dtype(np.float64)
 
 __all__ = ["one_real", "as_query", "check_queries", "load_query", "state_cols", "clipped"]
 
