@@ -175,15 +175,18 @@ def test_predict_one_equals_predict(name, fitted, interleaved):
 
 
 def test_predict_one_equals_predict_6dof_inward():
-    """The controller's case: a 6-joint inward cascade; agreement to 1e-10 (relative)."""
+    """The controller's case: a 6-joint inward cascade; agreement to 1e-10 (relative) plus the round-off of the
+    weighted sum (a few eps * sum|a|, about 1e-9 here: the two paths add the same terms in different orders, and
+    which order a CPU's kernels take differs; one CPU measured 9e-10 on torques of about 70 and 2e-10 on one of 0.3)."""
     arm = make_arm(6, friction=0.3)
     tr = sinusoid_data(arm, 20.0, 10.0, seed=1, noise=0.05)
     te = sinusoid_data(arm, 5.0, 10.0, seed=2)
     m = make_model("np-inward", 6, gp_config=GPFitConfig(n_restarts=1, max_iter=60)).fit(tr)
-    assert _roundoff_scale(m).max() < 1e7  # well conditioned
+    scale = _roundoff_scale(m).max()
+    assert scale < 1e7  # well conditioned
     mean, _ = m.predict(te.q, te.qd, te.qdd)
     one = np.array([m.predict_one(te.q[r], te.qd[r], te.qdd[r]) for r in range(len(te))])
-    np.testing.assert_allclose(one, mean, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(one, mean, rtol=1e-10, atol=16 * np.finfo(float).eps * scale)
 
 
 @pytest.mark.parametrize("name", ["np-inward", "sp-outward", "np-standard-df"])
