@@ -34,6 +34,7 @@ import numpy as np
 
 from cascgp.data import F64 as _F64
 from cascgp.data import all_finite
+from cascgp.checks import check_count
 from cascgp.gates import (GATE_RULES, GATE_SUFFIXES, INNOVATION_HALF_LIFE_S, GateRule, InnovationGate, gate_weights,
                           innovation_weights, make_gate)
 
@@ -198,10 +199,9 @@ class FeedforwardController:
             from cascgp.models.online import check_supported
 
             check_supported(model)
-        if isinstance(online_every, bool) or not isinstance(online_every, (int, np.integer)) or online_every < 1:
-            raise ValueError(f"online_every: expected an integer >= 1, got {online_every!r}")
+        online_every = check_count(online_every, "online_every")
         self.online = None if online is None else int(online)
-        self.online_every = int(online_every)
+        self.online_every = online_every
         self._recent: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
         self._n_observed = 0
         self.n_online_samples = 0

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from cascgp.gp import GPBank, GPFitConfig
+from cascgp.checks import check_count
 
 __all__ = ["cold_config", "audit_bank", "audit_model", "summarise_gaps"]
 
@@ -44,10 +45,8 @@ def cold_config(config: GPFitConfig | None = None, *, n_cold: int = 10, seed: in
     config = config or GPFitConfig()
     if not isinstance(config, GPFitConfig):
         raise TypeError(f"config: expected GPFitConfig or None, got {type(config).__name__}")
-    if not isinstance(n_cold, (int, np.integer)) or isinstance(n_cold, bool) or n_cold < 1:
-        raise ValueError(f"n_cold: expected an integer >= 1, got {n_cold!r}")
-    return dataclasses.replace(config, n_restarts=int(n_cold), seed=int(seed), stall_window=None, race_at=None,
-                               drop_after=None, screen_n=None)
+    return dataclasses.replace(config, n_restarts=check_count(n_cold, "n_cold"), seed=int(seed), stall_window=None,
+                               race_at=None, drop_after=None, screen_n=None)
 
 
 def summarise_gaps(gaps: np.ndarray, tol: float = 0.1) -> dict[str, Any]:

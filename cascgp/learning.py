@@ -39,6 +39,7 @@ from cascgp.controller import FeedforwardController
 from cascgp.gates import GATE_SUFFIXES
 from cascgp.episodes import EpisodeResult, run_episode
 from cascgp.gp import GPFitConfig
+from cascgp.checks import check_count, check_positive
 from cascgp.models import MODEL_NAMES, make_model
 
 __all__ = ["PLAIN_CONTROLLERS", "ONLINE_WINDOW", "Attempt", "Feedback", "RetrainConfig", "ControllerRun",
@@ -72,6 +73,13 @@ class RetrainConfig:
     rate_hz: float = 10.0   # training data rate (Hz)
     cap: int = 500          # maximum training-set size
     restarts: int = 3       # GP optimiser restarts per refit
+
+    def __post_init__(self) -> None:
+        # As Python numbers (the settings go into JSON records); episode seeds are seed * 1000 + i, and Gymnasium
+        # takes seeds >= 0.
+        for name, least in (("seed", 0), ("cap", 1), ("restarts", 1)):
+            object.__setattr__(self, name, check_count(getattr(self, name), name, least))
+        object.__setattr__(self, "rate_hz", check_positive(self.rate_hz, "rate_hz", "Hz"))
 
 
 @dataclass(frozen=True)

@@ -63,6 +63,7 @@ import numpy as np
 from tqdm import tqdm
 
 from cascgp.data import DynamicsData, SavGol
+from cascgp.checks import check_count
 
 ENV_ID = "JacoPayload-v0"
 
@@ -119,9 +120,7 @@ class CollectConfig:
 
     def __post_init__(self) -> None:
         for name in ("n_subsets", "n_test"):
-            v = getattr(self, name)
-            if not isinstance(v, int) or v < 1:
-                raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
+            check_count(getattr(self, name), name)
         for name in ("subset_seconds", "test_seconds", "rate_hz"):
             v = getattr(self, name)
             if not np.isfinite(v) or v <= 0:
@@ -132,8 +131,11 @@ class CollectConfig:
                 or not isinstance(self.savgol_polyorder, int) or not 1 <= self.savgol_polyorder < self.savgol_window):
             raise ValueError(f"savgol_window/savgol_polyorder: expected an odd window >= 3 and 1 <= polyorder < "
                              f"window, got {self.savgol_window!r}/{self.savgol_polyorder!r}")
-        if not np.isfinite(self.payload_mass) or self.payload_mass < 0:
-            raise ValueError(f"payload_mass: expected a mass >= 0 (kg), got {self.payload_mass!r}")
+        from jaco_env import scene
+        from jaco_env.checks import check_mass
+
+        check_mass(self.payload_mass, scene.BOTTLE_MASS, scene.MAX_PAYLOAD, "payload_mass")  # JacoPayload-v0's rule
+        check_count(self.seed, "seed", minimum=0)  # the motions' env seeds derive from it; Gymnasium takes >= 0
         if self.sensor_noise not in SENSOR_NOISE:
             raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {self.sensor_noise!r}")
         if self.qdd_source not in QDD_SOURCES:

@@ -55,6 +55,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from tqdm import tqdm
 
+from cascgp.checks import check_count
 from cascgp_experiments.common import install_hint
 from cascgp_experiments.job_cache import canonical_json, job_key, read_cached, write_cached
 from cascgp_experiments.ray_backend import RayAuthenticationError, import_ray, ray_connect, run_ray
@@ -126,8 +127,9 @@ def check_args(parser: Any, args: Any) -> None:
     ``error:`` (exit status 2) naming the fix, before any work and without Ray's traceback. The
     connection stays open for the run (:func:`run_jobs` and :func:`session` use it and leave it open;
     Ray closes it at exit)."""
-    if args.workers is not None and args.workers < 1:
-        parser.error(f"--workers: expected an integer >= 1, got {args.workers}")
+    from cascgp_experiments.cli.options import require_positive
+
+    require_positive(parser, args, "workers")
     if args.ray is not None:
         try:
             import ray  # noqa: F401
@@ -146,9 +148,7 @@ def check_args(parser: Any, args: Any) -> None:
 def check_workers(workers: int | None) -> int:
     if workers is None:
         return default_workers()
-    if not isinstance(workers, int) or isinstance(workers, bool) or workers < 1:
-        raise ValueError(f"workers: expected an integer >= 1, got {workers!r}")
-    return workers
+    return check_count(workers, "workers")
 
 
 # --------------------------------------------------------------------------- keys and cache

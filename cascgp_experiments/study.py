@@ -45,6 +45,7 @@ line is ``python -m scripts.data_efficiency``.
 
 from __future__ import annotations
 
+import math
 import os
 import platform
 import time
@@ -52,6 +53,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from cascgp.checks import check_count, check_positive
 from cascgp_experiments.common import (FULL_GRID, NP_DB, PAPER_TABLE, QUICK_GRID, RBD, SMOKE_GRID,
                                        VARIANTS, label, make_table, median_curves, read_json, write_json)
 from cascgp_experiments.curves import CurveSpec, run_curves
@@ -80,9 +82,38 @@ class Settings:
     sensor_pipeline: str = "jaco2"
 
     def __post_init__(self) -> None:
-        from cascgp_experiments.collect import check_pipeline
+        """Every field checked now, so that a bad setting is refused before any work (``ValueError`` naming it)."""
+        from cascgp_experiments import collect as col
 
-        check_pipeline(self.sensor_pipeline)
+        col.check_pipeline(self.sensor_pipeline)
+        if self.collection not in col.PRESETS:
+            raise ValueError(f"collection: expected one of {tuple(col.PRESETS)}, got {self.collection!r}")
+        data = col.PRESETS[self.collection]
+        _check_grid("grid", self.grid, data.subset_seconds)
+        _check_grid("sarcos_grid", self.sarcos_grid, None)
+        for name, least in (("n_subsets", 1), ("n_restarts", 1), ("iter_n", 2), ("iter_restarts", 1),
+                            ("sarcos_subsets", 1), ("seed", 0)):  # as Python ints: the settings go into JSON
+            object.__setattr__(self, name, check_count(getattr(self, name), name, least))
+        if self.n_subsets > data.n_subsets:
+            raise ValueError(f"n_subsets: expected at most the {self.collection!r} collection's {data.n_subsets} "
+                             f"training subsets, got {self.n_subsets}")
+        object.__setattr__(self, "test_hz", check_positive(self.test_hz, "test_hz", "Hz"))
+        if isinstance(self.audit_fraction, bool) or not isinstance(self.audit_fraction, (int, float)) \
+                or not 0 <= self.audit_fraction <= 1:
+            raise ValueError(f"audit_fraction: expected a number in [0, 1], got {self.audit_fraction!r}")
+        if not isinstance(self.warm_start, bool):
+            raise ValueError(f"warm_start: expected True or False, got {self.warm_start!r}")
+
+
+def _check_grid(name: str, grid: Any, most: float | None) -> None:
+    """``ValueError`` naming ``name`` unless ``grid`` is a non-empty, strictly ascending tuple of seconds of data above
+    0 (and at most ``most``, the length of a training subset)."""
+    ok = isinstance(grid, tuple) and len(grid) > 0 and all(
+        not isinstance(g, bool) and isinstance(g, (int, float)) and math.isfinite(g) and g > 0 for g in grid)
+    if not ok or any(b <= a for a, b in zip(grid, grid[1:])):
+        raise ValueError(f"{name}: expected a non-empty, strictly ascending tuple of seconds > 0, got {grid!r}")
+    if most is not None and grid[-1] > most:
+        raise ValueError(f"{name}: expected seconds of data at most the training subsets' {most:g} s, got {grid!r}")
 
 
 PRESETS: dict[str, Settings] = {

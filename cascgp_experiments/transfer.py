@@ -33,6 +33,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 import gymnasium as gym
 
 import jaco_env  # registers the environments
+from cascgp.checks import check_count
 from cascgp.io import atomic_write_text, read_json, write_json
 from cascgp.learning import (PLAIN_CONTROLLERS, Attempt, AttemptContext, ControllerRun, Feedback, ModelFactory,
                              RetrainConfig, RunHooks, attempt_plan, check_controller, run_controller)
@@ -57,7 +58,8 @@ def jaco_feedback() -> Feedback:
 
 @dataclass
 class TransferConfig:
-    """Settings of one task-transfer run (see ``--help`` of ``scripts/task_transfer.py`` for each)."""
+    """Settings of one task-transfer run (``cascgp transfer --help`` describes each); every field is checked on
+    construction."""
 
     controllers: tuple[str, ...] = FULL_CONTROLLERS
     tasks: tuple[str, ...] = FULL_TASKS
@@ -75,9 +77,26 @@ class TransferConfig:
     sensor_pipeline: str = "jaco2"
 
     def __post_init__(self) -> None:
+        """Every field checked now, so that a bad setting is refused before any episode runs (``ValueError`` or
+        ``TypeError`` naming the field)."""
         from cascgp_experiments.collect import check_pipeline
+        from jaco_env.scene import bottle_mass, check_payload_mass
+        from jaco_env.tasks import get_task
 
         check_pipeline(self.sensor_pipeline)  # the one rule (collection, study, transfer)
+        for name, values, check in (("controllers", self.controllers, check_controller),
+                                    ("tasks", self.tasks, get_task)):
+            if isinstance(values, str) or not isinstance(values, (tuple, list)) or not values:
+                raise ValueError(f"{name}: expected a non-empty tuple of names, got {values!r}")
+            for v in values:
+                check(v)
+        self.attempts = check_count(self.attempts, "attempts")
+        self.n_marbles = check_count(self.n_marbles, "n_marbles")
+        self.fit_seed_offset = check_count(self.fit_seed_offset, "fit_seed_offset", minimum=0)
+        self.payload_mass = check_payload_mass(self.payload_mass, bottle_mass(self.n_marbles),
+                                               "payload_mass (total in the hand)")
+        r = self.retrain()  # seed, rate_hz, cap, restarts: RetrainConfig's checks, and its Python numbers
+        self.seed, self.rate_hz, self.cap, self.restarts = r.seed, r.rate_hz, r.cap, r.restarts
 
     def plan(self) -> list[Attempt]:
         """Every attempt, in order (:func:`cascgp.learning.attempt_plan`)."""
@@ -265,8 +284,6 @@ def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bo
     (:func:`controller_job`) and compose the side-by-side clips (:func:`compose_videos`)."""
     from cascgp_experiments.execution import run_jobs
 
-    for name in cfg.controllers:
-        check_controller(name)
     if out is not None:
         claim_output(cfg, out)  # refuses buffers of a run with other settings (the CLI may have cleared them)
     plan = cfg.plan()

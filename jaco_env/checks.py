@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import numbers
 
 import numpy as np
@@ -35,3 +36,17 @@ def real_array(value, shape: tuple[int, ...], what: str, *, finite: bool = True)
         bad = np.flatnonzero(~np.isfinite(a)).tolist()
         raise ValueError(f"{what} must be finite; entries {bad} are NaN or inf: {a.tolist()}")
     return a
+
+
+def check_mass(value, lo: float, hi: float, what: str) -> float:
+    """``value`` as a float in [lo, hi] kg (TypeError / ValueError naming ``what`` otherwise).
+
+    Only real numbers are accepted: a string such as ``"1.2"``, a bool or a complex number raises
+    ``TypeError`` (``float()`` would silently accept the first two).
+    """
+    if not is_real_number(value):
+        raise TypeError(f"{what} must be a real number (kg), got {type(value).__name__} {value!r}")
+    v = float(value)
+    if not math.isfinite(v) or not (lo <= v <= hi):
+        raise ValueError(f"{what} must be in [{lo:.3f}, {hi:.3f}] kg, got {v!r}")
+    return v

@@ -31,6 +31,7 @@ import numpy as np
 from dm_control import mjcf
 
 from jaco_env import robot
+from jaco_env.checks import check_mass
 
 # --- geometry (m, kg) -------------------------------------------------------------
 BOTTLE_INNER_RADIUS = 0.035
@@ -52,6 +53,18 @@ JAR_WALL = 0.006
 JAR_N_WALLS = 16
 #: Total payload held in the hand (bottle + marbles + extra), Jaco 2 datasheet maximum.
 MAX_PAYLOAD = 1.6
+
+
+def bottle_mass(n_marbles: int) -> float:
+    """Mass (kg) of the bottle holding ``n_marbles`` marbles: the least payload in the hand."""
+    return BOTTLE_MASS + n_marbles * MARBLE_MASS
+
+
+def check_payload_mass(value: object, fixed_mass: float, what: str) -> float:
+    """``value`` as the total payload in the hand (kg): at least 1 g above ``fixed_mass`` (:func:`bottle_mass`), at
+    most :data:`MAX_PAYLOAD` (``TypeError`` / ``ValueError`` naming ``what``)."""
+    return check_mass(value, fixed_mass + 1e-3, MAX_PAYLOAD, what)
+
 
 #: Gains of the emulated firmware velocity loop (per joint), which sits on the closed torque loop
 #: (``robot`` docstring): tau_c = KV (v - qd) + KI (q_ref - q), q_ref the integral of the command v.

@@ -410,4 +410,4 @@ def test_study_sensor_pipeline_option() -> None:
     r = subprocess.run([str(Path(sys.executable).with_name("cascgp")), "study", "--out", "unused", "--smoke",
                         "--sensor-pipeline", "real"], env=_env(), cwd=REPO, capture_output=True, text=True,
                        timeout=120)
-    assert r.returncode == 2 and "sensor_pipeline: expected" in r.stderr
+    assert r.returncode == 2 and "--sensor-pipeline: expected" in r.stderr

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from cascgp.checks import check_count
 from cascgp.gp.kernels import check_kernel
 
 __all__ = ["GPFitConfig", "check_target_floor", "noise_var"]
@@ -108,35 +109,23 @@ class GPFitConfig:
 
     def __post_init__(self) -> None:
         check_kernel(self.kernel)
-        for name in ("n_restarts", "max_iter", "history", "screen_keep", "screen_max_iter", "race_keep"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1:
-                raise ValueError(f"{name}: expected an integer >= 1, got {v!r}")
+        for name in ("n_restarts", "max_iter", "history", "screen_keep", "screen_max_iter", "race_keep",
+                     "max_batch_bytes"):
+            check_count(getattr(self, name), name)
         for name in ("grad_tol", "rel_tol", "noise_floor", "jitter_max", "init_spread", "drop_margin", "stall_tol",
                      "screen_rel_tol"):
             v = getattr(self, name)
             if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
                 raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
-        if self.drop_after is not None and (not isinstance(self.drop_after, int) or self.drop_after < 1):
-            raise ValueError(f"drop_after: expected None or an integer >= 1, got {self.drop_after!r}")
-        for name in ("stall_window", "race_at"):
-            v = getattr(self, name)
-            if v is not None and (not isinstance(v, (int, np.integer)) or isinstance(v, bool) or v < 1):
-                raise ValueError(f"{name}: expected None or an integer >= 1, got {v!r}")
+        for name in ("drop_after", "stall_window", "race_at", "threads"):
+            check_count(getattr(self, name), name, optional=True)
         if self.snr_max is not None and (not isinstance(self.snr_max, (int, float)) or not math.isfinite(self.snr_max)
                                          or self.snr_max <= 0):
             raise ValueError(f"snr_max: expected None or a finite number > 0, got {self.snr_max!r}")
-        if not isinstance(self.max_batch_bytes, (int, np.integer)) or isinstance(self.max_batch_bytes, bool) or \
-                self.max_batch_bytes < 1:
-            raise ValueError(f"max_batch_bytes: expected an integer >= 1, got {self.max_batch_bytes!r}")
         if not isinstance(self.catch_up_windows, (int, float)) or not self.catch_up_windows > 0:
             raise ValueError(f"catch_up_windows: expected a number > 0, got {self.catch_up_windows!r}")
-        if self.screen_n is not None and (not isinstance(self.screen_n, int) or self.screen_n < 2):
-            raise ValueError(f"screen_n: expected None or an integer >= 2, got {self.screen_n!r}")
+        check_count(self.screen_n, "screen_n", minimum=2, optional=True)
         self.noise_floor_target = check_target_floor(self.noise_floor_target, "noise_floor_target")
-        if self.threads is not None and (not isinstance(self.threads, (int, np.integer)) or
-                                         isinstance(self.threads, bool) or self.threads < 1):
-            raise ValueError(f"threads: expected None or an integer >= 1, got {self.threads!r}")
 
     def floors(self, y_std: np.ndarray) -> np.ndarray | None:
         r"""Per-GP noise-variance floor in normalised units, ``(B,)``, or ``None`` without ``noise_floor_target``.

@@ -27,11 +27,11 @@ and updated by rank-one terms: dropping slot :math:`o` is the Schur complement o
 :math:`O(w^2)` instead of refactorising the block (:math:`O(w^3)`). Once every ``window`` samples :math:`S^{-1}` is
 recomputed from :math:`S` (Cholesky factor and its inverse, LAPACK ``dpotrf``/``dpotri``), so that the rank-one
 updates' round-off does not accumulate. A sample whose :math:`\delta` is not positive (the enlarged matrix would
-not be positive definite) is refused. :math:`K_{00}^{-1}` is formed once per window (from the fitted factor);
-a sample then costs a symmetric product with it for :math:`b` (:math:`O(n_0^2)`), two products with :math:`B`
-(:math:`O(n_0 w)`) and the rank-one terms. Why by hand: an extension of a fixed factor is not a library routine
-in NumPy/SciPy/torch, and refitting or refactorising the whole :math:`(n_0 + w)` matrix per sample
-(:math:`O(n^3)`) would not fit between control ticks.
+not be positive definite) is refused. A sample then costs two triangular solves with the fitted factor
+:math:`L_{00}` (:math:`L_{00}^{-1} k_0`, then :math:`b = L_{00}^{-\top} L_{00}^{-1} k_0`; :math:`O(n_0^2)`), two
+products with :math:`B` (:math:`O(n_0 w)`) and the rank-one terms. Why by hand: an extension of a fixed factor is
+not a library routine in NumPy/SciPy/torch, and refitting or refactorising the whole :math:`(n_0 + w)` matrix per
+sample (:math:`O(n^3)`) would not fit between control ticks.
 
 The single-query paths (:meth:`~cascgp.models.CascadedGPModel.predict_one`, ``predict_one_var``) read the
 enlarged sets: the fast path is rebuilt with room for the window (its rows ``n0 + slot``; empty slots carry zero
@@ -49,6 +49,7 @@ import numpy as np
 from scipy.linalg.blas import dsymv, dsyr, dtrsv
 from scipy.linalg.lapack import dpotrf, dpotri
 
+from cascgp.checks import check_count
 from cascgp.gp.checks import check_scale
 from cascgp.gp.kernels import get_kernel
 from cascgp.gp.likelihood import blas_threads
@@ -191,10 +192,8 @@ class OnlineWindow:
 
     def __init__(self, model: Any, window: int) -> None:
         check_supported(model)
-        if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or window < 1:
-            raise ValueError(f"window: expected an integer >= 1, got {window!r}")
+        self.window = check_count(window, "window")
         self.model = model
-        self.window = int(window)
         posts = model.posteriors()
         self.joints = [_JointWindow(P, self.window) for P in posts]
         self.fast = FastPath.build(posts, model.specs, model.order, capacity=self.window)

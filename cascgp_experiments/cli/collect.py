@@ -14,6 +14,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 
+from cascgp_experiments.cli.options import settings_error
 from cascgp_experiments.collect import PRESETS, CollectConfig, collect
 from cascgp_experiments.execution import add_execution_args, check_args, session
 
@@ -57,8 +58,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
         kw["payload_mass"] = a.payload_mass
     try:
         cfg = CollectConfig(**kw)
-    except ValueError as e:
-        ap.error(str(e))
+    except (ValueError, TypeError) as e:
+        settings_error(ap, e, {"seed": "--seed", "payload_mass": "--payload-mass",
+                               "sensor_pipeline": "--sensor-pipeline"})
     with session(a.ray, a.workers):
         train, test, info = collect(a.out, cfg, force=a.force, workers=a.workers, ray_address=a.ray,
                                     vector_env=a.vector_env)

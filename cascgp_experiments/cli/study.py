@@ -17,6 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from cascgp_experiments.cli.options import settings_error
 from cascgp_experiments.common import SARCOS_ENV, VARIANTS, default_sarcos, limit_threads
 from cascgp_experiments.execution import add_execution_args, check_args
 from cascgp_experiments.study import PRESETS, run_study
@@ -58,11 +59,15 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     if a.subsets is not None:
         kw["n_subsets"] = a.subsets
     if a.grid is not None:
-        kw["grid"] = tuple(float(x) for x in a.grid.split(","))
+        try:
+            kw["grid"] = tuple(float(x) for x in a.grid.split(","))
+        except ValueError:
+            ap.error(f"--grid: expected comma-separated seconds of data (e.g. 1,2,5), got {a.grid!r}")
     try:
         st = replace(st, **kw)
     except ValueError as exc:
-        ap.error(str(exc))
+        settings_error(ap, exc, {"n_restarts": "--restarts", "n_subsets": "--subsets", "grid": "--grid",
+                                 "seed": "--seed", "sensor_pipeline": "--sensor-pipeline"})
     if a.max_seconds is not None:
         if not a.max_seconds >= min(st.grid):
             ap.error(f"--max-seconds: expected at least the smallest grid point {min(st.grid)}, got {a.max_seconds}")

@@ -36,10 +36,16 @@ import sys
 import time
 from pathlib import Path
 
+from cascgp_experiments.cli.options import settings_error
 from cascgp_experiments.execution import add_execution_args, check_args, session
 from cascgp_experiments.transfer import (FULL_CONTROLLERS, FULL_TASKS, QUICK_CONTROLLERS, QUICK_TASKS,
                                          TransferConfig, VideoOptions, claim_output, run_transfer, video_attempts,
                                          write_outputs)
+
+#: The option that sets each field of :class:`TransferConfig` (error messages name the option).
+_OPTIONS = {"rate_hz": "--rate", "payload_mass": "--payload", "attempts": "--attempts", "cap": "--cap",
+            "restarts": "--restarts", "seed": "--seed", "sensor_pipeline": "--sensor-pipeline",
+            "controllers": "--controllers", "tasks": "--tasks"}
 
 
 def _config(a: argparse.Namespace) -> TransferConfig:
@@ -82,23 +88,22 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
                    help="the learned controller shown next to RBD (default: the last controller that learns)")
     add_execution_args(p)
     a = p.parse_args(argv)
+    if a.video is not None:
+        from cascgp_experiments.video import check_video_writer
+
+        try:
+            check_video_writer()  # now, not after the episodes (and before the settings' checks import the env)
+        except ImportError as exc:
+            p.error(f"--video: {exc}")
     try:
         cfg = _config(a)
-    except ValueError as exc:
-        p.error(str(exc))
-    if cfg.attempts < 1:
-        p.error("--attempts must be at least 1")
+    except (ValueError, TypeError) as exc:
+        settings_error(p, exc, _OPTIONS)
     check_args(p, a)
     if a.video is not None:
         learned = a.video_controller or next((c for c in reversed(cfg.controllers) if c not in ("pd", "rbd")), None)
         if learned is None or learned not in cfg.controllers or "rbd" not in cfg.controllers:
             p.error("--video needs 'rbd' and a learning controller among --controllers")
-        from cascgp_experiments.video import check_video_writer
-
-        try:
-            check_video_writer()  # now, not after the episodes
-        except ImportError as exc:
-            p.error(f"--video: {exc}")
         a.video_options = VideoOptions(str(a.video.resolve()), ("rbd", learned), video_attempts(cfg.plan()))
     else:
         a.video_options = None

@@ -76,20 +76,6 @@ DEFAULT_CAMERA: dict[str, Any] = {"distance": 2.0, "azimuth": 150.0, "elevation"
 _N = robot.N_JOINTS
 
 
-def check_mass(value, lo: float, hi: float, what: str) -> float:
-    """``value`` as a float in [lo, hi] kg (TypeError / ValueError naming ``what`` otherwise).
-
-    Only real numbers are accepted: a string such as ``"1.2"``, a bool or a complex number raises
-    ``TypeError`` (``float()`` would silently accept the first two).
-    """
-    if not is_real_number(value):
-        raise TypeError(f"{what} must be a real number (kg), got {type(value).__name__} {value!r}")
-    v = float(value)
-    if not math.isfinite(v) or not (lo <= v <= hi):
-        raise ValueError(f"{what} must be in [{lo:.3f}, {hi:.3f}] kg, got {v!r}")
-    return v
-
-
 # ------------------------------------------------------------------ scene files (one folder per process)
 _export_lock = threading.Lock()
 _export_dir: str | None = None

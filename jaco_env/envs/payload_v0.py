@@ -15,8 +15,8 @@ from gymnasium import error
 from gymnasium.utils import EzPickle
 
 from jaco_env import robot, scene
-from jaco_env.checks import real_array
-from jaco_env.envs.base import JacoMujocoEnv, check_mass, check_options
+from jaco_env.checks import check_mass, real_array
+from jaco_env.envs.base import JacoMujocoEnv, check_options
 from jaco_env.kinematics import home_pose
 from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
 from jaco_env.signal_pipeline import SignalPipeline

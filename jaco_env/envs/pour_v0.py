@@ -18,7 +18,7 @@ from gymnasium.utils import EzPickle
 
 from jaco_env import scene
 from jaco_env.checks import is_real_number
-from jaco_env.envs.base import JacoMujocoEnv, check_mass, check_options
+from jaco_env.envs.base import JacoMujocoEnv, check_options
 from jaco_env.sensors import POUR_OBS_DIM, SensorNoise
 from jaco_env.signal_pipeline import SignalPipeline
 from jaco_env.tasks import DEFAULT_TASKS, PouringTask, get_task
@@ -34,6 +34,8 @@ def _rows_times(v: np.ndarray, M: np.ndarray, start: Any = 0.0) -> np.ndarray:
 #: Default range (kg) of the total payload in the hand (bottle + marbles + extra rigid mass),
 #: drawn uniformly per episode unless the task or ``reset(options=...)`` fixes it.
 PAYLOAD_RANGE = (0.6, 1.5)
+
+
 #: Default reward weights: tracking cost per second and radian, pour reward for all marbles in the jar.
 W_TRACK = 10.0
 W_POUR = 10.0
@@ -212,7 +214,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
                 raise ValueError(f"{name} must be a finite number >= 0, got {w!r}")
         self._tracking_cost_weight = float(tracking_cost_weight)
         self._pour_reward_weight = float(pour_reward_weight)
-        self._fixed_mass = scene.BOTTLE_MASS + n_marbles * scene.MARBLE_MASS
+        self._fixed_mass = scene.bottle_mass(n_marbles)
         if not (isinstance(payload_range, (tuple, list)) and len(payload_range) == 2
                 and all(is_real_number(x) for x in payload_range)):
             raise TypeError(f"payload_range must be two real numbers (low, high) in kg, got {payload_range!r}")
@@ -225,7 +227,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         self.default_task = None if task is None else self._check_task(get_task(task), "task")
         for t in DEFAULT_TASKS.values() if task is None else ():
             if t.payload_mass is not None:  # drawn per reset: check now, not halfway through one
-                check_mass(t.payload_mass, self._fixed_mass + 1e-3, scene.MAX_PAYLOAD, f"task {t.name!r} payload_mass")
+                scene.check_payload_mass(t.payload_mass, self._fixed_mass, f"task {t.name!r} payload_mass")
         JacoMujocoEnv.__init__(self, control_mode=control_mode, control_freq=control_freq,
                                sensor_noise=sensor_noise, n_marbles=n_marbles, render_mode=render_mode,
                                width=width, height=height, camera_name=camera_name,
@@ -296,8 +298,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         ``ValueError`` here, not halfway through a reset) and its payload fits the marbles."""
         task.reference(0.0)
         if task.payload_mass is not None:
-            check_mass(task.payload_mass, self._fixed_mass + 1e-3, scene.MAX_PAYLOAD,
-                       f"{what} {task.name!r} payload_mass (total in the hand)")
+            scene.check_payload_mass(task.payload_mass, self._fixed_mass,
+                               f"{what} {task.name!r} payload_mass (total in the hand)")
         return task
 
     def _parse_options(self, options: dict | None) -> dict:
@@ -306,8 +308,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         if "task" in opts:
             parsed["task"] = self._check_task(get_task(opts["task"]), "options['task']")
         if "payload_mass" in opts:
-            parsed["payload_mass"] = check_mass(opts["payload_mass"], self._fixed_mass + 1e-3, scene.MAX_PAYLOAD,
-                                                "options['payload_mass'] (total in the hand)")
+            parsed["payload_mass"] = scene.check_payload_mass(opts["payload_mass"], self._fixed_mass,
+                                                        "options['payload_mass'] (total in the hand)")
         return parsed
 
     def reset_model(self) -> np.ndarray:

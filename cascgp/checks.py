@@ -1,0 +1,37 @@
+"""Checks of settings shared by the library and the experiments: a bad value raises ``ValueError`` naming the field
+and what was expected. Imports neither torch nor MuJoCo, so settings classes can use it at import time."""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Literal, overload
+
+import numpy as np
+
+__all__ = ["check_count", "check_positive"]
+
+
+@overload
+def check_count(v: Any, field_name: str, minimum: int = ..., optional: Literal[False] = ...) -> int: ...
+
+
+@overload
+def check_count(v: Any, field_name: str, minimum: int = ..., *, optional: bool) -> int | None: ...
+
+
+def check_count(v: Any, field_name: str, minimum: int = 1, optional: bool = False) -> int | None:
+    """``v`` as an ``int`` if it is an integer (Python or NumPy, not ``bool``) of at least ``minimum``, or ``None``
+    when ``optional``; else ``ValueError`` naming ``field_name`` and what was expected."""
+    if optional and v is None:
+        return None
+    if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < minimum:
+        raise ValueError(f"{field_name}: expected {'None or ' if optional else ''}an integer >= {minimum}, got {v!r}")
+    return int(v)
+
+
+def check_positive(v: Any, field_name: str, unit: str = "") -> float:
+    """``v`` as a ``float`` if it is a finite real number above 0; else ``ValueError`` naming ``field_name``."""
+    if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v) \
+            or v <= 0:
+        raise ValueError(f"{field_name}: expected a finite number > 0{f' ({unit})' if unit else ''}, got {v!r}")
+    return float(v)

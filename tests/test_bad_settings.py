@@ -1,0 +1,127 @@
+"""Bad settings are refused before any work: the library's settings classes raise errors naming the field, and the
+commands exit with status 2 and a one-line message naming the option, writing nothing."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cascgp.checks import check_count, check_positive
+from cascgp.learning import RetrainConfig
+from cascgp_experiments.study import PRESETS, Settings
+from cascgp_experiments.transfer import TransferConfig
+
+
+def test_check_count_and_check_positive() -> None:
+    assert check_count(3, "n") == 3 and type(check_count(np.int64(3), "n")) is int
+    assert check_count(0, "seed", minimum=0) == 0 and check_count(None, "k", optional=True) is None
+    for bad in (0, -1, 1.0, True, "2", None):
+        with pytest.raises(ValueError, match=r"^n: expected an integer >= 1, got "):
+            check_count(bad, "n")
+    with pytest.raises(ValueError, match=r"^k: expected None or an integer >= 2, got 1$"):
+        check_count(1, "k", minimum=2, optional=True)
+    assert check_positive(2, "rate_hz") == 2.0 and type(check_positive(np.float32(0.5), "r")) is float
+    for bad in (0, -1.0, float("nan"), float("inf"), True, "1"):
+        with pytest.raises(ValueError, match=r"^rate_hz: expected a finite number > 0 \(Hz\), got "):
+            check_positive(bad, "rate_hz", "Hz")
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("seed", -1, "seed: expected an integer >= 0"),
+    ("rate_hz", 0.0, "rate_hz: expected a finite number > 0"),
+    ("cap", 0, "cap: expected an integer >= 1"),
+    ("restarts", 1.5, "restarts: expected an integer >= 1"),
+])
+def test_retrain_config_refuses_bad_fields(field, value, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        RetrainConfig(**{field: value})
+
+
+def test_retrain_config_keeps_python_numbers() -> None:
+    r = RetrainConfig(seed=np.int64(2), rate_hz=np.float64(5), cap=np.int32(100), restarts=np.int64(1))
+    assert [type(v) for v in (r.seed, r.rate_hz, r.cap, r.restarts)] == [int, float, int, int]
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("attempts", 0, "attempts: expected an integer >= 1"),
+    ("payload_mass", 0.2, r"payload_mass \(total in the hand\) must be in \[0.351"),
+    ("payload_mass", "1.2", "payload_mass .* must be a real number"),
+    ("tasks", ("front", "nowhere"), "unknown task 'nowhere'"),
+    ("tasks", (), "tasks: expected a non-empty tuple"),
+    ("controllers", "rbd", "controllers: expected a non-empty tuple"),
+    ("controllers", ("pd", "sp-sideways"), "unknown controller 'sp-sideways'"),
+    ("seed", -2, "seed: expected an integer >= 0"),
+    ("cap", 0, "cap: expected an integer >= 1"),
+    ("rate_hz", float("nan"), "rate_hz: expected a finite number > 0"),
+    ("fit_seed_offset", -1, "fit_seed_offset: expected an integer >= 0"),
+    ("sensor_pipeline", "real", "sensor_pipeline: expected"),
+])
+def test_transfer_config_refuses_bad_fields(field, value, message) -> None:
+    with pytest.raises((ValueError, TypeError), match=message):
+        TransferConfig(**{field: value})
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("collection", "huge", "collection: expected one of"),
+    ("grid", (), "grid: expected a non-empty, strictly ascending"),
+    ("grid", (2.0, 1.0), "grid: expected a non-empty, strictly ascending"),
+    ("grid", (0.0, 1.0), "grid: expected a non-empty, strictly ascending"),
+    ("grid", (1.0, 61.0), "grid: expected seconds of data at most the training subsets' 60 s"),
+    ("sarcos_grid", (1.0, float("nan")), "sarcos_grid: expected a non-empty, strictly ascending"),
+    ("n_subsets", 0, "n_subsets: expected an integer >= 1"),
+    ("n_subsets", 11, "n_subsets: expected at most the 'full' collection's 10 training subsets"),
+    ("n_restarts", 0, "n_restarts: expected an integer >= 1"),
+    ("iter_n", 1, "iter_n: expected an integer >= 2"),
+    ("seed", -1, "seed: expected an integer >= 0"),
+    ("test_hz", 0, "test_hz: expected a finite number > 0"),
+    ("audit_fraction", 1.5, r"audit_fraction: expected a number in \[0, 1\]"),
+    ("warm_start", 1, "warm_start: expected True or False"),
+])
+def test_study_settings_refuse_bad_fields(field, value, message) -> None:
+    with pytest.raises(ValueError, match=message):
+        Settings(**{field: value})
+
+
+def test_study_presets_are_valid_settings() -> None:
+    for name, st in PRESETS.items():
+        assert Settings(**{f: getattr(st, f) for f in st.__dataclass_fields__}) == st, name
+
+
+@pytest.mark.parametrize("command, argv, message", [
+    ("transfer", ["--cap", "0"], "--cap: expected an integer >= 1, got 0"),
+    ("transfer", ["--restarts", "0"], "--restarts: expected an integer >= 1, got 0"),
+    ("transfer", ["--attempts", "0"], "--attempts: expected an integer >= 1, got 0"),
+    ("transfer", ["--seed", "-2"], "--seed: expected an integer >= 0, got -2"),
+    ("transfer", ["--rate", "0"], "--rate: expected a finite number > 0 (Hz), got 0.0"),
+    ("transfer", ["--payload", "-1"], "--payload (total in the hand) must be in [0.351, 1.600] kg, got -1.0"),
+    ("transfer", ["--tasks", "front,nowhere"], "unknown task 'nowhere'"),
+    ("transfer", ["--workers", "0"], "--workers: expected an integer >= 1, got 0"),
+    ("study", ["--restarts", "0"], "--restarts: expected an integer >= 1, got 0"),
+    ("study", ["--subsets", "0"], "--subsets: expected an integer >= 1, got 0"),
+    ("study", ["--subsets", "11"], "--subsets: expected at most the 'full' collection's 10 training subsets, got 11"),
+    ("study", ["--seed", "-1"], "--seed: expected an integer >= 0, got -1"),
+    ("study", ["--grid", "1,a"], "--grid: expected comma-separated seconds of data (e.g. 1,2,5), got '1,a'"),
+    ("study", ["--grid", "3,1"], "--grid: expected a non-empty, strictly ascending tuple of seconds > 0"),
+    ("study", ["--quick", "--grid", "1,20"], "--grid: expected seconds of data at most the training subsets' 12 s"),
+    ("collect", ["--seed", "-1"], "--seed: expected an integer >= 0, got -1"),
+    ("collect", ["--smoke", "--payload-mass", "5"], "--payload-mass must be in [0.200, 1.600] kg, got 5.0"),
+    ("sarcos", ["--restarts", "0", "--sarcos", "x.mat"], "--restarts: expected an integer >= 1, got 0"),
+    ("fit", ["--data", "x.csv", "--model", "np-inward", "--max-samples", "0"],
+     "--max-samples: expected an integer >= 1, got 0"),
+])
+def test_commands_refuse_bad_options_before_any_work(command, argv, message, tmp_path: Path, monkeypatch,
+                                                     capsys) -> None:
+    from cascgp_experiments.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "x.mat").write_bytes(b"")
+    out = tmp_path / "out"
+    with pytest.raises(SystemExit) as exc:
+        main([command, "--out", str(out), *argv])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"cascgp {command}: error: {message}"), err
+    assert "Traceback" not in "\n".join(err)
+    assert not out.exists()
