@@ -63,7 +63,7 @@ import numpy as np
 from tqdm import tqdm
 
 from cascgp.data import DynamicsData, SavGol
-from cascgp.checks import check_count
+from cascgp.checks import check_count, check_positive
 
 ENV_ID = "JacoPayload-v0"
 
@@ -122,19 +122,16 @@ class CollectConfig:
         for name in ("n_subsets", "n_test"):
             check_count(getattr(self, name), name)
         for name in ("subset_seconds", "test_seconds", "rate_hz"):
-            v = getattr(self, name)
-            if not np.isfinite(v) or v <= 0:
-                raise ValueError(f"{name}: expected a positive number, got {v!r}")
+            check_positive(getattr(self, name), name, "Hz" if name == "rate_hz" else "s")
         if not np.isfinite(self.warmup_seconds) or self.warmup_seconds < 0:
             raise ValueError(f"warmup_seconds: expected a number >= 0 (s), got {self.warmup_seconds!r}")
         if (not isinstance(self.savgol_window, int) or self.savgol_window < 3 or self.savgol_window % 2 == 0
                 or not isinstance(self.savgol_polyorder, int) or not 1 <= self.savgol_polyorder < self.savgol_window):
             raise ValueError(f"savgol_window/savgol_polyorder: expected an odd window >= 3 and 1 <= polyorder < "
                              f"window, got {self.savgol_window!r}/{self.savgol_polyorder!r}")
-        from jaco_env import scene
-        from jaco_env.checks import check_mass
+        from jaco_env.scene import check_rigid_payload_mass
 
-        check_mass(self.payload_mass, scene.BOTTLE_MASS, scene.MAX_PAYLOAD, "payload_mass")  # JacoPayload-v0's rule
+        check_rigid_payload_mass(self.payload_mass, "payload_mass")  # the collection's env: JacoPayload-v0
         check_count(self.seed, "seed", minimum=0)  # the motions' env seeds derive from it; Gymnasium takes >= 0
         if self.sensor_noise not in SENSOR_NOISE:
             raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {self.sensor_noise!r}")

@@ -127,9 +127,9 @@ def check_args(parser: Any, args: Any) -> None:
     ``error:`` (exit status 2) naming the fix, before any work and without Ray's traceback. The
     connection stays open for the run (:func:`run_jobs` and :func:`session` use it and leave it open;
     Ray closes it at exit)."""
-    from cascgp_experiments.cli.options import require_positive
+    from cascgp_experiments.cli.options import require_at_least
 
-    require_positive(parser, args, "workers")
+    require_at_least(parser, args, 1, "workers")
     if args.ray is not None:
         try:
             import ray  # noqa: F401

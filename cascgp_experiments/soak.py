@@ -244,7 +244,7 @@ class _Soak:
 
             if self.rng.random() < 0.8:
                 options["task"] = str(self.rng.choice(sorted(DEFAULT_TASKS)))
-            lo = scene.BOTTLE_MASS + u.n_marbles * scene.MARBLE_MASS + 0.01
+            lo = scene.bottle_mass(u.n_marbles) + 0.01
         else:
             lo = 0.2
         if self.rng.random() < 0.7:

@@ -73,6 +73,7 @@ class Settings:
     audit_fraction: float = 0.05
     iter_n: int = 500
     iter_restarts: int = 10
+    #: The SARCOS part's grid (seconds of data); empty: no SARCOS part.
     sarcos_grid: tuple[float, ...] = (1.0, 1.5, 2.0, 3.0, 4.0, 4.5, 5.0, 7.0, 9.0, 9.5, 10.0, 14.0, 20.0, 30.0)
     sarcos_subsets: int = 9
     test_hz: float = 10.0
@@ -89,8 +90,8 @@ class Settings:
         if self.collection not in col.PRESETS:
             raise ValueError(f"collection: expected one of {tuple(col.PRESETS)}, got {self.collection!r}")
         data = col.PRESETS[self.collection]
-        _check_grid("grid", self.grid, data.subset_seconds)
-        _check_grid("sarcos_grid", self.sarcos_grid, None)
+        object.__setattr__(self, "grid", _check_grid("grid", self.grid, data.subset_seconds))
+        object.__setattr__(self, "sarcos_grid", _check_grid("sarcos_grid", self.sarcos_grid, None, empty=True))
         for name, least in (("n_subsets", 1), ("n_restarts", 1), ("iter_n", 2), ("iter_restarts", 1),
                             ("sarcos_subsets", 1), ("seed", 0)):  # as Python ints: the settings go into JSON
             object.__setattr__(self, name, check_count(getattr(self, name), name, least))
@@ -105,15 +106,17 @@ class Settings:
             raise ValueError(f"warm_start: expected True or False, got {self.warm_start!r}")
 
 
-def _check_grid(name: str, grid: Any, most: float | None) -> None:
-    """``ValueError`` naming ``name`` unless ``grid`` is a non-empty, strictly ascending tuple of seconds of data above
-    0 (and at most ``most``, the length of a training subset)."""
-    ok = isinstance(grid, tuple) and len(grid) > 0 and all(
+def _check_grid(name: str, grid: Any, most: float | None, empty: bool = False) -> tuple[float, ...]:
+    """``grid`` as a tuple if it is a strictly ascending sequence of seconds of data above 0 (at most ``most``, the
+    length of a training subset), non-empty unless ``empty``; else ``ValueError`` naming ``name``."""
+    ok = isinstance(grid, (tuple, list)) and (empty or len(grid) > 0) and all(
         not isinstance(g, bool) and isinstance(g, (int, float)) and math.isfinite(g) and g > 0 for g in grid)
     if not ok or any(b <= a for a, b in zip(grid, grid[1:])):
-        raise ValueError(f"{name}: expected a non-empty, strictly ascending tuple of seconds > 0, got {grid!r}")
+        raise ValueError(f"{name}: expected a{'' if empty else ' non-empty,'} strictly ascending sequence of seconds "
+                         f"> 0, got {grid!r}")
     if most is not None and grid[-1] > most:
         raise ValueError(f"{name}: expected seconds of data at most the training subsets' {most:g} s, got {grid!r}")
+    return tuple(grid)
 
 
 PRESETS: dict[str, Settings] = {
@@ -237,8 +240,8 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
     results["correlation"]["data"] = "Jaco training set, 10 Hz"
     timings["correlation_s"] = time.perf_counter() - t0
 
-    # 5. SARCOS
-    if sarcos is not None:
+    # 5. SARCOS (an empty sarcos_grid skips it)
+    if sarcos is not None and settings.sarcos_grid:
         s = run_sarcos(sarcos, out / "sarcos", grid=settings.sarcos_grid, n_subsets=settings.sarcos_subsets,
                        n_restarts=settings.n_restarts, workers=workers, ray_address=ray_address, seed=settings.seed)
         results["sarcos"] = s

@@ -56,7 +56,7 @@ def jaco_feedback() -> Feedback:
     return Feedback(jaco_env.DEFAULT_KP, jaco_env.DEFAULT_KD, jaco_env.robot.TORQUE_LIMITS)
 
 
-@dataclass
+@dataclass(frozen=True)
 class TransferConfig:
     """Settings of one task-transfer run (``cascgp transfer --help`` describes each); every field is checked on
     construction."""
@@ -78,25 +78,33 @@ class TransferConfig:
 
     def __post_init__(self) -> None:
         """Every field checked now, so that a bad setting is refused before any episode runs (``ValueError`` or
-        ``TypeError`` naming the field)."""
+        ``TypeError`` naming the field); numbers are kept as Python ints and floats, names as tuples."""
         from cascgp_experiments.collect import check_pipeline
-        from jaco_env.scene import bottle_mass, check_payload_mass
+        from jaco_env import scene
         from jaco_env.tasks import get_task
 
+        def store(name: str, value: Any) -> None:
+            object.__setattr__(self, name, value)
+
         check_pipeline(self.sensor_pipeline)  # the one rule (collection, study, transfer)
-        for name, values, check in (("controllers", self.controllers, check_controller),
-                                    ("tasks", self.tasks, get_task)):
-            if isinstance(values, str) or not isinstance(values, (tuple, list)) or not values:
-                raise ValueError(f"{name}: expected a non-empty tuple of names, got {values!r}")
+        for name, check in (("controllers", check_controller), ("tasks", get_task)):
+            values = getattr(self, name)
+            if isinstance(values, str) or not isinstance(values, (tuple, list)) or not values \
+                    or len(set(values)) != len(values):
+                raise ValueError(f"{name}: expected a non-empty sequence of distinct names, got {values!r}")
             for v in values:
                 check(v)
-        self.attempts = check_count(self.attempts, "attempts")
-        self.n_marbles = check_count(self.n_marbles, "n_marbles")
-        self.fit_seed_offset = check_count(self.fit_seed_offset, "fit_seed_offset", minimum=0)
-        self.payload_mass = check_payload_mass(self.payload_mass, bottle_mass(self.n_marbles),
-                                               "payload_mass (total in the hand)")
+            store(name, tuple(values))
+        store("attempts", check_count(self.attempts, "attempts"))
+        store("n_marbles", check_count(self.n_marbles, "n_marbles"))
+        if self.n_marbles > scene.MAX_MARBLES:
+            raise ValueError(f"n_marbles: expected at most {scene.MAX_MARBLES}, got {self.n_marbles}")
+        store("fit_seed_offset", check_count(self.fit_seed_offset, "fit_seed_offset", minimum=0))
+        store("payload_mass", scene.check_payload_mass(self.payload_mass, scene.bottle_mass(self.n_marbles),
+                                                       "payload_mass (total in the hand)"))
         r = self.retrain()  # seed, rate_hz, cap, restarts: RetrainConfig's checks, and its Python numbers
-        self.seed, self.rate_hz, self.cap, self.restarts = r.seed, r.rate_hz, r.cap, r.restarts
+        for name in ("seed", "rate_hz", "cap", "restarts"):
+            store(name, getattr(r, name))
 
     def plan(self) -> list[Attempt]:
         """Every attempt, in order (:func:`cascgp.learning.attempt_plan`)."""

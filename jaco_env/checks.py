@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +39,7 @@ def real_array(value, shape: tuple[int, ...], what: str, *, finite: bool = True)
     return a
 
 
-def check_mass(value, lo: float, hi: float, what: str) -> float:
+def check_mass(value: Any, lo: float, hi: float, what: str) -> float:
     """``value`` as a float in [lo, hi] kg (TypeError / ValueError naming ``what`` otherwise).
 
     Only real numbers are accepted: a string such as ``"1.2"``, a bool or a complex number raises

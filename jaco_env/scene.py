@@ -53,11 +53,19 @@ JAR_WALL = 0.006
 JAR_N_WALLS = 16
 #: Total payload held in the hand (bottle + marbles + extra), Jaco 2 datasheet maximum.
 MAX_PAYLOAD = 1.6
+#: Most marbles a pouring env holds in its bottle.
+MAX_MARBLES = 60
 
 
 def bottle_mass(n_marbles: int) -> float:
     """Mass (kg) of the bottle holding ``n_marbles`` marbles: the least payload in the hand."""
     return BOTTLE_MASS + n_marbles * MARBLE_MASS
+
+
+def check_rigid_payload_mass(value: object, what: str) -> float:
+    """``value`` as the rigid payload in the hand (kg) of ``JacoPayload-v0``: at least the empty bottle's mass, at most
+    :data:`MAX_PAYLOAD` (``TypeError`` / ``ValueError`` naming ``what``)."""
+    return check_mass(value, BOTTLE_MASS, MAX_PAYLOAD, what)
 
 
 def check_payload_mass(value: object, fixed_mass: float, what: str) -> float:

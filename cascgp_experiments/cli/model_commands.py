@@ -32,7 +32,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from cascgp_experiments.cli.options import require_positive
+from cascgp_experiments.cli.options import require_at_least
 
 _NRMSE_HELP = ("nRMSE of joint i = RMSE_i / (max_i - min_i): the root-mean-square error of the predicted torques "
                "divided by the range of the measured test torques of that joint (0 = perfect; predicting the "
@@ -128,7 +128,7 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
                    help="torch/BLAS threads during the fit (default: the library's, one thread)")
     p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's random starts (default 0)")
     a = p.parse_args(argv)
-    require_positive(p, a, "restarts", "max_samples", "threads")
+    require_at_least(p, a, 1, "restarts", "max_samples", "threads")
     if a.rate_hz is not None and not (np.isfinite(a.rate_hz) and a.rate_hz > 0):
         p.error(f"--rate-hz: expected a positive rate, got {a.rate_hz}")
     if a.model.startswith("sp-") and a.urdf is None:

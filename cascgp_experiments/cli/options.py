@@ -6,13 +6,13 @@ import argparse
 from typing import Mapping, NoReturn
 
 
-def require_positive(parser: argparse.ArgumentParser, args: argparse.Namespace, *names: str) -> None:
-    """``parser.error`` (exit status 2) for the first of the options ``names`` (``args`` attributes) that is set and
-    below 1: ``--max-samples: expected an integer >= 1, got 0``."""
+def require_at_least(parser: argparse.ArgumentParser, args: argparse.Namespace, minimum: int, *names: str) -> None:
+    """``parser.error`` (exit status 2) for the first of the integer options ``names`` (``args`` attributes) that is
+    set and below ``minimum``: ``--max-samples: expected an integer >= 1, got 0``."""
     for name in names:
         value = getattr(args, name)
-        if value is not None and value < 1:
-            parser.error(f"--{name.replace('_', '-')}: expected an integer >= 1, got {value}")
+        if value is not None and value < minimum:
+            parser.error(f"--{name.replace('_', '-')}: expected an integer >= {minimum}, got {value}")
 
 
 def settings_error(parser: argparse.ArgumentParser, exc: Exception, options: Mapping[str, str]) -> NoReturn:

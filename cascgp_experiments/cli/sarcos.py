@@ -20,7 +20,7 @@ import numpy as np
 
 from cascgp.io import write_json
 from cascgp_experiments.common import SARCOS_ENV, default_sarcos, limit_threads, median_curves
-from cascgp_experiments.cli.options import require_positive
+from cascgp_experiments.cli.options import require_at_least
 from cascgp_experiments.execution import add_execution_args, check_args
 from cascgp_experiments.study import PRESETS, Settings, run_sarcos
 
@@ -45,7 +45,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     a = ap.parse_args(argv)
     if not Path(a.sarcos).is_file():
         ap.error(f"--sarcos: file not found: {a.sarcos}")
-    require_positive(ap, a, "restarts")
+    require_at_least(ap, a, 1, "restarts")
+    require_at_least(ap, a, 0, "seed")
     check_args(ap, a)
     limit_threads(1)
     preset = PRESETS["quick" if a.quick else "full"]

@@ -63,16 +63,17 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
             kw["grid"] = tuple(float(x) for x in a.grid.split(","))
         except ValueError:
             ap.error(f"--grid: expected comma-separated seconds of data (e.g. 1,2,5), got {a.grid!r}")
+    if a.max_seconds is not None:
+        grid = kw.get("grid", st.grid)
+        if not a.max_seconds >= min(grid):
+            ap.error(f"--max-seconds: expected at least the smallest grid point {min(grid)}, got {a.max_seconds}")
+        kw["grid"] = tuple(g for g in grid if g <= a.max_seconds)
+        kw["sarcos_grid"] = tuple(g for g in st.sarcos_grid if g <= a.max_seconds)
     try:
         st = replace(st, **kw)
     except ValueError as exc:
         settings_error(ap, exc, {"n_restarts": "--restarts", "n_subsets": "--subsets", "grid": "--grid",
                                  "seed": "--seed", "sensor_pipeline": "--sensor-pipeline"})
-    if a.max_seconds is not None:
-        if not a.max_seconds >= min(st.grid):
-            ap.error(f"--max-seconds: expected at least the smallest grid point {min(st.grid)}, got {a.max_seconds}")
-        st = replace(st, grid=tuple(g for g in st.grid if g <= a.max_seconds),
-                     sarcos_grid=tuple(g for g in st.sarcos_grid if g <= a.max_seconds))
     models = None
     if a.models:
         models = [m.strip() for m in a.models.split(",") if m.strip()]
@@ -87,6 +88,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
             ap.error(f"--sarcos: file not found: {a.sarcos}")
         if sarcos is None:
             print(f"no SARCOS file (--sarcos or ${SARCOS_ENV}): the SARCOS part is skipped", file=sys.stderr)
+        elif not st.sarcos_grid:
+            print(f"--max-seconds {a.max_seconds:g} is below every SARCOS grid point: the SARCOS part is skipped",
+                  file=sys.stderr)
     check_args(ap, a)
     limit_threads(1)
     res = run_study(a.out, st, models=models, workers=a.workers, ray_address=a.ray, sarcos=sarcos,

@@ -15,7 +15,7 @@ from gymnasium import error
 from gymnasium.utils import EzPickle
 
 from jaco_env import robot, scene
-from jaco_env.checks import check_mass, real_array
+from jaco_env.checks import real_array
 from jaco_env.envs.base import JacoMujocoEnv, check_options
 from jaco_env.kinematics import home_pose
 from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
@@ -105,7 +105,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
         EzPickle.__init__(self, control_mode, control_freq, sensor_noise, payload_mass, render_mode, width,
                           height, camera_name, sensor_pipeline, link_inertials)
         self._fixed_mass = scene.BOTTLE_MASS
-        self.default_payload = check_mass(payload_mass, scene.BOTTLE_MASS, scene.MAX_PAYLOAD, "payload_mass")
+        self.default_payload = scene.check_rigid_payload_mass(payload_mass, "payload_mass")
         JacoMujocoEnv.__init__(self, control_mode=control_mode, control_freq=control_freq,
                                sensor_noise=sensor_noise, n_marbles=0, render_mode=render_mode, width=width,
                                height=height, camera_name=camera_name,
@@ -115,8 +115,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
         opts = check_options(options, ("payload_mass", "q0"))
         parsed: dict[str, Any] = {}
         if "payload_mass" in opts:
-            parsed["payload_mass"] = check_mass(opts["payload_mass"], scene.BOTTLE_MASS, scene.MAX_PAYLOAD,
-                                                "options['payload_mass']")
+            parsed["payload_mass"] = scene.check_rigid_payload_mass(opts["payload_mass"], "options['payload_mass']")
         if "q0" in opts:
             parsed["q0"] = real_array(opts["q0"], (robot.N_JOINTS,), "options['q0'] (joint angles, rad)")
         return parsed

@@ -34,8 +34,6 @@ def _rows_times(v: np.ndarray, M: np.ndarray, start: Any = 0.0) -> np.ndarray:
 #: Default range (kg) of the total payload in the hand (bottle + marbles + extra rigid mass),
 #: drawn uniformly per episode unless the task or ``reset(options=...)`` fixes it.
 PAYLOAD_RANGE = (0.6, 1.5)
-
-
 #: Default reward weights: tracking cost per second and radian, pour reward for all marbles in the jar.
 W_TRACK = 10.0
 W_POUR = 10.0
@@ -205,8 +203,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
                           sensor_pipeline, link_inertials)
         if not isinstance(n_marbles, (int, np.integer)) or isinstance(n_marbles, (bool, np.bool_)):
             raise TypeError(f"n_marbles must be an integer, got {type(n_marbles).__name__} {n_marbles!r}")
-        if not 1 <= n_marbles <= 60:
-            raise ValueError(f"n_marbles must be an integer in [1, 60], got {n_marbles!r}")
+        if not 1 <= n_marbles <= scene.MAX_MARBLES:
+            raise ValueError(f"n_marbles must be an integer in [1, {scene.MAX_MARBLES}], got {n_marbles!r}")
         for name, w in (("tracking_cost_weight", tracking_cost_weight), ("pour_reward_weight", pour_reward_weight)):
             if not is_real_number(w):
                 raise TypeError(f"{name} must be a real number, got {type(w).__name__} {w!r}")
@@ -299,7 +297,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         task.reference(0.0)
         if task.payload_mass is not None:
             scene.check_payload_mass(task.payload_mass, self._fixed_mass,
-                               f"{what} {task.name!r} payload_mass (total in the hand)")
+                                     f"{what} {task.name!r} payload_mass (total in the hand)")
         return task
 
     def _parse_options(self, options: dict | None) -> dict:
@@ -309,7 +307,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
             parsed["task"] = self._check_task(get_task(opts["task"]), "options['task']")
         if "payload_mass" in opts:
             parsed["payload_mass"] = scene.check_payload_mass(opts["payload_mass"], self._fixed_mass,
-                                                        "options['payload_mass'] (total in the hand)")
+                                                              "options['payload_mass'] (total in the hand)")
         return parsed
 
     def reset_model(self) -> np.ndarray:
