@@ -29,9 +29,11 @@ def check_count(v: Any, field_name: str, minimum: int = 1, optional: bool = Fals
     return int(v)
 
 
-def check_positive(v: Any, field_name: str, unit: str = "") -> float:
-    """``v`` as a ``float`` if it is a finite real number above 0; else ``ValueError`` naming ``field_name``."""
+def check_positive(v: Any, field_name: str, unit: str = "", zero: bool = False) -> float:
+    """``v`` as a ``float`` if it is a finite real number above 0 (or 0 itself, with ``zero``); else ``ValueError``
+    naming ``field_name``."""
     if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v) \
-            or v <= 0:
-        raise ValueError(f"{field_name}: expected a finite number > 0{f' ({unit})' if unit else ''}, got {v!r}")
+            or v < 0 or (v == 0 and not zero):
+        raise ValueError(f"{field_name}: expected a finite number {'>=' if zero else '>'} 0"
+                         f"{f' ({unit})' if unit else ''}, got {v!r}")
     return float(v)

@@ -119,20 +119,21 @@ class CollectConfig:
         return SavGol(self.savgol_window, self.savgol_polyorder, causal=causal)
 
     def __post_init__(self) -> None:
-        for name in ("n_subsets", "n_test"):
-            check_count(getattr(self, name), name)
-        for name in ("subset_seconds", "test_seconds", "rate_hz"):
-            check_positive(getattr(self, name), name, "Hz" if name == "rate_hz" else "s")
-        if not np.isfinite(self.warmup_seconds) or self.warmup_seconds < 0:
-            raise ValueError(f"warmup_seconds: expected a number >= 0 (s), got {self.warmup_seconds!r}")
+        def store(name: str, value: object) -> None:  # as Python numbers: the settings go into JSON and job keys
+            object.__setattr__(self, name, value)
+
+        for name, least in (("n_subsets", 1), ("n_test", 1), ("seed", 0)):  # seed: Gymnasium takes seeds >= 0
+            store(name, check_count(getattr(self, name), name, least))
+        for name in ("subset_seconds", "test_seconds", "rate_hz", "warmup_seconds"):
+            store(name, check_positive(getattr(self, name), name, "Hz" if name == "rate_hz" else "s",
+                                       zero=name == "warmup_seconds"))
         if (not isinstance(self.savgol_window, int) or self.savgol_window < 3 or self.savgol_window % 2 == 0
                 or not isinstance(self.savgol_polyorder, int) or not 1 <= self.savgol_polyorder < self.savgol_window):
             raise ValueError(f"savgol_window/savgol_polyorder: expected an odd window >= 3 and 1 <= polyorder < "
                              f"window, got {self.savgol_window!r}/{self.savgol_polyorder!r}")
         from jaco_env.scene import check_rigid_payload_mass
 
-        check_rigid_payload_mass(self.payload_mass, "payload_mass")  # the collection's env: JacoPayload-v0
-        check_count(self.seed, "seed", minimum=0)  # the motions' env seeds derive from it; Gymnasium takes >= 0
+        store("payload_mass", check_rigid_payload_mass(self.payload_mass, "payload_mass"))  # its env: JacoPayload-v0
         if self.sensor_noise not in SENSOR_NOISE:
             raise ValueError(f"sensor_noise: expected one of {SENSOR_NOISE}, got {self.sensor_noise!r}")
         if self.qdd_source not in QDD_SOURCES:

@@ -89,7 +89,7 @@ class TransferConfig:
         check_pipeline(self.sensor_pipeline)  # the one rule (collection, study, transfer)
         for name, check in (("controllers", check_controller), ("tasks", get_task)):
             values = getattr(self, name)
-            if isinstance(values, str) or not isinstance(values, (tuple, list)) or not values \
+            if not isinstance(values, (tuple, list)) or not values or not all(isinstance(v, str) for v in values) \
                     or len(set(values)) != len(values):
                 raise ValueError(f"{name}: expected a non-empty sequence of distinct names, got {values!r}")
             for v in values:
@@ -133,8 +133,7 @@ class TransferConfig:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> "TransferConfig":
         """The settings of :meth:`to_dict`; a record without ``sensor_pipeline`` was run under ``"ideal"``."""
-        return cls(**{"sensor_pipeline": "ideal", **d, "controllers": tuple(d["controllers"]),
-                      "tasks": tuple(d["tasks"])})
+        return cls(**{"sensor_pipeline": "ideal", **d})
 
 
 @dataclass(frozen=True)
@@ -388,7 +387,7 @@ def write_outputs(runs: list[ControllerRun], cfg: TransferConfig, out: Path, wal
     """Write ``results.json``, ``summary.md`` and ``transfer.png`` into ``out``; returns the results dict.
     ``jobs``: the job statistics of the run (workers, backend, seconds per controller), stored as ``"jobs"``."""
     results = {
-        "config": {**cfg.__dict__, "controllers": list(cfg.controllers), "tasks": list(cfg.tasks)},
+        "config": cfg.to_dict(),
         "wall_seconds": wall_s,
         "controllers": {run.name: run.attempts for run in runs},
     }

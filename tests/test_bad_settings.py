@@ -24,6 +24,9 @@ def test_check_count_and_check_positive() -> None:
     with pytest.raises(ValueError, match=r"^k: expected None or an integer >= 2, got 1$"):
         check_count(1, "k", minimum=2, optional=True)
     assert check_positive(2, "rate_hz") == 2.0 and type(check_positive(np.float32(0.5), "r")) is float
+    assert check_positive(0, "warmup", zero=True) == 0.0
+    with pytest.raises(ValueError, match=r"^warmup: expected a finite number >= 0 \(s\), got -1$"):
+        check_positive(-1, "warmup", "s", zero=True)
     for bad in (0, -1.0, float("nan"), float("inf"), True, "1"):
         with pytest.raises(ValueError, match=r"^rate_hz: expected a finite number > 0 \(Hz\), got "):
             check_positive(bad, "rate_hz", "Hz")
@@ -54,6 +57,7 @@ def test_retrain_config_keeps_python_numbers() -> None:
     ("tasks", ("front", "front"), "tasks: expected a non-empty sequence of distinct names"),
     ("controllers", "rbd", "controllers: expected a non-empty sequence of distinct names"),
     ("controllers", ("rbd", "rbd"), "controllers: expected a non-empty sequence of distinct names"),
+    ("controllers", (["rbd"],), "controllers: expected a non-empty sequence of distinct names"),
     ("n_marbles", 61, "n_marbles: expected at most 60"),
     ("controllers", ("pd", "sp-sideways"), "unknown controller 'sp-sideways'"),
     ("seed", -2, "seed: expected an integer >= 0"),
@@ -87,6 +91,7 @@ def test_transfer_config_stores_json_types_and_round_trips() -> None:
     ("rate_hz", "100", r"rate_hz: expected a finite number > 0 \(Hz\)"),
     ("payload_mass", 0.1, r"payload_mass must be in \[0.200, 1.600\] kg"),
     ("seed", -1, "seed: expected an integer >= 0"),
+    ("warmup_seconds", "2", r"warmup_seconds: expected a finite number >= 0 \(s\)"),
 ])
 def test_collect_config_refuses_bad_fields(field, value, message) -> None:
     with pytest.raises((ValueError, TypeError), match=message):
@@ -113,6 +118,11 @@ def test_collect_config_refuses_bad_fields(field, value, message) -> None:
 def test_study_settings_refuse_bad_fields(field, value, message) -> None:
     with pytest.raises(ValueError, match=message):
         Settings(**{field: value})
+
+
+def test_collect_config_stores_python_numbers() -> None:
+    c = CollectConfig(n_subsets=np.int64(2), seed=np.int32(1), subset_seconds=np.float32(12), payload_mass=1)
+    assert [type(c.n_subsets), type(c.seed), type(c.subset_seconds), type(c.payload_mass)] == [int, int, float, float]
 
 
 def test_study_settings_store_tuples_and_python_numbers() -> None:
@@ -161,6 +171,8 @@ def test_study_max_seconds_below_the_sarcos_grid_skips_sarcos(tmp_path: Path, mo
     ("study", ["--grid", "1,a"], "--grid: expected comma-separated seconds of data (e.g. 1,2,5), got '1,a'"),
     ("study", ["--grid", "3,1"], "--grid: expected a non-empty, strictly ascending sequence of seconds > 0"),
     ("study", ["--quick", "--grid", "1,20"], "--grid: expected seconds of data at most the training subsets' 12 s"),
+    ("study", ["--grid", "5,1", "--max-seconds", "3"], "--grid: expected a non-empty, strictly ascending"),
+    ("study", ["--grid", "1,nan", "--max-seconds", "5"], "--grid: expected a non-empty, strictly ascending"),
     ("collect", ["--seed", "-1"], "--seed: expected an integer >= 0, got -1"),
     ("collect", ["--smoke", "--payload-mass", "5"], "--payload-mass must be in [0.200, 1.600] kg, got 5.0"),
     ("sarcos", ["--restarts", "0", "--sarcos", "x.mat"], "--restarts: expected an integer >= 1, got 0"),

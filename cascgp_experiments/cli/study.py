@@ -63,17 +63,16 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
             kw["grid"] = tuple(float(x) for x in a.grid.split(","))
         except ValueError:
             ap.error(f"--grid: expected comma-separated seconds of data (e.g. 1,2,5), got {a.grid!r}")
-    if a.max_seconds is not None:
-        grid = kw.get("grid", st.grid)
-        if not a.max_seconds >= min(grid):
-            ap.error(f"--max-seconds: expected at least the smallest grid point {min(grid)}, got {a.max_seconds}")
-        kw["grid"] = tuple(g for g in grid if g <= a.max_seconds)
-        kw["sarcos_grid"] = tuple(g for g in st.sarcos_grid if g <= a.max_seconds)
     try:
         st = replace(st, **kw)
     except ValueError as exc:
         settings_error(ap, exc, {"n_restarts": "--restarts", "n_subsets": "--subsets", "grid": "--grid",
                                  "seed": "--seed", "sensor_pipeline": "--sensor-pipeline"})
+    if a.max_seconds is not None:  # the grids checked above; what is left of them stays valid (SARCOS's may be empty)
+        if not a.max_seconds >= st.grid[0]:
+            ap.error(f"--max-seconds: expected at least the smallest grid point {st.grid[0]}, got {a.max_seconds}")
+        st = replace(st, grid=tuple(g for g in st.grid if g <= a.max_seconds),
+                     sarcos_grid=tuple(g for g in st.sarcos_grid if g <= a.max_seconds))
     models = None
     if a.models:
         models = [m.strip() for m in a.models.split(",") if m.strip()]
