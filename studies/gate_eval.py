@@ -77,8 +77,11 @@ def protocol_from_args(p: Any, a: Any, *, min_attempts: int, two_tasks_why: str
         p.error(f"--seeds: expected comma-separated integers, got {a.seeds!r}")
     if a.attempts < min_attempts:
         p.error(f"--attempts must be at least {min_attempts}")
-    cfg = replace(GATE_EVAL_CONFIG, attempts=a.attempts, restarts=a.restarts, cap=a.cap,
-                  **({"tasks": tuple(a.tasks.split(","))} if a.tasks else {}))
+    try:
+        cfg = replace(GATE_EVAL_CONFIG, attempts=a.attempts, restarts=a.restarts, cap=a.cap,
+                      **({"tasks": tuple(a.tasks.split(","))} if a.tasks else {}))
+    except ValueError as exc:  # TransferConfig's checks (unknown or repeated tasks, cap, restarts)
+        p.error(str(exc))
     if len(cfg.tasks) < 2:
         p.error(f"--tasks: at least two tasks ({two_tasks_why})")
     return cfg, seeds
