@@ -43,6 +43,13 @@ def test_retrain_config_refuses_bad_fields(field, value, message) -> None:
         RetrainConfig(**{field: value})
 
 
+def test_gp_fit_config_refuses_a_negative_seed() -> None:
+    from cascgp.gp import GPFitConfig
+
+    with pytest.raises(ValueError, match="^seed: expected an integer >= 0, got -1$"):
+        GPFitConfig(seed=-1)
+
+
 def test_retrain_config_keeps_python_numbers() -> None:
     r = RetrainConfig(seed=np.int64(2), rate_hz=np.float64(5), cap=np.int32(100), restarts=np.int64(1))
     assert [type(v) for v in (r.seed, r.rate_hz, r.cap, r.restarts)] == [int, float, int, int]
@@ -177,8 +184,11 @@ def test_study_max_seconds_below_the_sarcos_grid_skips_sarcos(tmp_path: Path, mo
     ("collect", ["--smoke", "--payload-mass", "5"], "--payload-mass must be in [0.200, 1.600] kg, got 5.0"),
     ("sarcos", ["--restarts", "0", "--sarcos", "x.mat"], "--restarts: expected an integer >= 1, got 0"),
     ("sarcos", ["--seed", "-1", "--sarcos", "x.mat"], "--seed: expected an integer >= 0, got -1"),
-    ("fit", ["--data", "x.csv", "--model", "np-inward", "--max-samples", "0"],
-     "--max-samples: expected an integer >= 1, got 0"),
+    ("fit", ["--data", "x.csv", "--model", "np-inward", "--max-samples", "1"],
+     "--max-samples: expected an integer >= 2, got 1"),
+    ("fit", ["--data", "x.csv", "--model", "np-inward", "--seed", "-1"], "--seed: expected an integer >= 0, got -1"),
+    ("fit", ["--data", "x.csv", "--model", "np-inward", "--threads", "0"],
+     "--threads: expected an integer >= 1, got 0"),
 ])
 def test_commands_refuse_bad_options_before_any_work(command, argv, message, tmp_path: Path, monkeypatch,
                                                      capsys) -> None:

@@ -119,6 +119,7 @@ class GPFitConfig:
                 raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
         for name in ("drop_after", "stall_window", "race_at", "threads"):
             check_count(getattr(self, name), name, optional=True)
+        check_count(self.seed, "seed", minimum=0)  # NumPy's generators take seeds >= 0
         if self.snr_max is not None and (not isinstance(self.snr_max, (int, float)) or not math.isfinite(self.snr_max)
                                          or self.snr_max <= 0):
             raise ValueError(f"snr_max: expected None or a finite number > 0, got {self.snr_max!r}")

@@ -128,7 +128,9 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
                    help="torch/BLAS threads during the fit (default: the library's, one thread)")
     p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's random starts (default 0)")
     a = p.parse_args(argv)
-    require_at_least(p, a, 1, "restarts", "max_samples", "threads")
+    require_at_least(p, a, 1, "restarts", "threads")
+    require_at_least(p, a, 2, "max_samples")  # a GP needs two rows
+    require_at_least(p, a, 0, "seed")
     if a.rate_hz is not None and not (np.isfinite(a.rate_hz) and a.rate_hz > 0):
         p.error(f"--rate-hz: expected a positive rate, got {a.rate_hz}")
     if a.model.startswith("sp-") and a.urdf is None:
