@@ -175,6 +175,8 @@ def test_study_max_seconds_below_the_sarcos_grid_skips_sarcos(tmp_path: Path, mo
     ("study", ["--subsets", "0"], "--subsets: expected an integer >= 1, got 0"),
     ("study", ["--subsets", "11"], "--subsets: expected at most the 'full' collection's 10 training subsets, got 11"),
     ("study", ["--seed", "-1"], "--seed: expected an integer >= 0, got -1"),
+    ("study", ["--models", ","], "--models: no name; expected names from"),
+    ("study", ["--models", "np-inward,np-sideways"], "--models: unknown ['np-sideways']; expected names from"),
     ("study", ["--grid", "1,a"], "--grid: expected comma-separated seconds of data (e.g. 1,2,5), got '1,a'"),
     ("study", ["--grid", "3,1"], "--grid: expected a non-empty, strictly ascending sequence of seconds > 0"),
     ("study", ["--quick", "--grid", "1,20"], "--grid: expected seconds of data at most the training subsets' 12 s"),

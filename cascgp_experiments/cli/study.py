@@ -77,8 +77,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     if a.models:
         models = [m.strip() for m in a.models.split(",") if m.strip()]
         bad = [m for m in models if m not in VARIANTS]
-        if bad:
-            ap.error(f"--models: unknown {bad}; expected names from {list(VARIANTS)}")
+        if bad or not models:
+            ap.error(f"--models: {f'unknown {bad}' if bad else 'no name'}; expected names from {list(VARIANTS)}")
     sarcos = None
     if not a.no_sarcos:
         found = default_sarcos()
