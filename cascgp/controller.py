@@ -32,8 +32,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from cascgp.data import F64 as _F64
-from cascgp.data import all_finite
+from cascgp.data import F64 as _F64, all_finite
 from cascgp.checks import check_count
 from cascgp.gates import (GATE_RULES, GATE_SUFFIXES, INNOVATION_HALF_LIFE_S, GateRule, InnovationGate, gate_weights,
                           innovation_weights, make_gate)

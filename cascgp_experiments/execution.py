@@ -56,6 +56,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 from tqdm import tqdm
 
 from cascgp.checks import check_count
+from cascgp_experiments.cli.options import require_at_least
 from cascgp_experiments.common import install_hint
 from cascgp_experiments.job_cache import canonical_json, job_key, read_cached, write_cached
 from cascgp_experiments.ray_backend import RayAuthenticationError, import_ray, ray_connect, run_ray
@@ -127,8 +128,6 @@ def check_args(parser: Any, args: Any) -> None:
     ``error:`` (exit status 2) naming the fix, before any work and without Ray's traceback. The
     connection stays open for the run (:func:`run_jobs` and :func:`session` use it and leave it open;
     Ray closes it at exit)."""
-    from cascgp_experiments.cli.options import require_at_least
-
     require_at_least(parser, args, 1, "workers")
     if args.ray is not None:
         try:
