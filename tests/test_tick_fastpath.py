@@ -63,6 +63,9 @@ def _both(model, q, qd, qdd, h):
 def test_compiled_mean_and_variance_equal_the_numpy_path_and_predict(models, key) -> None:
     model = models[key]
     assert model._fast.jit is not None
+    fv = model.prepare_variance()
+    assert fv.Lc is not None  # the compiled solves run; BLAS's views are of the same factors
+    assert all(np.shares_memory(L, Lc) for L, Lc in zip(fv.L, fv.Lc))
     for q, qd, qdd, h, _ in _queries():
         f, m_jit, m_np, (mv_jit, v_jit), (mv_np, v_np) = _both(model, q, qd, qdd, h)
         tol = 1e-12 * _scale(f, m_np)
@@ -101,7 +104,7 @@ def test_without_the_compiled_path_the_numpy_path_runs(models, monkeypatch) -> N
     monkeypatch.setenv("CASCGP_JIT", "0")
     model = make_model("sp-inward", 3, make_arm(3), gp_config=CFG)
     model.adopt_banks(models["sp-inward"].banks, models["sp-inward"].where, models["sp-inward"].n_train)
-    assert model._fast.jit is None
+    assert model._fast.jit is None and model.prepare_variance().Lc is None
     for q, qd, qdd, _, _ in _queries(4):
         f, tau = load_query(model, q, qd, qdd, None)
         np.testing.assert_array_equal(model.predict_one(q, qd, qdd), f.mean_numpy(tau))
@@ -206,6 +209,49 @@ def test_a_float64_query_and_the_general_form_give_the_same_answer_and_errors(mo
                 model.predict_one(*args)
         with pytest.raises(ValueError, match="shape"):
             model.predict_one(q, qd, np.zeros(4))
+
+
+@needs_jit
+@pytest.mark.parametrize("key", ["sp-inward", "np-outward", "np-standard", "rbf:sp-inward"])
+def test_compiled_variance_solves_are_blas_solves(models, key) -> None:
+    """Given the same kernel rows, the compiled loop's variances equal the per-joint BLAS path's but for the order
+    of the sum of squares (the solves themselves are the same BLAS call)."""
+    from cascgp.models.fastkernel import jit_mean, jit_var
+
+    model = models[key]
+    fv = model.prepare_variance()
+    for q, qd, qdd, h, _ in _queries(6):
+        f, tau = load_query(model, q, qd, qdd, h)
+        N = len(f.order)
+        K, G, mean = np.empty(f.alpha.shape), np.zeros(N), np.empty(N)
+        assert jit_mean(f.jit, f.buf, tau, mean, (K, G))
+        var = np.full(N, np.nan)
+        assert jit_var(f.jit, fv.Lc, fv.scale, fv.prior, K, G, var)
+        ref = np.empty(N)
+        for j in f.order:  # FastVariance.mean_var's loop without the compiled solves
+            tj = f.torque_from[j]
+            ref[j] = fv._var(j, K[j], G[j] * G[j] * ref[tj] if tj is not None else None)
+        assert np.all(np.abs(var - ref) <= 1e-13 * (fv.prior + np.abs(ref))), (var, ref)
+
+
+@needs_jit
+def test_a_compiled_variance_loop_that_fails_to_build_leaves_the_blas_solves(models, monkeypatch) -> None:
+    import cascgp.models.fastkernel as fk
+
+    def broken(*a):
+        raise RuntimeError("no cache location")
+
+    monkeypatch.setattr(fk, "_compiled", {"mean": fk._kernel(), "var": broken})
+    model = make_model("sp-inward", 3, make_arm(3), gp_config=CFG)
+    model.adopt_banks(models["sp-inward"].banks, models["sp-inward"].where, models["sp-inward"].n_train)
+    with pytest.warns(RuntimeWarning, match="compiled variance loop is not used"):
+        fv = model.prepare_variance()
+    assert fv.Lc is None and model._fast.jit is not None  # the compiled mean still runs
+    for q, qd, qdd, _, _ in _queries(3):
+        m, v = model.predict_one_var(q, qd, qdd)
+        m_ref, v_ref = models["sp-inward"].predict_one_var(q, qd, qdd)
+        np.testing.assert_array_equal(m, m_ref)
+        np.testing.assert_allclose(v, v_ref, rtol=1e-10, atol=1e-13 * float(model.signal_var.max()))
 
 
 def test_a_compiled_loop_that_fails_to_build_leaves_the_numpy_path(models, monkeypatch) -> None:

@@ -28,7 +28,7 @@ from scipy.linalg.blas import dtrsv
 
 from cascgp.gp.kernels import Kernel, get_kernel
 from cascgp.gp.posterior import GPPosterior
-from cascgp.models.fastkernel import JIT_WT, jit_args, jit_mean
+from cascgp.models.fastkernel import JIT_WT, jit_args, jit_mean, jit_var, jit_var_factors
 
 __all__ = ["FastPath", "FastVariance", "ZCLIP"]
 
@@ -201,18 +201,22 @@ class FastVariance:
         L: per joint, :math:`L_j^\top` (a Fortran-ordered view of the factor, as BLAS reads it); scale: ``(N,)``
             :math:`c_j`; prior: ``(N,)`` prior variances (N m^2).
         window: online samples (:class:`cascgp.models.online.OnlineWindow`) whose variance term is added.
+        Lc: the same factors for the compiled solves (:func:`~cascgp.models.fastkernel.jit_var`: ``L`` are their
+            transposed views), None when they are not used; an online window's variance uses the NumPy solves.
     """
 
     L: tuple[np.ndarray, ...]
     scale: np.ndarray
     prior: np.ndarray
     window: Any = None
+    Lc: tuple[np.ndarray, ...] | None = None
 
     @classmethod
     def build(cls, posts: Sequence[GPPosterior]) -> FastVariance:
-        return cls(L=tuple(np.ascontiguousarray(P.L).T for P in posts),
+        Lc = jit_var_factors(tuple(P.L for P in posts))
+        return cls(L=tuple(L.T for L in Lc) if Lc is not None else tuple(np.ascontiguousarray(P.L).T for P in posts),
                    scale=np.array([P.y_std * P.signal_var for P in posts]),
-                   prior=np.array([P.y_std**2 * P.signal_var for P in posts]))
+                   prior=np.array([P.y_std**2 * P.signal_var for P in posts]), Lc=Lc)
 
     def solve(self, j: int, b: np.ndarray) -> np.ndarray:
         """:math:`L_j^{-1} b` (a new array)."""
@@ -221,12 +225,16 @@ class FastVariance:
     def mean_var(self, fast: FastPath, tau_mean: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Predicted torques and their propagated latent variances ``(N,)``, ``(N,)`` for the state in
         ``fast.buf`` (as :meth:`FastPath.mean`). The kernel rows come from the compiled loop when the fast path
-        has it (:mod:`cascgp.models.fastkernel`), else from :meth:`mean_var_numpy` (equal to round-off)."""
+        has it (:mod:`cascgp.models.fastkernel`), and so do the solves without an online window; else they come
+        from :meth:`mean_var_numpy` (equal to round-off)."""
         N = len(fast.order)
         mean, var = np.empty(N), np.empty(N)
         K, G = np.empty(fast.alpha.shape), np.zeros(N)
         if fast.jit is None or not jit_mean(fast.jit, fast.buf, tau_mean, mean, (K, G)):
             return self.mean_var_numpy(fast, tau_mean)
+        if self.window is None and self.Lc is not None and jit_var(fast.jit, self.Lc, self.scale, self.prior, K, G,
+                                                                    var):
+            return mean, var
         for j in fast.order:
             tj = fast.torque_from[j]
             var[j] = self._var(j, K[j], G[j] * G[j] * var[tj] if tj is not None else None)
