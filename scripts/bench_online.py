@@ -49,6 +49,38 @@ def _times(fn, args_list, reps: int) -> dict[str, float]:
             "p99_us": float(np.percentile(us, 99))}
 
 
+#: Alternating rounds of :func:`_paths_side_by_side`.
+PATH_ROUNDS = 10
+
+
+def _paths_side_by_side(model, q, samples) -> dict[str, dict[str, float]]:
+    """The compiled online sample against the NumPy one, and the compiled variance loop against the per-joint
+    BLAS solves, on the same model in alternating rounds (the reference path is switched on by clearing the
+    compiled path's handle, as a failed compile does; the window's full and in use)."""
+    win, fv = model._online, model._fast_var_offline
+    work, Lc = win._jit, fv.Lc
+    pairs = {"add_sample (full window)": (model.add_sample, samples, 60,
+                                          lambda on: setattr(win, "_jit", work if on else None)),
+             "predict_one_var (offline)": (model.predict_one_var, q, 300,
+                                           lambda on: object.__setattr__(fv, "Lc", Lc if on else None))}
+    out = {}
+    for label, (fn, args, reps, use) in pairs.items():
+        if (work if label.startswith("add") else Lc) is None:
+            continue
+        if label.startswith("predict"):
+            model.stop_online()  # the offline variance path
+        t = {True: [], False: []}
+        for k in range(PATH_ROUNDS):
+            for on in (True, False):
+                use(on)
+                t[on].append(_times(fn, args[k * reps % len(args):] + args, reps)["median_us"])
+        use(True)
+        ratio = float(np.median(np.array(t[True]) / np.array(t[False])))
+        out[label] = {"compiled_us": float(np.median(t[True])), "reference_us": float(np.median(t[False])),
+                      "ratio": ratio}
+    return out
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True)
@@ -112,8 +144,10 @@ def main(argv: list[str] | None = None) -> None:
     rows["predict_one_var (online, full window)"] = _times(model.predict_one_var, q, a.reps)
     from cascgp.models.fastkernel import jit_enabled
 
+    paths = _paths_side_by_side(model, q, samples) if jit_enabled() else {}
+
     res = {"n_train": model.n_train, "window": a.window, "fit_s": fit_s, "reps": a.reps, "rows": rows,
-           "compiled": jit_enabled(),
+           "compiled": jit_enabled(), "compiled_vs_reference_side_by_side": paths,
            "control_period_us": 25_000.0, "command": "python -m scripts.bench_online " + " ".join(argv or []),
            "git_commit": git_commit(),
            "load_average_end": list(os.getloadavg()), "cpu_count": os.cpu_count()}
@@ -123,6 +157,13 @@ def main(argv: list[str] | None = None) -> None:
     print("| call | median (us) | p90 (us) | p99 (us) |\n|---|---|---|---|")
     for k, v in rows.items():
         print(f"| {k} | {v['median_us']:.0f} | {v['p90_us']:.0f} | {v['p99_us']:.0f} |")
+    if paths:
+        print(f"\nThe compiled loops against their reference paths, side by side ({PATH_ROUNDS} alternating rounds, "
+              "medians of the rounds' medians):")
+        print("| call | compiled (us) | reference (us) | compiled / reference (median of the rounds' ratios) |")
+        print("|---|---|---|---|")
+        for k, v in paths.items():
+            print(f"| {k} | {v['compiled_us']:.0f} | {v['reference_us']:.0f} | {v['ratio']:.2f} |")
     print(f"wrote {out / 'bench_online.json'}")
 
 

@@ -43,6 +43,7 @@ Derivative-based (``db``) models only.
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 import numpy as np
@@ -53,6 +54,7 @@ from cascgp.checks import check_count
 from cascgp.gp.checks import check_scale
 from cascgp.gp.kernels import get_kernel
 from cascgp.gp.likelihood import blas_threads
+from cascgp.models.fastkernel import JIT_WT, jit_enabled, kernel_id
 from cascgp.models.fastpath import FastPath, FastVariance
 from cascgp.models.queries import one_real, state_cols
 
@@ -75,7 +77,8 @@ class _JointWindow:
         n0, d = P.Z.shape
         self.kernel = get_kernel(P.kernel)
         self.noise = P.noise_var + P.jitter
-        self.U00 = np.ascontiguousarray(P.L).T  # L00^T, Fortran-ordered: what BLAS reads without a copy
+        self.Lf = np.ascontiguousarray(P.L)
+        self.U00 = self.Lf.T  # L00^T, Fortran-ordered: what BLAS reads without a copy
         y0 = P.L @ (P.L.T @ P.alpha)  # the normalised targets
         self.u0 = dtrsv(self.U00, y0, lower=0, trans=1)  # L00^-1 y0
         self.alpha_fit = np.ascontiguousarray(P.alpha, dtype=np.float64)
@@ -200,7 +203,74 @@ class OnlineWindow:
         self.n0 = posts[0].Z.shape[0]
         self.c = math.sqrt(self.fast.kernel.r2_scale)
         self.n_added = 0
+        D = 3 * model.dof  # columns of the flattened states; the measured torques follow them
+        self._cols = [np.concatenate([state_cols(np.arange(D)[None], sj)[0], [D + tj] if tj is not None else []])
+                      .astype(np.intp) for sj, tj in model.specs]
         self._var: FastVariance | None = None
+        self._jit = self._compiled_work()
+
+    def _compiled_work(self) -> tuple | None:
+        """Work arrays of the compiled sample (:mod:`cascgp.models.online_kernel`), which is compiled (or loaded
+        from Numba's cache) and run once now on copies of the window, so that an episode's first sample does not
+        pay for it; None when the NumPy path runs (no Numba, ``CASCGP_JIT=0``, a kernel without a compiled form,
+        or a loop that fails to build)."""
+        if kernel_id(self.fast.kernel.name) < 0 or not jit_enabled() or self.fast.jit is None:
+            return None
+        try:
+            from cascgp.models import online_kernel
+        except ImportError:
+            return None
+        N, W, n0 = len(self.joints), self.window, self.n0
+        d = max(J.Zw.shape[1] for J in self.joints)
+        work = (np.zeros((N, d)), *(np.zeros((N, n0)) for _ in range(4)), *(np.zeros((N, W)) for _ in range(6)),
+                np.zeros((N, 2)), np.zeros(4, dtype=np.int32), np.zeros(2), np.zeros(3, dtype=np.uint8))
+        x = [J.P.x_mean.copy() for J in self.joints]
+        y = np.array([J.P.y_mean for J in self.joints])
+        try:
+            with blas_threads(1):
+                fails = self._propose_compiled(online_kernel, work, x, y)
+                self._commit_compiled(online_kernel, work, copies=True)
+        except Exception as exc:  # noqa: BLE001 - as for the control tick's loop: the NumPy path still works
+            warnings.warn(f"cascgp: the compiled online sample is not used ({type(exc).__name__}: {exc}); the "
+                          "NumPy path runs", RuntimeWarning, stacklevel=4)
+            return None
+        return work if fails < 0 else None
+
+    def _consts(self) -> np.ndarray:
+        """Per joint: signal variance, noise (plus jitter), target mean and scale, the fast path's weight scale
+        (:data:`~cascgp.models.online_kernel.CONSTS`), read at each sample as the NumPy path reads them."""
+        return np.array([(J.P.signal_var, J.noise, J.P.y_mean, J.P.y_std, J.P.y_std * J.P.signal_var)
+                         for J in self.joints])
+
+    def _per_joint(self, get: Any) -> tuple:
+        """``get(J)`` for every joint's window, as the tuple the compiled loops take."""
+        return tuple(get(J) for J in self.joints)
+
+    def _propose_compiled(self, ok: Any, work: tuple, x_per_joint: Any, y: np.ndarray) -> int:
+        """:func:`~cascgp.models.online_kernel.propose` on this window: -1, or the joint that refuses."""
+        f, J0, per = ok.blas(), self.joints[0], self._per_joint
+        xs = tuple(np.ascontiguousarray(x, dtype=np.float64) for x in x_per_joint)
+        return ok.propose(f["dtrsv"], f["dgemv"], f["dsymv"], kernel_id(self.fast.kernel.name),
+                          self.fast.zclip / self.c, J0.m, J0.n_in, xs, np.asarray(y, np.float64), self._consts(),
+                          per(lambda J: J.P.x_mean), per(lambda J: J.P.x_scale), per(lambda J: J.Lf),
+                          per(lambda J: J.P.Z), per(lambda J: J.Z2), per(lambda J: J.u0),
+                          per(lambda J: J.alpha_fit), per(lambda J: J.Zw), per(lambda J: J.B),
+                          per(lambda J: J.Sinv.T), per(lambda J: J.r), *work)
+
+    def _commit_compiled(self, ok: Any, work: tuple, copies: bool = False) -> None:
+        """:func:`~cascgp.models.online_kernel.commit` of the last proposal (``copies``: into copies of every
+        array it writes, changing nothing: the build's trial run)."""
+        fast = self.fast
+        cp = (lambda a: a.copy()) if copies else (lambda a: a)
+        tfrom = np.array([-1 if t is None else t for t in fast.torque_from], dtype=np.int64)
+        Pz, Prow, Pb, Pa0, _, Ps, Pt, Phv, Pr, Paw, _, Psc, fi, fd, ch = work
+        WT = fast.jit[JIT_WT] if fast.jit is not None else np.zeros((1, 1, 1))  # the compiled mean's copy of W
+        windows = [self._per_joint(lambda J, nm=nm: cp(getattr(J, nm))) for nm in ("Zw", "B", "Lw0", "S")]
+        weights = [self._per_joint(lambda J, nm=nm: cp(getattr(J, nm))) for nm in ("r", "alphaw", "alpha0")]
+        ok.commit(ok.blas()["dsyr"], self.joints[0].m, self.joints[0].n_in, self._consts(), tfrom, self.c,
+                  *windows, self._per_joint(lambda J: cp(J.Sinv.T)), *weights, cp(fast.W), cp(fast.W2), cp(WT),
+                  fast.jit is not None, cp(fast.Zt), cp(fast.alpha), Pz, Prow, Pb, Pa0, Ps, Pt, Phv, Pr, Paw, Psc,
+                  fi, fd, ch)
 
     def variance(self, base: FastVariance | None = None) -> FastVariance:
         """The variance path of the fitted sets plus this window (the window's term is read live at each
@@ -237,12 +307,8 @@ class OnlineWindow:
         S = model._states(arr["q"][None], arr["qd"][None], arr["qdd"][None], None).reshape(-1)
         target = arr["tau"] - (model._rbd_torque(arr["q"][None], arr["qd"][None], arr["qdd"][None])[0]
                                if model.parametric == "sp" else 0.0)
-        xs = []
-        for j in range(N):
-            sj, tj = model.specs[j]
-            x = state_cols(S[None], sj)[0]
-            xs.append(np.append(x, arr["tau"][tj]) if tj is not None else x)
-        self.add(xs, target)
+        v = np.concatenate([S, arr["tau"]])  # each joint's input: its state columns, then the neighbour's torque
+        self.add([v[c] for c in self._cols], target)
 
     def add(self, x_per_joint: list[np.ndarray], y: np.ndarray) -> None:
         """Add one sample: each joint's raw GP input (states, measured neighbour torque) and target. BLAS runs
@@ -251,6 +317,24 @@ class OnlineWindow:
             self._add(x_per_joint, y)
 
     def _add(self, x_per_joint: list[np.ndarray], y: np.ndarray) -> None:
+        if self._jit is not None:
+            from cascgp.models import online_kernel
+
+            j = self._propose_compiled(online_kernel, self._jit, x_per_joint, y)
+            if j >= 0:
+                raise np.linalg.LinAlgError("the window block is not positive definite (Schur complement "
+                                            f"{float(self._jit[11][j, 1])!r})")
+            self._commit_compiled(online_kernel, self._jit)
+            for j, J in enumerate(self.joints):  # the counts, and the periodic recomputation (in NumPy)
+                J.m = min(J.m + 1, self.window)
+                J.n_in += 1
+                if J.n_in % self.window == 0:
+                    J._recompute()
+                    scale = J.P.y_std * J.P.signal_var
+                    np.multiply(J.alpha0, scale, out=self.fast.alpha[j, :self.n0])
+                    np.multiply(J.alphaw, scale, out=self.fast.alpha[j, self.n0:])
+            self.n_added += 1
+            return
         fast, n0, c = self.fast, self.n0, self.c
         proposals = []  # every joint first: a joint that refuses the sample leaves all of them unchanged
         for j, (J, x) in enumerate(zip(self.joints, x_per_joint)):
