@@ -9,13 +9,14 @@ queries from the held-out motions: ``predict_one`` (the paper's feedforward), ``
 propagated variance, what the gated controller calls), ``add_sample`` (one online sample into every joint),
 and both single-query paths again with a full online window; the six triangular solves of the variance alone
 and one read of the same factors' triangles packed into one array (the memory floor of an exact variance at this
-n); and whole controller ticks
+n); one online sample's BLAS calls alone (the floor of its memory traffic); and whole controller ticks
 (:class:`cascgp.FeedforwardController`, PD plus feedforward): ungated, with the default innovation gate (RBD
 plus ``predict_one`` per tick) and its update per measured sample (``observe``: one more ``predict_one`` and RBD
 call), and with each variance gate (RBD plus ``predict_one_var``). Medians, 90th and 99th percentiles over
 ``--reps`` calls, one thread; ``compiled`` says whether the compiled single-query loop ran
-(:mod:`cascgp.models.fastkernel`: Numba installed, ``CASCGP_JIT`` not 0). Prints a table and writes
-``bench_online.json``.
+(:mod:`cascgp.models.fastkernel`: Numba installed, ``CASCGP_JIT`` not 0). When it ran, the compiled online sample
+and variance loop are also timed against their reference paths (NumPy sample, per-joint BLAS solves) on the same
+model in alternating rounds. Prints tables and writes ``bench_online.json``.
 """
 
 from __future__ import annotations
@@ -47,6 +48,32 @@ def _times(fn, args_list, reps: int) -> dict[str, float]:
     us = 1e6 * np.asarray(out)
     return {"median_us": float(np.median(us)), "p90_us": float(np.percentile(us, 90)),
             "p99_us": float(np.percentile(us, 99))}
+
+
+def _sample_blas_calls(model):
+    """One online sample's BLAS calls for every joint of the open (full) window, nothing else: the two triangular
+    solves with the fitted factor, the two products with B, the two symmetric products and the two rank-one
+    updates with the window's inverse (on a copy), through SciPy's wrappers (their call overhead included)."""
+    from scipy.linalg.blas import dgemv, dsymv, dsyr, dtrsv
+
+    rng = np.random.default_rng(0)
+    joints = model._online.joints
+    k0 = [np.abs(rng.standard_normal(J.U00.shape[0])) for J in joints]
+    v = [rng.standard_normal(J.window) for J in joints]
+    Sc = [J.Sinv.copy(order="F") for J in joints]
+
+    def calls():
+        for J, k, x, S in zip(joints, k0, v, Sc):
+            row = dtrsv(J.U00, k, lower=0, trans=1)
+            dtrsv(J.U00, row, lower=0)
+            dgemv(1.0, J.B.T, k, trans=1)  # B @ k0 (B.T: the Fortran-ordered view BLAS reads without a copy)
+            dgemv(1.0, J.B.T, x)  # x @ B
+            dsymv(1.0, S, x, lower=1)
+            dsymv(1.0, S, x, lower=1)
+            dsyr(1e-12, x, lower=1, a=S, overwrite_a=1)
+            dsyr(-1e-12, x, lower=1, a=S, overwrite_a=1)
+
+    return calls
 
 
 #: Alternating rounds of :func:`_paths_side_by_side`.
@@ -140,6 +167,8 @@ def main(argv: list[str] | None = None) -> None:
     model.start_online(a.window)
     samples = [(test.q[i], test.qd[i], test.qdd[i], test.tau[i]) for i in range(0, test.n_samples, 10)]
     rows["add_sample (window filling and full)"] = _times(model.add_sample, samples, max(3 * a.window, 300))
+    rows["add_sample's BLAS calls alone (full window; its memory floor)"] = _times(
+        _sample_blas_calls(model), [()], a.reps)
     rows["predict_one (online, full window)"] = _times(model.predict_one, q, a.reps)
     rows["predict_one_var (online, full window)"] = _times(model.predict_one_var, q, a.reps)
     from cascgp.models.fastkernel import jit_enabled

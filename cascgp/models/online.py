@@ -31,7 +31,9 @@ not be positive definite) is refused. A sample then costs two triangular solves 
 :math:`L_{00}` (:math:`L_{00}^{-1} k_0`, then :math:`b = L_{00}^{-\top} L_{00}^{-1} k_0`; :math:`O(n_0^2)`), two
 products with :math:`B` (:math:`O(n_0 w)`) and the rank-one terms. Why by hand: an extension of a fixed factor is
 not a library routine in NumPy/SciPy/torch, and refitting or refactorising the whole :math:`(n_0 + w)` matrix per
-sample (:math:`O(n^3)`) would not fit between control ticks.
+sample (:math:`O(n^3)`) would not fit between control ticks. With the ``fast`` extra (Numba) a sample runs
+compiled (:mod:`cascgp.models.online_kernel`: the same steps and BLAS calls in two compiled calls, equal to
+round-off); this module's NumPy form is the reference and runs without it.
 
 The single-query paths (:meth:`~cascgp.models.CascadedGPModel.predict_one`, ``predict_one_var``) read the
 enlarged sets: the fast path is rebuilt with room for the window (its rows ``n0 + slot``; empty slots carry zero
@@ -322,8 +324,8 @@ class OnlineWindow:
 
             j = self._propose_compiled(online_kernel, self._jit, x_per_joint, y)
             if j >= 0:
-                raise np.linalg.LinAlgError("the window block is not positive definite (Schur complement "
-                                            f"{float(self._jit[11][j, 1])!r})")
+                schur = float(self._jit[11][j, 1])  # the proposal's (c, delta) rows
+                raise np.linalg.LinAlgError(f"the window block is not positive definite (Schur complement {schur!r})")
             self._commit_compiled(online_kernel, self._jit)
             for j, J in enumerate(self.joints):  # the counts, and the periodic recomputation (in NumPy)
                 J.m = min(J.m + 1, self.window)

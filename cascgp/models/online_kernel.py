@@ -113,6 +113,8 @@ def propose(trsv: Any, gemv: Any, symv: Any, kid: int, zlim: float, m: int, n_in
     drop = m == W
     h = W if drop else m  # slots held
     for j in range(N):
+        if not (Lf[j].flags.c_contiguous and B[j].flags.c_contiguous and ST[j].flags.c_contiguous):
+            raise ValueError("online sample: BLAS reads the factor, B and the inverse as contiguous blocks")
         n0, d = Z[j].shape
         sv, noise = consts[j, 0], consts[j, 1]
         x, mu, sc, z = xs[j], xm[j], xsc[j], Pz[j]
@@ -201,6 +203,8 @@ def commit(syr: Any, m: int, n_in: int, consts: np.ndarray, tfrom: np.ndarray, c
         n0 = B[j].shape[1]
         d = Zw[j].shape[1]
         STj, t = ST[j], Pt[j]
+        if not STj.flags.c_contiguous:
+            raise ValueError("online sample: BLAS writes the inverse as a contiguous block")
         if drop:
             _syr(syr, -1.0 / t[o], t, STj, fi, fd, ch)
             for i in range(W):
