@@ -12,6 +12,7 @@ from cascgp.features import states_from_arrays
 from cascgp.gp import GPFitConfig
 from cascgp.gp.kernels import get_kernel
 from cascgp.models import make_model
+from cascgp.models.fastkernel import JIT_WT
 from tests.conftest import make_arm, sinusoid_data
 
 
@@ -224,27 +225,39 @@ def test_compiled_and_numpy_samples_agree_as_the_window_turns_over(name: str) ->
     def close(a, b, rel, what):
         np.testing.assert_allclose(a, b, rtol=rel, atol=rel * float(np.abs(b).max()), err_msg=what)
 
-    for i in range(11):  # fills the window, drops the oldest, recomputes its inverse twice (at 4 and 8)
+    far = (1e9 * new.q[11], 1e9 * new.qd[11], new.qdd[11], new.tau[11])  # normalised inputs beyond the clip
+    for i in range(12):  # fills the window, drops the oldest, recomputes its inverse twice (at 4 and 8)
+        sample = far if i == 11 else (new.q[i], new.qd[i], new.qdd[i], new.tau[i])
         for m in (model, ref):
-            m.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
+            m.add_sample(*sample)
+        f, g = model._online.fast, ref._online.fast
         for j, (J, R) in enumerate(zip(model._online.joints, ref._online.joints)):
             assert (J.m, J.n_in) == (R.m, R.n_in)
-            for nm in ("Zw", "B", "Lw0", "S", "r", "alphaw", "alpha0"):
+            np.testing.assert_array_equal(J.Zw, R.Zw)  # the same normalisation and clipping, bit for bit
+            for nm in ("B", "Lw0", "S", "r", "alphaw", "alpha0"):
                 close(getattr(J, nm), getattr(R, nm), rel[j], nm)
             close(np.tril(J.Sinv), np.tril(R.Sinv), rel[j], "Sinv")
-        f, g = model._online.fast, ref._online.fast
-        for nm in ("W", "W2", "Zt", "alpha"):
-            close(getattr(f, nm), getattr(g, nm), max(rel), nm)
-        np.testing.assert_array_equal(f.jit[2], f.W.transpose(0, 2, 1))  # the compiled mean's copy kept equal
+            scale = J.P.y_std * J.P.signal_var  # the fast path's weights are the window's, also after a recompute
+            np.testing.assert_array_equal(f.alpha[j], np.concatenate([J.alpha0, J.alphaw]) * scale)
+        for nm in ("W", "Zt"):
+            np.testing.assert_array_equal(getattr(f, nm), getattr(g, nm), err_msg=nm)
+        close(f.W2, g.W2, max(rel), "W2")
+        np.testing.assert_array_equal(f.jit[JIT_WT], f.W.transpose(0, 2, 1))  # the compiled mean's copy kept equal
+        if i == 11:
+            break
         m1, v1 = model.predict_one_var(*query)
         m2, v2 = ref.predict_one_var(*query)
         np.testing.assert_allclose(m1, m2, rtol=1e-9, atol=1e-9)
         np.testing.assert_allclose(v1, v2, rtol=1e-8, atol=1e-12)
         np.testing.assert_allclose(model.predict_one(*query), m2, rtol=1e-9, atol=1e-9)
-    assert model.n_online == ref.n_online == 11
+    zlim = model._online.fast.zclip / model._online.c
+    assert any(np.abs(J.Zw).max() == zlim for J in model._online.joints)  # the far sample was clipped
+    assert model.n_online == ref.n_online == 12
 
 
 def test_a_compiled_sample_that_fails_to_build_leaves_the_numpy_path(monkeypatch) -> None:
+    """A compiled sample that fails in its trial run (here: any error) warns and leaves the NumPy path, which
+    works; ``CASCGP_JIT=0`` chooses the NumPy path without a warning."""
     pytest.importorskip("numba")
     import cascgp.models.online_kernel as ok
 
@@ -261,6 +274,23 @@ def test_a_compiled_sample_that_fails_to_build_leaves_the_numpy_path(monkeypatch
     new = sinusoid_data(make_arm(3, friction=0.8), 1.0, 10.0, seed=3)
     model.add_sample(new.q[0], new.qd[0], new.qdd[0], new.tau[0])
     assert model.n_online == 1
+    monkeypatch.undo()
+    monkeypatch.setenv("CASCGP_JIT", "0")
+    model.start_online(window=3)
+    assert model._online._jit is None
+
+
+def test_add_refuses_inputs_of_the_wrong_shape_and_changes_nothing() -> None:
+    model = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(
+        sinusoid_data(make_arm(3), 2.0, 10.0, seed=1))
+    model.start_online(window=3)
+    win = model._online
+    xs = [np.zeros(J.Zw.shape[1]) for J in win.joints]
+    for bad_x, bad_y, match in ((xs[:2], np.zeros(3), "3 joint inputs"), (xs, np.zeros(2), "3 joint inputs"),
+                                ([xs[0], xs[1], np.zeros(1)], np.zeros(3), r"x_per_joint\[2\]")):
+        with pytest.raises(ValueError, match=match):
+            win.add(bad_x, bad_y)
+    assert model.n_online == 0 and all(J.m == 0 for J in win.joints)
 
 
 def test_the_variance_path_is_built_once_per_fit_and_shared_by_online_windows() -> None:
@@ -284,3 +314,42 @@ def test_the_variance_path_is_built_once_per_fit_and_shared_by_online_windows() 
     model.stop_online()
     assert model.prepare_variance() is base
     np.testing.assert_array_equal(model.predict_one_var(*query)[1], v_off)
+
+
+def test_a_numba_that_cannot_cache_leaves_the_numpy_paths(monkeypatch) -> None:
+    """Numba refuses ``cache=True`` when it decorates a function and finds no writable cache location: the compiled
+    online sample (decorated when its module is imported) and the control tick's loops (decorated on first use)
+    then warn and leave their NumPy paths."""
+    numba = pytest.importorskip("numba")
+    import sys
+
+    import cascgp.models
+    import cascgp.models.fastkernel as fk
+
+    monkeypatch.delenv("CASCGP_JIT", raising=False)
+    fitted = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(
+        sinusoid_data(make_arm(3), 2.0, 10.0, seed=1))
+    if fitted._fast.jit is None:
+        pytest.skip("the compiled tick is not in use here")
+
+    def no_cache(*args, **kwargs):
+        raise RuntimeError("cannot cache function: no locator available")
+
+    monkeypatch.setattr(numba, "njit", no_cache)
+    monkeypatch.delitem(sys.modules, "cascgp.models.online_kernel", raising=False)
+    monkeypatch.delattr(cascgp.models, "online_kernel", raising=False)
+    with pytest.warns(RuntimeWarning, match="compiled online sample is not used"):
+        fitted.start_online(window=3)
+    assert fitted._online._jit is None
+    new = sinusoid_data(make_arm(3, friction=0.8), 1.0, 10.0, seed=3)
+    fitted.add_sample(new.q[0], new.qd[0], new.qdd[0], new.tau[0])
+    assert fitted.n_online == 1
+
+    monkeypatch.setattr(fk, "_compiled", {})  # nothing decorated yet in this process
+    model = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=20))
+    with pytest.warns(RuntimeWarning, match="compiled single-query loop is not used"):
+        model.adopt_banks(fitted.banks, fitted.where, fitted.n_train)
+    assert model._fast.jit is None and model.prepare_variance().Lc is None
+    q = (new.q[1], new.qd[1], new.qdd[1])
+    fitted.stop_online()
+    np.testing.assert_allclose(model.predict_one(*q), fitted.predict_one(*q), rtol=1e-12, atol=1e-12)

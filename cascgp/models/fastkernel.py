@@ -191,6 +191,12 @@ def _var_source(trsv: Any, Lc: tuple, scale: np.ndarray, prior: np.ndarray, ints
         var[j] = w
 
 
+def _dropped(what: str, exc: Exception) -> None:
+    """Warn that a compiled loop is not used (the NumPy path runs)."""
+    warnings.warn(f"cascgp: the compiled {what} is not used ({type(exc).__name__}: {exc}); the NumPy path runs",
+                  RuntimeWarning, stacklevel=4)
+
+
 def _kernel() -> Callable[..., Any] | None:
     """The compiled :func:`_source` (compiled once per process, cached on disk), or None without Numba."""
     if "mean" not in _compiled:
@@ -198,6 +204,9 @@ def _kernel() -> Callable[..., Any] | None:
             numba: Any = importlib.import_module("numba")
             _compiled["mean"] = numba.njit(cache=True, nogil=True, fastmath={"contract"})(_source)
         except ImportError:
+            _compiled["mean"] = None
+        except Exception as exc:  # noqa: BLE001 - e.g. no writable cache location (Numba checks when it decorates)
+            _dropped("single-query loop", exc)
             _compiled["mean"] = None
     return _compiled["mean"]
 
@@ -209,6 +218,9 @@ def _var_kernel() -> Callable[..., Any] | None:
             numba: Any = importlib.import_module("numba")
             _compiled["var"] = numba.njit(cache=True, nogil=True)(_var_source)
         except ImportError:
+            _compiled["var"] = None
+        except Exception as exc:  # noqa: BLE001 - as in _kernel
+            _dropped("variance loop", exc)
             _compiled["var"] = None
     return _compiled["var"]
 
@@ -260,8 +272,7 @@ def jit_args(kernel: str, arrays: tuple) -> tuple | None:
     try:
         jit_mean(args, np.zeros(D + 1), None, out)
     except Exception as exc:  # noqa: BLE001 - e.g. no writable cache location: the NumPy path still works
-        warnings.warn(f"cascgp: the compiled single-query loop is not used ({type(exc).__name__}: {exc}); "
-                      "the NumPy path runs", RuntimeWarning, stacklevel=3)
+        _dropped("single-query loop", exc)
         _compiled["mean"] = None
         return None
     return args
@@ -306,8 +317,7 @@ def jit_var_factors(factors: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...] |
         fn(_blas_dtrsv(), Lc, np.ones(N), np.ones(N), ints, np.zeros((N, n)), np.zeros(N), np.zeros(N), np.zeros(n),
            np.zeros(3, dtype=np.int32), np.zeros(3, dtype=np.uint8))
     except Exception as exc:  # noqa: BLE001 - as in jit_args: the NumPy path still works
-        warnings.warn(f"cascgp: the compiled variance loop is not used ({type(exc).__name__}: {exc}); "
-                      "the NumPy path runs", RuntimeWarning, stacklevel=3)
+        _dropped("variance loop", exc)
         _compiled["var"] = None
         return None
     return Lc

@@ -62,6 +62,8 @@ from cascgp.models.queries import one_real, state_cols
 
 __all__ = ["OnlineWindow", "check_supported"]
 
+#: Position in the compiled sample's work arrays of the proposal's rows ``(c, delta)`` per joint.
+_PSC = 11
 #: Magnitudes below which a sample's values are finite and normalisable without checking each field.
 _SMALL = 1e150
 
@@ -222,6 +224,10 @@ class OnlineWindow:
             from cascgp.models import online_kernel
         except ImportError:
             return None
+        except Exception as exc:  # noqa: BLE001 - e.g. Numba finds no writable cache location when it decorates
+            warnings.warn(f"cascgp: the compiled online sample is not used ({type(exc).__name__}: {exc}); the "
+                          "NumPy path runs", RuntimeWarning, stacklevel=4)
+            return None
         N, W, n0 = len(self.joints), self.window, self.n0
         d = max(J.Zw.shape[1] for J in self.joints)
         work = (np.zeros((N, d)), *(np.zeros((N, n0)) for _ in range(4)), *(np.zeros((N, W)) for _ in range(6)),
@@ -230,13 +236,14 @@ class OnlineWindow:
         y = np.array([J.P.y_mean for J in self.joints])
         try:
             with blas_threads(1):
-                fails = self._propose_compiled(online_kernel, work, x, y)
+                if self._propose_compiled(online_kernel, work, x, y) >= 0:
+                    return None  # a window that refuses the trial sample: the NumPy path, untried
                 self._commit_compiled(online_kernel, work, copies=True)
         except Exception as exc:  # noqa: BLE001 - as for the control tick's loop: the NumPy path still works
             warnings.warn(f"cascgp: the compiled online sample is not used ({type(exc).__name__}: {exc}); the "
                           "NumPy path runs", RuntimeWarning, stacklevel=4)
             return None
-        return work if fails < 0 else None
+        return work
 
     def _consts(self) -> np.ndarray:
         """Per joint: signal variance, noise (plus jitter), target mean and scale, the fast path's weight scale
@@ -248,18 +255,19 @@ class OnlineWindow:
         """``get(J)`` for every joint's window, as the tuple the compiled loops take."""
         return tuple(get(J) for J in self.joints)
 
-    def _propose_compiled(self, ok: Any, work: tuple, x_per_joint: Any, y: np.ndarray) -> int:
-        """:func:`~cascgp.models.online_kernel.propose` on this window: -1, or the joint that refuses."""
-        f, J0, per = ok.blas(), self.joints[0], self._per_joint
+    def _propose_compiled(self, kernels: Any, work: tuple, x_per_joint: Any, y: np.ndarray) -> int:
+        """:func:`~cascgp.models.online_kernel.propose` (``kernels``: that module) on this window: -1, or the
+        joint that refuses."""
+        f, J0, per = kernels.blas(), self.joints[0], self._per_joint
         xs = tuple(np.ascontiguousarray(x, dtype=np.float64) for x in x_per_joint)
-        return ok.propose(f["dtrsv"], f["dgemv"], f["dsymv"], kernel_id(self.fast.kernel.name),
+        return kernels.propose(f["dtrsv"], f["dgemv"], f["dsymv"], kernel_id(self.fast.kernel.name),
                           self.fast.zclip / self.c, J0.m, J0.n_in, xs, np.asarray(y, np.float64), self._consts(),
                           per(lambda J: J.P.x_mean), per(lambda J: J.P.x_scale), per(lambda J: J.Lf),
                           per(lambda J: J.P.Z), per(lambda J: J.Z2), per(lambda J: J.u0),
                           per(lambda J: J.alpha_fit), per(lambda J: J.Zw), per(lambda J: J.B),
                           per(lambda J: J.Sinv.T), per(lambda J: J.r), *work)
 
-    def _commit_compiled(self, ok: Any, work: tuple, copies: bool = False) -> None:
+    def _commit_compiled(self, kernels: Any, work: tuple, copies: bool = False) -> None:
         """:func:`~cascgp.models.online_kernel.commit` of the last proposal (``copies``: into copies of every
         array it writes, changing nothing: the build's trial run)."""
         fast = self.fast
@@ -269,10 +277,10 @@ class OnlineWindow:
         WT = fast.jit[JIT_WT] if fast.jit is not None else np.zeros((1, 1, 1))  # the compiled mean's copy of W
         windows = [self._per_joint(lambda J, nm=nm: cp(getattr(J, nm))) for nm in ("Zw", "B", "Lw0", "S")]
         weights = [self._per_joint(lambda J, nm=nm: cp(getattr(J, nm))) for nm in ("r", "alphaw", "alpha0")]
-        ok.commit(ok.blas()["dsyr"], self.joints[0].m, self.joints[0].n_in, self._consts(), tfrom, self.c,
-                  *windows, self._per_joint(lambda J: cp(J.Sinv.T)), *weights, cp(fast.W), cp(fast.W2), cp(WT),
-                  fast.jit is not None, cp(fast.Zt), cp(fast.alpha), Pz, Prow, Pb, Pa0, Ps, Pt, Phv, Pr, Paw, Psc,
-                  fi, fd, ch)
+        kernels.commit(kernels.blas()["dsyr"], self.joints[0].m, self.joints[0].n_in, self._consts(), tfrom,
+                       self.c, *windows, self._per_joint(lambda J: cp(J.Sinv.T)), *weights, cp(fast.W),
+                       cp(fast.W2), cp(WT), fast.jit is not None, cp(fast.Zt), cp(fast.alpha), Pz, Prow, Pb, Pa0, Ps,
+                       Pt, Phv, Pr, Paw, Psc, fi, fd, ch)
 
     def variance(self, base: FastVariance | None = None) -> FastVariance:
         """The variance path of the fitted sets plus this window (the window's term is read live at each
@@ -314,7 +322,15 @@ class OnlineWindow:
 
     def add(self, x_per_joint: list[np.ndarray], y: np.ndarray) -> None:
         """Add one sample: each joint's raw GP input (states, measured neighbour torque) and target. BLAS runs
-        on one thread (its threads spun against the simulation: 30 ms instead of 0.3 ms per window factor)."""
+        on one thread (its threads spun against the simulation: 30 ms instead of 0.3 ms per window factor).
+        ``ValueError`` naming the argument for a wrong number of joints or input length, changing nothing."""
+        N = len(self.joints)
+        if len(x_per_joint) != N or np.shape(y) != (N,):
+            raise ValueError(f"add: expected {N} joint inputs and targets of shape ({N},), got "
+                             f"{len(x_per_joint)} inputs and targets of shape {np.shape(y)}")
+        for j, (J, x) in enumerate(zip(self.joints, x_per_joint)):
+            if np.shape(x) != (J.Zw.shape[1],):
+                raise ValueError(f"add: x_per_joint[{j}]: expected shape ({J.Zw.shape[1]},), got {np.shape(x)}")
         with blas_threads(1):
             self._add(x_per_joint, y)
 
@@ -324,7 +340,7 @@ class OnlineWindow:
 
             j = self._propose_compiled(online_kernel, self._jit, x_per_joint, y)
             if j >= 0:
-                schur = float(self._jit[11][j, 1])  # the proposal's (c, delta) rows
+                schur = float(self._jit[_PSC][j, 1])
                 raise np.linalg.LinAlgError(f"the window block is not positive definite (Schur complement {schur!r})")
             self._commit_compiled(online_kernel, self._jit)
             for j, J in enumerate(self.joints):  # the counts, and the periodic recomputation (in NumPy)

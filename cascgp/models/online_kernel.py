@@ -22,11 +22,11 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["blas", "propose", "commit"]
+__all__ = ["CONSTS", "blas", "propose", "commit"]
 
 #: ImportError without Numba (the ``fast`` extra): :mod:`cascgp.models.online` then runs the NumPy path.
 numba: Any = importlib.import_module("numba")
-_jit = numba.njit(cache=True, nogil=True)
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")  # x / 0 is inf or NaN, as in NumPy
 _SQRT5 = math.sqrt(5.0)
 #: Columns of the per-joint constants :func:`propose` and :func:`commit` take: signal variance, noise (plus
 #: jitter), target mean, target scale, the fast path's weight scale (target scale times signal variance).
@@ -78,7 +78,7 @@ def _without(symv: Any, o: int, ST: np.ndarray, x: np.ndarray, t: np.ndarray, ha
     fi[0], fi[1] = W, 1
     fd[0], fd[1] = 1.0, 0.0
     symv(ch[0:].ctypes, fi[0:].ctypes, fd[0:].ctypes, ST.ctypes, fi[0:].ctypes, x.ctypes, fi[1:].ctypes,
-       fd[1:].ctypes, y.ctypes, fi[1:].ctypes)
+         fd[1:].ctypes, y.ctypes, fi[1:].ctypes)
     if has_t:
         f = np.dot(t, x) / t[o]
         for i in range(W):
@@ -98,11 +98,11 @@ def _syr(fn: Any, alpha: float, x: np.ndarray, ST: np.ndarray, fi: np.ndarray, f
 
 @_jit
 def propose(trsv: Any, gemv: Any, symv: Any, kid: int, zlim: float, m: int, n_in: int, xs: tuple,
-                    y: np.ndarray, consts: np.ndarray, xm: tuple, xsc: tuple, Lf: tuple, Z: tuple, Z2: tuple,
-                    u0: tuple, alpha_fit: tuple, Zw: tuple, B: tuple, ST: tuple, r: tuple, Pz: np.ndarray,
-                    Prow: np.ndarray, Pb: np.ndarray, Pa0: np.ndarray, Pk: np.ndarray, Ps: np.ndarray,
-                    Pt: np.ndarray, Phv: np.ndarray, Pr: np.ndarray, Paw: np.ndarray, Pw: np.ndarray,
-                    Psc: np.ndarray, fi: np.ndarray, fd: np.ndarray, ch: np.ndarray) -> int:  # pragma: no cover
+            y: np.ndarray, consts: np.ndarray, xm: tuple, xsc: tuple, Lf: tuple, Z: tuple, Z2: tuple,
+            u0: tuple, alpha_fit: tuple, Zw: tuple, B: tuple, ST: tuple, r: tuple, Pz: np.ndarray,
+            Prow: np.ndarray, Pb: np.ndarray, Pa0: np.ndarray, Pk: np.ndarray, Ps: np.ndarray,
+            Pt: np.ndarray, Phv: np.ndarray, Pr: np.ndarray, Paw: np.ndarray, Pw: np.ndarray,
+            Psc: np.ndarray, fi: np.ndarray, fd: np.ndarray, ch: np.ndarray) -> int:  # pragma: no cover
     """Every joint's :meth:`~cascgp.models.online._JointWindow.propose` (same steps, same names) into the
     ``P*`` rows, changing nothing of the windows: ``-1``, or the first joint whose enlarged matrix would not be
     positive definite (its Schur complement in ``Psc[j, 1]``). ``Lf[j]``: the C-ordered lower factor (the memory
@@ -187,11 +187,11 @@ def propose(trsv: Any, gemv: Any, symv: Any, kid: int, zlim: float, m: int, n_in
 
 @_jit
 def commit(syr: Any, m: int, n_in: int, consts: np.ndarray, tfrom: np.ndarray, c: float, Zw: tuple,
-                   B: tuple, Lw0: tuple, S: tuple, ST: tuple, r: tuple, alphaw: tuple, alpha0: tuple,
-                   fW: np.ndarray, fW2: np.ndarray, fWT: np.ndarray, has_WT: bool, fZt: np.ndarray,
-                   falpha: np.ndarray, Pz: np.ndarray, Prow: np.ndarray, Pb: np.ndarray, Pa0: np.ndarray,
-                   Ps: np.ndarray, Pt: np.ndarray, Phv: np.ndarray, Pr: np.ndarray, Paw: np.ndarray,
-                   Psc: np.ndarray, fi: np.ndarray, fd: np.ndarray, ch: np.ndarray) -> None:  # pragma: no cover
+           B: tuple, Lw0: tuple, S: tuple, ST: tuple, r: tuple, alphaw: tuple, alpha0: tuple,
+           fW: np.ndarray, fW2: np.ndarray, fWT: np.ndarray, has_WT: bool, fZt: np.ndarray,
+           falpha: np.ndarray, Pz: np.ndarray, Prow: np.ndarray, Pb: np.ndarray, Pa0: np.ndarray,
+           Ps: np.ndarray, Pt: np.ndarray, Phv: np.ndarray, Pr: np.ndarray, Paw: np.ndarray,
+           Psc: np.ndarray, fi: np.ndarray, fd: np.ndarray, ch: np.ndarray) -> None:  # pragma: no cover
     """Every joint's :meth:`~cascgp.models.online._JointWindow.commit` of :func:`propose`'s rows, and the
     fast path's rows and weights (``OnlineWindow._add``); the counts and the periodic recomputation stay with
     the caller."""
@@ -259,4 +259,3 @@ def blas() -> dict[str, Any]:
         _blas.update({name: ctypes.CFUNCTYPE(None, *([vp] * n))(get("scipy.linalg.cython_blas", name))
                       for name, n in _BLAS_ARGS.items()})
     return _blas
-
