@@ -2,8 +2,8 @@ r"""Optional compiled form of an online sample (:meth:`cascgp.models.online.Onli
 
 Why compiled, and why by hand: a sample's arithmetic for a 6-joint cascade at n = 500 with a window of 150 is six
 pairs of triangular solves with the fitted factors and two products with each window's :math:`B` (about 19 MB of
-memory read: those BLAS calls alone take about a third of a millisecond on a 2-core machine), but the NumPy form
-issues some forty array calls per joint (the proposal, the rank-one updates, the fast path's rows), each a
+memory read: those BLAS calls alone take 0.4-0.6 ms on a 2-core machine, ``scripts.bench_online``), but the NumPy
+form issues some forty array calls per joint (the proposal, the rank-one updates, the fast path's rows), each a
 microsecond or more of dispatch, which more than doubled the cost. One compiled call proposes the sample to every
 joint and a second commits it. The memory-heavy steps are the same BLAS routines the NumPy path calls (SciPy's
 ``dtrsv``, ``dgemv``, ``dsymv`` and ``dsyr``, through its Cython API, passed to the loops as arguments so that Numba
