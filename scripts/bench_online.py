@@ -9,7 +9,8 @@ queries from the held-out motions: ``predict_one`` (the paper's feedforward), ``
 propagated variance, what the gated controller calls), ``add_sample`` (one online sample into every joint),
 and both single-query paths again with a full online window; the six triangular solves of the variance alone
 and one read of the same factors' triangles packed into one array (the memory floor of an exact variance at this
-n); one online sample's BLAS calls alone (the floor of its memory traffic); and whole controller ticks
+n); one online sample's BLAS calls alone (with SciPy's wrappers' overhead: near the floor of its memory traffic);
+and whole controller ticks
 (:class:`cascgp.FeedforwardController`, PD plus feedforward): ungated, with the default innovation gate (RBD
 plus ``predict_one`` per tick) and its update per measured sample (``observe``: one more ``predict_one`` and RBD
 call), and with each variance gate (RBD plus ``predict_one_var``). Medians, 90th and 99th percentiles over
@@ -25,6 +26,7 @@ import argparse
 import os
 import time
 from pathlib import Path
+from typing import Any, Callable
 
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
@@ -50,7 +52,7 @@ def _times(fn, args_list, reps: int) -> dict[str, float]:
             "p99_us": float(np.percentile(us, 99))}
 
 
-def _sample_blas_calls(model):
+def _sample_blas_calls(model: Any) -> Callable[[], None]:
     """One online sample's BLAS calls for every joint of the open (full) window, nothing else: the two triangular
     solves with the fitted factor, the two products with B, the two symmetric products and the two rank-one
     updates with the window's inverse (on a copy), through SciPy's wrappers (their call overhead included)."""
@@ -62,7 +64,7 @@ def _sample_blas_calls(model):
     v = [rng.standard_normal(J.window) for J in joints]
     Sc = [J.Sinv.copy(order="F") for J in joints]
 
-    def calls():
+    def calls() -> None:
         for J, k, x, S in zip(joints, k0, v, Sc):
             row = dtrsv(J.U00, k, lower=0, trans=1)
             dtrsv(J.U00, row, lower=0)
@@ -80,7 +82,7 @@ def _sample_blas_calls(model):
 PATH_ROUNDS = 10
 
 
-def _paths_side_by_side(model, q, samples) -> dict[str, dict[str, float]]:
+def _paths_side_by_side(model: Any, q: list, samples: list) -> dict[str, dict[str, float]]:
     """The compiled online sample against the NumPy one, and the compiled variance loop against the per-joint
     BLAS solves, on the same model in alternating rounds (the reference path is switched on by clearing the
     compiled path's handle, as a failed compile does; the window's full and in use)."""
@@ -167,7 +169,7 @@ def main(argv: list[str] | None = None) -> None:
     model.start_online(a.window)
     samples = [(test.q[i], test.qd[i], test.qdd[i], test.tau[i]) for i in range(0, test.n_samples, 10)]
     rows["add_sample (window filling and full)"] = _times(model.add_sample, samples, max(3 * a.window, 300))
-    rows["add_sample's BLAS calls alone (full window; its memory floor)"] = _times(
+    rows["add_sample's BLAS calls alone (full window, through SciPy's wrappers)"] = _times(
         _sample_blas_calls(model), [()], a.reps)
     rows["predict_one (online, full window)"] = _times(model.predict_one, q, a.reps)
     rows["predict_one_var (online, full window)"] = _times(model.predict_one_var, q, a.reps)
