@@ -255,6 +255,23 @@ def test_compiled_and_numpy_samples_agree_as_the_window_turns_over(name: str) ->
     assert model.n_online == ref.n_online == 12
 
 
+def _small_np_inward():
+    """A quickly fitted 3-joint NP inward cascade (the fallback tests' model)."""
+    return make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(
+        sinusoid_data(make_arm(3), 2.0, 10.0, seed=1))
+
+
+def _opens_on_the_numpy_path_with_a_warning(model):
+    """Open a window that warns and runs the NumPy path; one sample enters it. Returns the samples' motion."""
+    with pytest.warns(RuntimeWarning, match="compiled online sample is not used"):
+        model.start_online(window=3)
+    assert model._online._jit is None
+    new = sinusoid_data(make_arm(3, friction=0.8), 1.0, 10.0, seed=3)  # another arm
+    model.add_sample(new.q[0], new.qd[0], new.qdd[0], new.tau[0])
+    assert model.n_online == 1
+    return new
+
+
 def test_a_compiled_sample_that_fails_to_build_leaves_the_numpy_path(monkeypatch) -> None:
     """A compiled sample that fails in its trial run (here: any error) warns and leaves the NumPy path, which
     works; ``CASCGP_JIT=0`` chooses the NumPy path without a warning."""
@@ -266,14 +283,8 @@ def test_a_compiled_sample_that_fails_to_build_leaves_the_numpy_path(monkeypatch
 
     monkeypatch.setattr(ok, "propose", broken)
     monkeypatch.delenv("CASCGP_JIT", raising=False)
-    model = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(
-        sinusoid_data(make_arm(3), 2.0, 10.0, seed=1))
-    with pytest.warns(RuntimeWarning, match="compiled online sample is not used"):
-        model.start_online(window=3)
-    assert model._online._jit is None
-    new = sinusoid_data(make_arm(3, friction=0.8), 1.0, 10.0, seed=3)
-    model.add_sample(new.q[0], new.qd[0], new.qdd[0], new.tau[0])
-    assert model.n_online == 1
+    model = _small_np_inward()
+    _opens_on_the_numpy_path_with_a_warning(model)
     monkeypatch.undo()
     monkeypatch.setenv("CASCGP_JIT", "0")
     model.start_online(window=3)
@@ -281,8 +292,7 @@ def test_a_compiled_sample_that_fails_to_build_leaves_the_numpy_path(monkeypatch
 
 
 def test_add_refuses_inputs_of_the_wrong_shape_and_changes_nothing() -> None:
-    model = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(
-        sinusoid_data(make_arm(3), 2.0, 10.0, seed=1))
+    model = _small_np_inward()
     model.start_online(window=3)
     win = model._online
     xs = [np.zeros(J.Zw.shape[1]) for J in win.joints]
@@ -327,8 +337,7 @@ def test_a_numba_that_cannot_cache_leaves_the_numpy_paths(monkeypatch) -> None:
     import cascgp.models.fastkernel as fk
 
     monkeypatch.delenv("CASCGP_JIT", raising=False)
-    fitted = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(
-        sinusoid_data(make_arm(3), 2.0, 10.0, seed=1))
+    fitted = _small_np_inward()
     if fitted._fast.jit is None:
         pytest.skip("the compiled tick is not in use here")
 
@@ -338,12 +347,7 @@ def test_a_numba_that_cannot_cache_leaves_the_numpy_paths(monkeypatch) -> None:
     monkeypatch.setattr(numba, "njit", no_cache)
     monkeypatch.delitem(sys.modules, "cascgp.models.online_kernel", raising=False)
     monkeypatch.delattr(cascgp.models, "online_kernel", raising=False)
-    with pytest.warns(RuntimeWarning, match="compiled online sample is not used"):
-        fitted.start_online(window=3)
-    assert fitted._online._jit is None
-    new = sinusoid_data(make_arm(3, friction=0.8), 1.0, 10.0, seed=3)
-    fitted.add_sample(new.q[0], new.qd[0], new.qdd[0], new.tau[0])
-    assert fitted.n_online == 1
+    new = _opens_on_the_numpy_path_with_a_warning(fitted)
 
     monkeypatch.setattr(fk, "_compiled", {})  # nothing decorated yet in this process
     model = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=20))

@@ -244,7 +244,7 @@ def test_a_compiled_variance_loop_that_fails_to_build_leaves_the_blas_solves(mod
         raise RuntimeError("no cache location")
 
     reference = [models["sp-inward"].predict_one_var(q, qd, qdd) for q, qd, qdd, _, _ in _queries(3)]
-    monkeypatch.setattr(fk, "_compiled", {"mean": fk._kernel(), "var": broken, "dtrsv": fk._blas_dtrsv()})
+    monkeypatch.setattr(fk, "_compiled", {"mean": fk._kernel(), "var": broken, "dtrsv": fk.blas_routine("dtrsv")})
     model = make_model("sp-inward", 3, make_arm(3), gp_config=CFG)
     model.adopt_banks(models["sp-inward"].banks, models["sp-inward"].where, models["sp-inward"].n_train)
     with pytest.warns(RuntimeWarning, match="compiled variance loop is not used"):

@@ -163,7 +163,7 @@ def _var_source(trsv: Any, Lc: tuple, scale: np.ndarray, prior: np.ndarray, ints
                 G: np.ndarray, var: np.ndarray, u: np.ndarray, fi: np.ndarray,
                 ch: np.ndarray) -> None:  # pragma: no cover - runs compiled (tests compare it)
     r"""The loop Numba compiles: :meth:`FastVariance.mean_var`'s per-joint part after the kernel rows, in the
-    cascade's order (``ints`` as in :func:`pack_fixed`). ``trsv``: BLAS ``dtrsv`` (:func:`_blas_dtrsv`), called
+    cascade's order (``ints`` as in :func:`pack_fixed`). ``trsv``: BLAS ``dtrsv`` (:func:`blas_routine`), called
     as :meth:`FastVariance.solve` calls it (``Lc[j]``, joint j's C-ordered lower factor, is the Fortran-ordered
     :math:`L_j^\top` that BLAS reads; ``fi``, ``ch``: work arrays for its integer and character arguments), so
     :math:`u = L_j^{-1} c_j \kappa_j` is the same to the bit; ``var[j]`` is :math:`\max(p_j - \|u\|^2, 0)` plus
@@ -225,16 +225,21 @@ def _var_kernel() -> Callable[..., Any] | None:
     return _compiled["var"]
 
 
-def _blas_dtrsv() -> Any:
-    """SciPy's BLAS ``dtrsv`` (the routine ``scipy.linalg.blas.dtrsv`` wraps) as a ctypes function that compiled
-    code calls: every argument by pointer (Fortran). Passed to the compiled loop as an argument, not read as a
-    global, so that Numba can cache the loop on disk."""
-    if "dtrsv" not in _compiled:
+#: BLAS routines the compiled loops call (here and in :mod:`cascgp.models.online_kernel`), by SciPy's Cython API
+#: name, with their number of arguments (every one a pointer: Fortran).
+BLAS_ARGS = {"dtrsv": 8, "dgemv": 11, "dsymv": 10, "dsyr": 7}
+
+
+def blas_routine(name: str) -> Any:
+    """SciPy's BLAS routine ``name`` (of :data:`BLAS_ARGS`; what ``scipy.linalg.blas`` wraps) as a ctypes function
+    that compiled code calls, looked up once per process. Passed to the compiled loops as an argument, not read
+    as a global, so that Numba can cache the loops on disk."""
+    if name not in _compiled:
         extending: Any = importlib.import_module("numba.extending")
         vp = ctypes.c_void_p
-        addr = extending.get_cython_function_address("scipy.linalg.cython_blas", "dtrsv")
-        _compiled["dtrsv"] = ctypes.CFUNCTYPE(None, vp, vp, vp, vp, vp, vp, vp, vp)(addr)
-    return _compiled["dtrsv"]
+        addr = extending.get_cython_function_address("scipy.linalg.cython_blas", name)
+        _compiled[name] = ctypes.CFUNCTYPE(None, *([vp] * BLAS_ARGS[name]))(addr)
+    return _compiled[name]
 
 
 #: Position of the transposed training inputs ``WT`` in :func:`jit_args`' tuple (online samples write into it).
@@ -314,8 +319,8 @@ def jit_var_factors(factors: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...] |
     ints[:, 1], ints[:, 2] = -1, np.arange(N)
     n = max(L.shape[0] for L in Lc)
     try:
-        fn(_blas_dtrsv(), Lc, np.ones(N), np.ones(N), ints, np.zeros((N, n)), np.zeros(N), np.zeros(N), np.zeros(n),
-           np.zeros(3, dtype=np.int32), np.zeros(3, dtype=np.uint8))
+        fn(blas_routine("dtrsv"), Lc, np.ones(N), np.ones(N), ints, np.zeros((N, n)), np.zeros(N), np.zeros(N),
+           np.zeros(n), np.zeros(3, dtype=np.int32), np.zeros(3, dtype=np.uint8))
     except Exception as exc:  # noqa: BLE001 - as in jit_args: the NumPy path still works
         _dropped("variance loop", exc)
         _compiled["var"] = None

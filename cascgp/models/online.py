@@ -211,6 +211,7 @@ class OnlineWindow:
         self._cols = [np.concatenate([state_cols(np.arange(D)[None], sj)[0], [D + tj] if tj is not None else []])
                       .astype(np.intp) for sj, tj in model.specs]
         self._var: FastVariance | None = None
+        self._tfrom = np.array([-1 if t is None else t for t in self.fast.torque_from], dtype=np.int64)
         self._jit = self._compiled_work()
 
     def _compiled_work(self) -> tuple | None:
@@ -236,9 +237,10 @@ class OnlineWindow:
         y = np.array([J.P.y_mean for J in self.joints])
         try:
             with blas_threads(1):
-                if self._propose_compiled(online_kernel, work, x, y) >= 0:
+                consts = self._consts()
+                if self._propose_compiled(online_kernel, work, x, y, consts) >= 0:
                     return None  # a window that refuses the trial sample: the NumPy path, untried
-                self._commit_compiled(online_kernel, work, copies=True)
+                self._commit_compiled(online_kernel, work, consts, copies=True)
         except Exception as exc:  # noqa: BLE001 - as for the control tick's loop: the NumPy path still works
             warnings.warn(f"cascgp: the compiled online sample is not used ({type(exc).__name__}: {exc}); the "
                           "NumPy path runs", RuntimeWarning, stacklevel=4)
@@ -255,29 +257,29 @@ class OnlineWindow:
         """``get(J)`` for every joint's window, as the tuple the compiled loops take."""
         return tuple(get(J) for J in self.joints)
 
-    def _propose_compiled(self, kernels: Any, work: tuple, x_per_joint: Any, y: np.ndarray) -> int:
-        """:func:`~cascgp.models.online_kernel.propose` (``kernels``: that module) on this window: -1, or the
-        joint that refuses."""
+    def _propose_compiled(self, kernels: Any, work: tuple, x_per_joint: Any, y: np.ndarray,
+                          consts: np.ndarray) -> int:
+        """:func:`~cascgp.models.online_kernel.propose` (``kernels``: that module; ``consts``: :meth:`_consts`) on
+        this window: -1, or the joint that refuses."""
         f, J0, per = kernels.blas(), self.joints[0], self._per_joint
         xs = tuple(np.ascontiguousarray(x, dtype=np.float64) for x in x_per_joint)
         return kernels.propose(f["dtrsv"], f["dgemv"], f["dsymv"], kernel_id(self.fast.kernel.name),
-                          self.fast.zclip / self.c, J0.m, J0.n_in, xs, np.asarray(y, np.float64), self._consts(),
+                          self.fast.zclip / self.c, J0.m, J0.n_in, xs, np.asarray(y, np.float64), consts,
                           per(lambda J: J.P.x_mean), per(lambda J: J.P.x_scale), per(lambda J: J.Lf),
                           per(lambda J: J.P.Z), per(lambda J: J.Z2), per(lambda J: J.u0),
                           per(lambda J: J.alpha_fit), per(lambda J: J.Zw), per(lambda J: J.B),
                           per(lambda J: J.Sinv.T), per(lambda J: J.r), *work)
 
-    def _commit_compiled(self, kernels: Any, work: tuple, copies: bool = False) -> None:
-        """:func:`~cascgp.models.online_kernel.commit` of the last proposal (``copies``: into copies of every
-        array it writes, changing nothing: the build's trial run)."""
+    def _commit_compiled(self, kernels: Any, work: tuple, consts: np.ndarray, copies: bool = False) -> None:
+        """:func:`~cascgp.models.online_kernel.commit` of the last proposal (``consts``: the proposal's;
+        ``copies``: into copies of every array it writes, changing nothing: the build's trial run)."""
         fast = self.fast
         cp = (lambda a: a.copy()) if copies else (lambda a: a)
-        tfrom = np.array([-1 if t is None else t for t in fast.torque_from], dtype=np.int64)
         Pz, Prow, Pb, Pa0, _, Ps, Pt, Phv, Pr, Paw, _, Psc, fi, fd, ch = work
         WT = fast.jit[JIT_WT] if fast.jit is not None else np.zeros((1, 1, 1))  # the compiled mean's copy of W
         windows = [self._per_joint(lambda J, nm=nm: cp(getattr(J, nm))) for nm in ("Zw", "B", "Lw0", "S")]
         weights = [self._per_joint(lambda J, nm=nm: cp(getattr(J, nm))) for nm in ("r", "alphaw", "alpha0")]
-        kernels.commit(kernels.blas()["dsyr"], self.joints[0].m, self.joints[0].n_in, self._consts(), tfrom,
+        kernels.commit(kernels.blas()["dsyr"], self.joints[0].m, self.joints[0].n_in, consts, self._tfrom,
                        self.c, *windows, self._per_joint(lambda J: cp(J.Sinv.T)), *weights, cp(fast.W),
                        cp(fast.W2), cp(WT), fast.jit is not None, cp(fast.Zt), cp(fast.alpha), Pz, Prow, Pb, Pa0, Ps,
                        Pt, Phv, Pr, Paw, Psc, fi, fd, ch)
@@ -338,11 +340,12 @@ class OnlineWindow:
         if self._jit is not None:
             from cascgp.models import online_kernel
 
-            j = self._propose_compiled(online_kernel, self._jit, x_per_joint, y)
+            consts = self._consts()
+            j = self._propose_compiled(online_kernel, self._jit, x_per_joint, y, consts)
             if j >= 0:
                 schur = float(self._jit[_PSC][j, 1])
                 raise np.linalg.LinAlgError(f"the window block is not positive definite (Schur complement {schur!r})")
-            self._commit_compiled(online_kernel, self._jit)
+            self._commit_compiled(online_kernel, self._jit, consts)
             for j, J in enumerate(self.joints):  # the counts, and the periodic recomputation (in NumPy)
                 J.m = min(J.m + 1, self.window)
                 J.n_in += 1

@@ -15,12 +15,13 @@ last bit). The compiler is Numba, as for the control tick (:mod:`cascgp.models.f
 
 from __future__ import annotations
 
-import ctypes
 import importlib
 import math
 from typing import Any
 
 import numpy as np
+
+from cascgp.models.fastkernel import BLAS_ARGS, blas_routine
 
 __all__ = ["CONSTS", "blas", "propose", "commit"]
 
@@ -31,7 +32,6 @@ _SQRT5 = math.sqrt(5.0)
 #: Columns of the per-joint constants :func:`propose` and :func:`commit` take: signal variance, noise (plus
 #: jitter), target mean, target scale, the fast path's weight scale (target scale times signal variance).
 CONSTS = ("signal_var", "noise", "y_mean", "y_std", "scale")
-_blas: dict[str, Any] = {}
 
 
 @_jit
@@ -245,17 +245,7 @@ def commit(syr: Any, m: int, n_in: int, consts: np.ndarray, tfrom: np.ndarray, c
             falpha[j, n0 + i] = Paw[j, i] * scale
 
 
-#: BLAS routines the loops call, by SciPy's Cython API name, with their number of arguments (every one a pointer:
-#: Fortran).
-_BLAS_ARGS = {"dtrsv": 8, "dgemv": 11, "dsymv": 10, "dsyr": 7}
-
-
 def blas() -> dict[str, Any]:
-    """SciPy's BLAS ``dtrsv``, ``dgemv``, ``dsymv`` and ``dsyr`` (what ``scipy.linalg.blas`` wraps) as ctypes
-    functions that compiled code calls (looked up once per process)."""
-    if not _blas:
-        vp = ctypes.c_void_p
-        get = importlib.import_module("numba.extending").get_cython_function_address
-        _blas.update({name: ctypes.CFUNCTYPE(None, *([vp] * n))(get("scipy.linalg.cython_blas", name))
-                      for name, n in _BLAS_ARGS.items()})
-    return _blas
+    """SciPy's BLAS ``dtrsv``, ``dgemv``, ``dsymv`` and ``dsyr`` as ctypes functions that compiled code calls
+    (:func:`cascgp.models.fastkernel.blas_routine`)."""
+    return {name: blas_routine(name) for name in BLAS_ARGS}
