@@ -83,20 +83,23 @@ PATH_ROUNDS = 10
 
 
 def _paths_side_by_side(model: Any, q: list, samples: list) -> dict[str, dict[str, float]]:
-    """The compiled online sample against the NumPy one, and the compiled variance loop against the per-joint
-    BLAS solves, on the same model in alternating rounds (the reference path is switched on by clearing the
-    compiled path's handle, as a failed compile does; the window's full and in use)."""
-    win, fv = model._online, model._fast_var_offline
+    """The compiled online sample against the NumPy one, and the compiled variance loop (with the window's term,
+    then without a window) against the per-joint BLAS path, on the same model in alternating rounds (the reference
+    path is switched on by clearing the compiled path's handle, as a failed compile does; the window's full and in
+    use)."""
+    win, fv, fvo = model._online, model._fast_var_offline, model.prepare_variance()
     work, Lc = win._jit, fv.Lc
     pairs = {"add_sample (full window)": (model.add_sample, samples, 60,
                                           lambda on: setattr(win, "_jit", work if on else None)),
+             "predict_one_var (online, full window)": (model.predict_one_var, q, 300,
+                                                       lambda on: object.__setattr__(fvo, "Lc", Lc if on else None)),
              "predict_one_var (offline)": (model.predict_one_var, q, 300,
                                            lambda on: object.__setattr__(fv, "Lc", Lc if on else None))}
     out = {}
     for label, (fn, args, reps, use) in pairs.items():
         if (work if label.startswith("add") else Lc) is None:
             continue
-        if label.startswith("predict"):
+        if label.endswith("(offline)"):
             model.stop_online()  # the offline variance path
         t = {True: [], False: []}
         for k in range(PATH_ROUNDS):

@@ -212,26 +212,45 @@ def test_a_float64_query_and_the_general_form_give_the_same_answer_and_errors(mo
 
 
 @needs_jit
-@pytest.mark.parametrize("key", ["sp-inward", "np-outward", "np-standard", "rbf:sp-inward"])
+@pytest.mark.parametrize("key", ["sp-inward", "np-outward", "np-standard", "rbf:sp-inward",
+                                 "online:sp-inward", "online:np-outward"])
 def test_compiled_variance_solves_are_blas_solves(models, key) -> None:
     """Given the same kernel rows, the compiled loop's variances equal the per-joint BLAS path's but for the order
-    of the sum of squares (the solves themselves are the same BLAS call)."""
+    of the sums (the solves and, with an online window, its products are the same BLAS calls)."""
     from cascgp.models.fastkernel import jit_mean, jit_var
 
-    model = models[key]
-    fv = model.prepare_variance()
-    for q, qd, qdd, h, _ in _queries(6):
-        f, tau = load_query(model, q, qd, qdd, h)
-        N = len(f.order)
-        K, G, mean = np.empty(f.alpha.shape), np.zeros(N), np.empty(N)
-        assert jit_mean(f.jit, f.buf, tau, mean, (K, G))
-        var = np.full(N, np.nan)
-        assert jit_var(f.jit, fv.Lc, fv.scale, fv.prior, K, G, var)
-        ref = np.empty(N)
-        for j in f.order:  # FastVariance.mean_var's loop without the compiled solves
-            tj = f.torque_from[j]
-            ref[j] = fv._var(j, K[j], G[j] * G[j] * ref[tj] if tj is not None else None)
-        assert np.all(np.abs(var - ref) <= 1e-13 * (fv.prior + np.abs(ref))), (var, ref)
+    online = key.startswith("online:")
+    model = models[key.removeprefix("online:")]
+    window, queries = None, _queries(6)
+    if online:  # a window that has turned over (samples dropped, its inverse recomputed once)
+        new = sinusoid_data(make_arm(3, friction=0.8), 2.0, 10.0, seed=9, noise=0.02)
+        model.start_online(window=5)
+        for i in range(7):
+            model.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
+        window = model._online.compiled_var_terms()
+        assert window[0] == 5
+        queries.append((new.q[6], new.qd[6], new.qdd[6], None, None))  # at the last sample: its term shows
+    try:
+        fv = model.prepare_variance()
+        assert (fv.window is not None) == online and fv.Lc is not None
+        for q, qd, qdd, h, _ in queries:
+            f, tau = load_query(model, q, qd, qdd, h)
+            N = len(f.order)
+            K, G, mean = np.empty(f.alpha.shape), np.zeros(N), np.empty(N)
+            assert jit_mean(f.jit, f.buf, tau, mean, (K, G))
+            var = np.full(N, np.nan)
+            assert jit_var(f.jit, fv.Lc, fv.scale, fv.prior, K, G, var, window)
+            ref = np.empty(N)
+            for j in f.order:  # FastVariance.mean_var's loop without the compiled solves
+                tj = f.torque_from[j]
+                ref[j] = fv._var(j, K[j], G[j] * G[j] * ref[tj] if tj is not None else None)
+            assert np.all(np.abs(var - ref) <= 1e-13 * (fv.prior + np.abs(ref))), (var, ref)
+        if online:  # the window's term was there: without it the last query's variances are larger
+            off = np.full(N, np.nan)
+            assert jit_var(f.jit, fv.Lc, fv.scale, fv.prior, K, G, off)
+            assert np.all(off >= var) and np.any(off > var * (1 + 1e-3)), (off, var)
+    finally:
+        model.stop_online()
 
 
 @needs_jit

@@ -202,7 +202,7 @@ class FastVariance:
             :math:`c_j`; prior: ``(N,)`` prior variances (N m^2).
         window: online samples (:class:`cascgp.models.online.OnlineWindow`) whose variance term is added.
         Lc: the same factors for the compiled solves (:func:`~cascgp.models.fastkernel.jit_var`: ``L`` are their
-            transposed views), None when they are not used; an online window's variance uses the NumPy solves.
+            transposed views; with an online window, its term too), None when they are not used.
     """
 
     L: tuple[np.ndarray, ...]
@@ -225,15 +225,15 @@ class FastVariance:
     def mean_var(self, fast: FastPath, tau_mean: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """Predicted torques and their propagated latent variances ``(N,)``, ``(N,)`` for the state in
         ``fast.buf`` (as :meth:`FastPath.mean`). The kernel rows come from the compiled loop when the fast path
-        has it (:mod:`cascgp.models.fastkernel`), and so do the solves without an online window; else they come
-        from :meth:`mean_var_numpy` (equal to round-off)."""
+        has it (:mod:`cascgp.models.fastkernel`), and so do the solves and an online window's term; else they
+        come from :meth:`mean_var_numpy` (equal to round-off)."""
         N = len(fast.order)
         mean, var = np.empty(N), np.empty(N)
         K, G = np.empty(fast.alpha.shape), np.zeros(N)
         if fast.jit is None or not jit_mean(fast.jit, fast.buf, tau_mean, mean, (K, G)):
             return self.mean_var_numpy(fast, tau_mean)
-        if self.window is None and self.Lc is not None and jit_var(fast.jit, self.Lc, self.scale, self.prior, K, G,
-                                                                    var):
+        window = self.window.compiled_var_terms() if self.window is not None else None
+        if self.Lc is not None and jit_var(fast.jit, self.Lc, self.scale, self.prior, K, G, var, window):
             return mean, var
         for j in fast.order:
             tj = fast.torque_from[j]

@@ -290,8 +290,13 @@ class OnlineWindow:
         so that opening a window does not rebuild it."""
         if self._var is None:
             base = base if base is not None else FastVariance.build(self.model.posteriors())
-            self._var = FastVariance(L=base.L, scale=base.scale, prior=base.prior, window=self)
+            self._var = FastVariance(L=base.L, scale=base.scale, prior=base.prior, window=self, Lc=base.Lc)
         return self._var
+
+    def compiled_var_terms(self) -> tuple[int, tuple, tuple]:
+        """The window's variance term for the compiled loop (:func:`~cascgp.models.fastkernel.jit_var`): samples
+        held, each joint's :math:`L_{w0}`, and the memory of each joint's Fortran-ordered :math:`S^{-1}`."""
+        return self.joints[0].m, self._per_joint(lambda J: J.Lw0), self._per_joint(lambda J: J.Sinv.T)
 
     def extra_var(self, j: int, kap: np.ndarray, u: np.ndarray) -> float:
         """Hook of :meth:`FastVariance.mean_var`: the window term of joint ``j``."""
