@@ -65,3 +65,28 @@ def test_bad_thread_counts_are_refused(bad) -> None:
 def test_saved_configs_without_the_field_load_with_the_default() -> None:
     d = {k: v for k, v in GPFitConfig().__dict__.items() if k != "threads"}
     assert GPFitConfig.from_dict(d).threads == 1
+
+
+def test_blas_threads_limits_every_blas_library_and_restores_each_one() -> None:
+    """``blas_threads`` (also around every online sample) sets each BLAS library to ``k`` threads and restores
+    each library's own count afterwards, also when the block raises and when calls nest."""
+    import scipy.linalg.blas  # noqa: F401 - SciPy's OpenBLAS, loaded as in a fit
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from cascgp.gp.likelihood import blas_threads
+
+    def counts() -> list[int]:
+        return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = counts()
+        assert before and set(before) == {2}
+        with blas_threads(1):
+            assert set(counts()) == {1}
+            with blas_threads(1):
+                assert set(counts()) == {1}
+            assert set(counts()) == {1}
+        assert counts() == before
+        with pytest.raises(RuntimeError, match="inside"), blas_threads(1):
+            raise RuntimeError("inside")
+        assert counts() == before

@@ -196,6 +196,37 @@ def test_a_sample_refused_by_one_joint_changes_no_joint(path: str) -> None:
     np.testing.assert_array_equal(model.predict_one_var(*query)[1], twin.predict_one_var(*query)[1])
 
 
+@pytest.mark.parametrize("how", ["deepcopy", "pickle"])
+def test_a_copied_window_runs_on_its_own_arrays(how: str) -> None:
+    """The compiled paths gather the window's arrays once; a copy (``deepcopy``, or pickled and loaded) gathers
+    its own, so that it goes on exactly as the original through samples and the periodic recomputation, and the
+    two never share memory."""
+    import pickle
+
+    arm = make_arm(3, friction=0.3)
+    model = make_model("sp-inward", 3, make_arm(3), gp_config=GPFitConfig(n_restarts=1, max_iter=30)).fit(
+        sinusoid_data(arm, 3.0, 10.0, seed=1))
+    new = sinusoid_data(make_arm(3, friction=2.0), 1.5, 10.0, seed=5)
+    model.start_online(window=3)
+    for i in range(2):
+        model.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
+    model.predict_one_var(new.q[0], new.qd[0], new.qdd[0])  # the variance's arrays are gathered too
+    twin = copy.deepcopy(model) if how == "deepcopy" else pickle.loads(pickle.dumps(model))
+    for i in range(2, 9):  # through two recomputations of the window's inverse (at 3 and 6 samples)
+        for m in (model, twin):
+            m.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
+        query = (new.q[i] + 0.01, new.qd[i], new.qdd[i])
+        np.testing.assert_array_equal(model.predict_one(*query), twin.predict_one(*query))
+        np.testing.assert_array_equal(model.predict_one_var(*query)[1], twin.predict_one_var(*query)[1])
+    for J, T in zip(model._online.joints, twin._online.joints):
+        np.testing.assert_array_equal(J.Sinv, T.Sinv)
+        assert not np.shares_memory(J.Sinv, T.Sinv)
+    if model._online._jit is not None:
+        for a, b in zip(model._online._arrays()["ST"], twin._online._arrays()["ST"]):
+            assert not np.shares_memory(a, b)
+        assert all(np.shares_memory(a, T.Sinv) for a, T in zip(twin._online._arrays()["ST"], twin._online.joints))
+
+
 def _use_path(model, path: str) -> None:
     """Run the open window's samples on the NumPy path, or check that they run compiled (skip without Numba)."""
     if path == "numpy":
@@ -226,10 +257,15 @@ def test_compiled_and_numpy_samples_agree_as_the_window_turns_over(name: str) ->
         np.testing.assert_allclose(a, b, rtol=rel, atol=rel * float(np.abs(b).max()), err_msg=what)
 
     far = (1e9 * new.q[11], 1e9 * new.qd[11], new.qdd[11], new.tau[11])  # normalised inputs beyond the clip
+    names = ("Zw", "B", "Lw0", "S", "Sinv", "r", "alphaw", "alpha0")
+    held = [[getattr(J, nm) for nm in names] for m in (model, ref) for J in m._online.joints]
     for i in range(12):  # fills the window, drops the oldest, recomputes its inverse twice (at 4 and 8)
         sample = far if i == 11 else (new.q[i], new.qd[i], new.qdd[i], new.tau[i])
         for m in (model, ref):
             m.add_sample(*sample)
+        # both paths write into the window's arrays, never replace them (the compiled paths hold them)
+        assert all(a is getattr(J, nm) for m, arrays in zip((model, ref), (held[:3], held[3:]))
+                   for J, row in zip(m._online.joints, arrays) for nm, a in zip(names, row))
         f, g = model._online.fast, ref._online.fast
         for j, (J, R) in enumerate(zip(model._online.joints, ref._online.joints)):
             assert (J.m, J.n_in) == (R.m, R.n_in)

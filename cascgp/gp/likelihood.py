@@ -88,7 +88,7 @@ DTYPE = torch.float64
 LOG2PI = math.log(2.0 * math.pi)
 
 
-_CONTROLLER = None  # the process's threadpoolctl controller, built on first use
+_BLAS_LIBS: list | None = None  # the BLAS libraries threadpoolctl finds in this process, looked up on first use
 
 
 @contextlib.contextmanager
@@ -97,17 +97,28 @@ def blas_threads(k: int) -> Iterator[None]:
 
     The per-member LAPACK calls are small (n x n); OpenBLAS's own threads gained nothing there and, on a shared
     2-core machine, spun against the other process (measured: 25 ms instead of 8 ms per evaluation at n = 500).
-    Uses one ``threadpoolctl.ThreadpoolController`` per process: building it inspects the loaded libraries
-    (measured 1.9 ms per ``threadpool_limits`` call, 11 us per ``controller.limit``), which matters for the
-    online updates between control ticks (:mod:`cascgp.models.online`).
+    The libraries are found once per process by a ``threadpoolctl.ThreadpoolController`` (building one inspects
+    the loaded libraries: 1.9 ms per ``threadpool_limits`` call); each call then reads and sets their thread
+    counts through its library controllers, setting only those that differ from ``k`` and restoring them after
+    (``controller.limit`` took 24 us per call, which mattered for the online updates between control ticks,
+    :mod:`cascgp.models.online`).
     """
-    global _CONTROLLER
-    if _CONTROLLER is None:
+    global _BLAS_LIBS
+    if _BLAS_LIBS is None:
         from threadpoolctl import ThreadpoolController
 
-        _CONTROLLER = ThreadpoolController()
-    with _CONTROLLER.limit(limits=k, user_api="blas"):
+        _BLAS_LIBS = [lib for lib in ThreadpoolController().lib_controllers if lib.user_api == "blas"]
+    changed = []
+    try:
+        for lib in _BLAS_LIBS:
+            prev = lib.get_num_threads()
+            if prev is not None and prev != k:
+                lib.set_num_threads(k)
+                changed.append((lib, prev))
         yield
+    finally:
+        for lib, prev in changed:
+            lib.set_num_threads(prev)
 
 
 @contextlib.contextmanager

@@ -74,7 +74,8 @@ class _JointWindow:
     :math:`S^{-1}` is Fortran-ordered with its lower triangle kept (what BLAS ``dsymv``/``dsyr`` read and
     write); ``S`` is kept in full (for the periodic recomputation). Besides :math:`B` the slots hold
     :math:`L_{w0} = K_{w0} L_{00}^{-\top}` (rows :math:`L_{00}^{-1} k_{0i}`, the better-conditioned form of the
-    variance term: :math:`B k_0 = L_{w0} L_{00}^{-1} k_0`)."""
+    variance term: :math:`B k_0 = L_{w0} L_{00}^{-1} k_0`). Every array is allocated once and written in place,
+    never replaced (the compiled sample and variance hold them)."""
 
     def __init__(self, P: Any, window: int) -> None:
         self.P = P
@@ -148,13 +149,15 @@ class _JointWindow:
         if t is not None:
             Sinv = dsyr(-1.0 / t[o], t, lower=1, a=Sinv, overwrite_a=1)  # in place (Fortran-ordered)
             Sinv[o, :] = Sinv[:, o] = 0.0
-        self.Sinv = Sinv = dsyr(1.0 / delta, hv, lower=1, a=Sinv, overwrite_a=1)
+        Sinv = dsyr(1.0 / delta, hv, lower=1, a=Sinv, overwrite_a=1)
+        if Sinv is not self.Sinv:  # the window's arrays stay the same objects (the compiled paths hold them)
+            self.Sinv[...] = Sinv
         self.S[o, :] = self.S[:, o] = s
         self.S[o, o] = c
-        self.Zw[o], self.B[o], self.Lw0[o], self.r = z, b, row, r
+        self.Zw[o], self.B[o], self.Lw0[o], self.r[:] = z, b, row, r
         self.m = min(self.m + 1, self.window)
         self.n_in += 1
-        self.alphaw, self.alpha0 = alphaw, alpha0
+        self.alphaw[:], self.alpha0[:] = alphaw, alpha0
         if self.n_in % self.window == 0:
             self._recompute()
 
@@ -167,8 +170,8 @@ class _JointWindow:
         Si, info = dpotri(Lf, lower=1)
         if info == 0 and np.isfinite(Si).all():
             self.Sinv[:] = Si
-            self.alphaw = dsymv(1.0, self.Sinv, self.r, lower=1)
-            self.alpha0 = self.alpha_fit - self.alphaw @ self.B
+            self.alphaw[:] = dsymv(1.0, self.Sinv, self.r, lower=1)
+            self.alpha0[:] = self.alpha_fit - self.alphaw @ self.B
 
     def extra_var(self, kap_w: np.ndarray, u: np.ndarray, scale: float) -> float:
         """Window term of the latent variance (torque units): ``kap_w`` the query's kernel row of the slots,
@@ -212,6 +215,7 @@ class OnlineWindow:
                       .astype(np.intp) for sj, tj in model.specs]
         self._var: FastVariance | None = None
         self._tfrom = np.array([-1 if t is None else t for t in self.fast.torque_from], dtype=np.int64)
+        self._gathered: dict[str, Any] | None = None
         self._jit = self._compiled_work()
 
     def _compiled_work(self) -> tuple | None:
@@ -247,42 +251,55 @@ class OnlineWindow:
             return None
         return work
 
+    def _per_joint(self, get: Any) -> tuple:
+        """``get(J)`` for every joint's window, as the tuple the compiled loops take."""
+        return tuple(get(J) for J in self.joints)
+
     def _consts(self) -> np.ndarray:
         """Per joint: signal variance, noise (plus jitter), target mean and scale, the fast path's weight scale
         (:data:`~cascgp.models.online_kernel.CONSTS`), read at each sample as the NumPy path reads them."""
         return np.array([(J.P.signal_var, J.noise, J.P.y_mean, J.P.y_std, J.P.y_std * J.P.signal_var)
                          for J in self.joints])
 
-    def _per_joint(self, get: Any) -> tuple:
-        """``get(J)`` for every joint's window, as the tuple the compiled loops take."""
-        return tuple(get(J) for J in self.joints)
+    def _arrays(self) -> dict[str, Any]:
+        """The per-joint arrays the compiled loops take, gathered once per window (they are written in place, never
+        replaced). Not copied or pickled with the window (``__getstate__``): a copy's views of its own arrays are
+        gathered again."""
+        if self._gathered is None:
+            per = self._per_joint
+            self._gathered = {
+                "fitted": (per(lambda J: J.P.x_mean), per(lambda J: J.P.x_scale), per(lambda J: J.Lf),
+                           per(lambda J: J.P.Z), per(lambda J: J.Z2), per(lambda J: J.u0), per(lambda J: J.alpha_fit)),
+                **{nm: per(lambda J, nm=nm: getattr(J, nm)) for nm in ("Zw", "B", "Lw0", "S", "r", "alphaw",
+                                                                     "alpha0")},
+                "ST": per(lambda J: J.Sinv.T)}  # the memory of each Fortran-ordered inverse
+        return self._gathered
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {**self.__dict__, "_gathered": None}
 
     def _propose_compiled(self, kernels: Any, work: tuple, x_per_joint: Any, y: np.ndarray,
                           consts: np.ndarray) -> int:
         """:func:`~cascgp.models.online_kernel.propose` (``kernels``: that module; ``consts``: :meth:`_consts`) on
         this window: -1, or the joint that refuses."""
-        f, J0, per = kernels.blas(), self.joints[0], self._per_joint
+        f, J0, a = kernels.blas(), self.joints[0], self._arrays()
         xs = tuple(np.ascontiguousarray(x, dtype=np.float64) for x in x_per_joint)
         return kernels.propose(f["dtrsv"], f["dgemv"], f["dsymv"], kernel_id(self.fast.kernel.name),
-                          self.fast.zclip / self.c, J0.m, J0.n_in, xs, np.asarray(y, np.float64), consts,
-                          per(lambda J: J.P.x_mean), per(lambda J: J.P.x_scale), per(lambda J: J.Lf),
-                          per(lambda J: J.P.Z), per(lambda J: J.Z2), per(lambda J: J.u0),
-                          per(lambda J: J.alpha_fit), per(lambda J: J.Zw), per(lambda J: J.B),
-                          per(lambda J: J.Sinv.T), per(lambda J: J.r), *work)
+                               self.fast.zclip / self.c, J0.m, J0.n_in, xs, np.asarray(y, np.float64), consts,
+                               *a["fitted"], a["Zw"], a["B"], a["ST"], a["r"], *work)
 
     def _commit_compiled(self, kernels: Any, work: tuple, consts: np.ndarray, copies: bool = False) -> None:
         """:func:`~cascgp.models.online_kernel.commit` of the last proposal (``consts``: the proposal's;
         ``copies``: into copies of every array it writes, changing nothing: the build's trial run)."""
-        fast = self.fast
-        cp = (lambda a: a.copy()) if copies else (lambda a: a)
+        fast, a = self.fast, self._arrays()
+        cp = (lambda x: x.copy()) if copies else (lambda x: x)
+        cpt = (lambda t: tuple(x.copy() for x in t)) if copies else (lambda t: t)
         Pz, Prow, Pb, Pa0, _, Ps, Pt, Phv, Pr, Paw, _, Psc, fi, fd, ch = work
         WT = fast.jit[JIT_WT] if fast.jit is not None else np.zeros((1, 1, 1))  # the compiled mean's copy of W
-        windows = [self._per_joint(lambda J, nm=nm: cp(getattr(J, nm))) for nm in ("Zw", "B", "Lw0", "S")]
-        weights = [self._per_joint(lambda J, nm=nm: cp(getattr(J, nm))) for nm in ("r", "alphaw", "alpha0")]
         kernels.commit(kernels.blas()["dsyr"], self.joints[0].m, self.joints[0].n_in, consts, self._tfrom,
-                       self.c, *windows, self._per_joint(lambda J: cp(J.Sinv.T)), *weights, cp(fast.W),
-                       cp(fast.W2), cp(WT), fast.jit is not None, cp(fast.Zt), cp(fast.alpha), Pz, Prow, Pb, Pa0, Ps,
-                       Pt, Phv, Pr, Paw, Psc, fi, fd, ch)
+                       self.c, *(cpt(a[nm]) for nm in ("Zw", "B", "Lw0", "S", "ST", "r", "alphaw", "alpha0")),
+                       cp(fast.W), cp(fast.W2), cp(WT), fast.jit is not None, cp(fast.Zt), cp(fast.alpha), Pz, Prow,
+                       Pb, Pa0, Ps, Pt, Phv, Pr, Paw, Psc, fi, fd, ch)
 
     def variance(self, base: FastVariance | None = None) -> FastVariance:
         """The variance path of the fitted sets plus this window (the window's term is read live at each
@@ -296,7 +313,8 @@ class OnlineWindow:
     def compiled_var_terms(self) -> tuple[int, tuple, tuple]:
         """The window's variance term for the compiled loop (:func:`~cascgp.models.fastkernel.jit_var`): samples
         held, each joint's :math:`L_{w0}`, and the memory of each joint's Fortran-ordered :math:`S^{-1}`."""
-        return self.joints[0].m, self._per_joint(lambda J: J.Lw0), self._per_joint(lambda J: J.Sinv.T)
+        a = self._arrays()
+        return self.joints[0].m, a["Lw0"], a["ST"]
 
     def extra_var(self, j: int, kap: np.ndarray, u: np.ndarray) -> float:
         """Hook of :meth:`FastVariance.mean_var`: the window term of joint ``j``."""
@@ -322,8 +340,8 @@ class OnlineWindow:
                     raise ValueError(f"{nm}: expected a finite array of shape ({N},), got {a!r}")
                 check_scale(np.stack([a, np.zeros(N)]), nm)
         S = model._states(arr["q"][None], arr["qd"][None], arr["qdd"][None], None).reshape(-1)
-        target = arr["tau"] - (model._rbd_torque(arr["q"][None], arr["qd"][None], arr["qdd"][None])[0]
-                               if model.parametric == "sp" else 0.0)
+        target = arr["tau"] - (model._rbd_torque(arr["q"], arr["qd"], arr["qdd"]) if model.parametric == "sp"
+                               else 0.0)
         v = np.concatenate([S, arr["tau"]])  # each joint's input: its state columns, then the neighbour's torque
         self.add([v[c] for c in self._cols], target)
 
