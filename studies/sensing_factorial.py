@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import os
 import platform
-import subprocess
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -38,6 +37,7 @@ import numpy as np
 from cascgp.io import write_json
 from cascgp_experiments.common import TABLE_INTERVALS, limit_threads
 from cascgp_experiments.pooled_stats import holm, identical_joints, scores, wilcoxon_p
+from scripts.provenance import git_commit
 
 #: The arms: name -> options of ``cascgp_experiments.collect.CollectConfig`` on top of the study's preset.
 ARMS: dict[str, dict[str, Any]] = {
@@ -144,14 +144,6 @@ def verdicts(blocks: dict[str, dict[str, Any]], interval: tuple[float, float] = 
     return {"interval": [lo, hi], "factor_changes_effect": changes, "cascades_beat_standard": wins}
 
 
-def _git_commit() -> str | None:
-    try:
-        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True, check=True,
-                              cwd=Path(__file__).resolve().parent).stdout.strip() or None
-    except (OSError, subprocess.CalledProcessError):
-        return None
-
-
 def run(out: str | Path, *, quick: bool = False, workers: int | None = None, ray_address: str | None = None,
         arms: list[str] | None = None, command: str = "") -> dict[str, Any]:
     """Collect, fit and score every arm, then the effects and (not ``quick``) the verdicts; writes
@@ -172,7 +164,7 @@ def run(out: str | Path, *, quick: bool = False, workers: int | None = None, ray
     t0 = time.perf_counter()
     res: dict[str, Any] = {"meta": {
         "command": command, "protocol": "docs/studies/sensing_factorial.md", "protocol_commit": PROTOCOL_COMMIT,
-        "code_commit": _git_commit(), "quick": quick, "arms": {a: ARMS[a] for a in arms}, "grid_s": list(grid),
+        "code_commit": git_commit(), "quick": quick, "arms": {a: ARMS[a] for a in arms}, "grid_s": list(grid),
         "n_subsets": n_subsets, "n_restarts": n_restarts, "models": MODELS, "workers": workers,
         "started": time.strftime("%Y-%m-%d %H:%M:%S"), "loadavg_start": list(os.getloadavg()),
         "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}}, "arms": {}}

@@ -50,6 +50,16 @@ def test_gp_fit_config_refuses_a_negative_seed() -> None:
         GPFitConfig(seed=-1)
 
 
+@pytest.mark.parametrize("field", ["grad_tol", "noise_floor", "init_spread", "stall_tol"])
+@pytest.mark.parametrize("bad", [-1e-3, float("nan"), float("inf"), True, "0.1", None])
+def test_gp_fit_config_refuses_bad_tolerances(field, bad) -> None:
+    from cascgp.gp import GPFitConfig
+
+    with pytest.raises(ValueError, match=rf"^{field}: expected a finite number >= 0, got "):
+        GPFitConfig(**{field: bad})
+    assert getattr(GPFitConfig(**{field: 0}), field) == 0
+
+
 def test_retrain_config_keeps_python_numbers() -> None:
     r = RetrainConfig(seed=np.int64(2), rate_hz=np.float64(5), cap=np.int32(100), restarts=np.int64(1))
     assert [type(v) for v in (r.seed, r.rate_hz, r.cap, r.restarts)] == [int, float, int, int]

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from cascgp.checks import check_count
+from cascgp.checks import check_count, check_positive
 from cascgp.gp.kernels import check_kernel
 
 __all__ = ["GPFitConfig", "check_target_floor", "noise_var"]
@@ -114,9 +114,7 @@ class GPFitConfig:
             check_count(getattr(self, name), name)
         for name in ("grad_tol", "rel_tol", "noise_floor", "jitter_max", "init_spread", "drop_margin", "stall_tol",
                      "screen_rel_tol"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v) or v < 0:
-                raise ValueError(f"{name}: expected a finite number >= 0, got {v!r}")
+            check_positive(getattr(self, name), name, zero=True)
         for name in ("drop_after", "stall_window", "race_at", "threads"):
             check_count(getattr(self, name), name, optional=True)
         check_count(self.seed, "seed", minimum=0)  # NumPy's generators take seeds >= 0
