@@ -275,6 +275,51 @@ def test_a_compiled_variance_loop_that_fails_to_build_leaves_the_blas_solves(mod
         np.testing.assert_allclose(v, v_ref, rtol=1e-10, atol=1e-13 * float(model.signal_var.max()))
 
 
+@needs_jit
+def test_the_window_variance_is_compiled_when_the_window_opens_and_falls_back_if_it_fails(models,
+                                                                                        monkeypatch) -> None:
+    """The variance loop's form with an online window's term is compiled (or loaded) when the window's variance
+    path is prepared, not in the first gated tick; if that fails, a warning, and the per-joint path gives the same
+    variances to round-off."""
+    import cascgp.models.fastkernel as fk
+    import cascgp.models.online as online
+
+    model = models["sp-inward"]
+    new = sinusoid_data(make_arm(3, friction=0.8), 2.0, 10.0, seed=9, noise=0.02)
+    queries = [(new.q[i] + 0.01, new.qd[i], new.qdd[i]) for i in (3, 6)]
+    model.start_online(window=5)
+    calls = []
+    monkeypatch.setattr(online, "jit_var", lambda *a: calls.append(a[-1]) or fk.jit_var(*a))
+    try:
+        fv = model.prepare_variance()
+        assert fv.Lc is not None
+        assert len(calls) == 1 and calls[0] is not None  # run once with the window's arrays when it opened
+        monkeypatch.undo()
+        for i in range(7):
+            model.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
+        reference = [model.predict_one_var(*q) for q in queries]
+        real = fk._compiled["var"]
+
+        def refuses_the_window(*a):
+            if a[-1] is not None:
+                raise RuntimeError("cannot compile")
+            return real(*a)
+
+        monkeypatch.setitem(fk._compiled, "var", refuses_the_window)
+        model.start_online(window=5)
+        with pytest.warns(RuntimeWarning, match="compiled variance of the online window is not used"):
+            fv = model.prepare_variance()
+        assert fv.Lc is None and fv.window is not None
+        for i in range(7):
+            model.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])
+        for q, (m_ref, v_ref) in zip(queries, reference):
+            m, v = model.predict_one_var(*q)
+            np.testing.assert_array_equal(m, m_ref)
+            np.testing.assert_allclose(v, v_ref, rtol=1e-10, atol=1e-13 * float(model.signal_var.max()))
+    finally:
+        model.stop_online()
+
+
 def test_a_compiled_loop_that_fails_to_build_leaves_the_numpy_path(models, monkeypatch) -> None:
     import cascgp.models.fastkernel as fk
 

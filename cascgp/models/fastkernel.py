@@ -160,23 +160,23 @@ def _source(ints: np.ndarray, flts: np.ndarray, WT: np.ndarray, W2: np.ndarray, 
 
 
 def _var_source(trsv: Any, Lc: tuple, scale: np.ndarray, prior: np.ndarray, ints: np.ndarray, K: np.ndarray,
-                G: np.ndarray, var: np.ndarray, u: np.ndarray, fi: np.ndarray, ch: np.ndarray, gemv: Any,
-                symv: Any, held: int, Lw: tuple, ST: tuple, v: np.ndarray, y: np.ndarray,
-                fd: np.ndarray) -> None:  # pragma: no cover - runs compiled (tests compare it)
+                G: np.ndarray, var: np.ndarray, u: np.ndarray, fi: np.ndarray, ch: np.ndarray,
+                window: tuple | None) -> None:  # pragma: no cover - runs compiled (tests compare it)
     r"""The loop Numba compiles: :meth:`FastVariance.mean_var`'s per-joint part after the kernel rows, in the
     cascade's order (``ints`` as in :func:`pack_fixed`). ``trsv``: BLAS ``dtrsv`` (:func:`blas_routine`), called
     as :meth:`FastVariance.solve` calls it (``Lc[j]``, joint j's C-ordered lower factor, is the Fortran-ordered
-    :math:`L_j^\top` that BLAS reads; ``fi``, ``fd``, ``ch``: work arrays for its integer, floating and character
-    arguments), so :math:`u = L_j^{-1} c_j \kappa_j` is the same to the bit; ``var[j]`` is
-    :math:`\max(p_j - \|u\|^2 - e_j, 0)` plus :math:`G_j^2` times the neighbour's variance. With ``held``
-    samples in an online window (:meth:`cascgp.models.online._JointWindow.extra_var`), :math:`e_j = v^\top S^{-1}
-    v` with :math:`v = c_j \kappa_{jw} - L_{w0} u` (``Lw[j]``: :math:`L_{w0}`, C-ordered; ``ST[j]``: the memory of
-    the Fortran-ordered :math:`S^{-1}`, lower triangle), by the BLAS ``dgemv`` and ``dsymv`` the window calls;
-    ``held = 0``: :math:`e_j = 0` (``Lw``, ``ST`` are not read)."""
+    :math:`L_j^\top` that BLAS reads; ``fi``, ``ch``: work arrays for its integer and character arguments), so
+    :math:`u = L_j^{-1} c_j \kappa_j` is the same to the bit; ``var[j]`` is :math:`\max(p_j - \|u\|^2 - e_j, 0)`
+    plus :math:`G_j^2` times the neighbour's variance.
+
+    ``window``: None (:math:`e_j = 0`; Numba compiles this case without the window's code), or an online window
+    (:meth:`cascgp.models.online._JointWindow.extra_var`) as ``(gemv, symv, held, Lw, ST, v, y, fd)``: BLAS
+    ``dgemv`` and ``dsymv``, the samples held, per joint :math:`L_{w0}` (C-ordered) and the memory of the
+    Fortran-ordered :math:`S^{-1}` (lower triangle), and work arrays; with samples held,
+    :math:`e_j = v^\top S^{-1} v`, :math:`v = c_j \kappa_{jw} - L_{w0} u`, by the BLAS calls the window makes."""
     N = ints.shape[0]
     D = ints.shape[1] - 3
     ch[0], ch[1], ch[2], ch[3] = 85, 84, 78, 76  # "U", "T", "N": L^T upper, transposed, not unit; "L": lower
-    fd[0], fd[1] = 1.0, 0.0  # BLAS's alpha and beta
     for jj in range(N):
         j = ints[jj, D + 2]
         L = Lc[j]
@@ -190,21 +190,24 @@ def _var_source(trsv: Any, Lc: tuple, scale: np.ndarray, prior: np.ndarray, ints
         q = 0.0
         for i in range(n0):
             q += u[i] * u[i]
-        if held:
-            Wn = ST[j].shape[0]
-            if not (Lw[j].flags.c_contiguous and ST[j].flags.c_contiguous and Lw[j].shape[1] == n0):
-                raise ValueError("online variance: BLAS reads L_w0 and the inverse as contiguous blocks")
-            fi[3] = Wn
-            gemv(ch[1:].ctypes, fi[0:].ctypes, fi[3:].ctypes, fd[0:].ctypes, Lw[j].ctypes, fi[1:].ctypes, u.ctypes,
-                 fi[2:].ctypes, fd[1:].ctypes, y.ctypes, fi[2:].ctypes)  # y = L_w0 u
-            for i in range(Wn):
-                v[i] = c * K[j, n0 + i] - y[i]
-            symv(ch[3:].ctypes, fi[3:].ctypes, fd[0:].ctypes, ST[j].ctypes, fi[3:].ctypes, v.ctypes, fi[2:].ctypes,
-                 fd[1:].ctypes, y.ctypes, fi[2:].ctypes)  # y = S^-1 v
-            e = 0.0
-            for i in range(Wn):
-                e += v[i] * y[i]
-            q += e
+        if window is not None:
+            gemv, symv, held, Lw, ST, v, y, fd = window
+            if held:
+                Wn = ST[j].shape[0]
+                if not (Lw[j].flags.c_contiguous and ST[j].flags.c_contiguous and Lw[j].shape[1] == n0):
+                    raise ValueError("online variance: BLAS reads L_w0 and the inverse as contiguous blocks")
+                fi[3] = Wn
+                fd[0], fd[1] = 1.0, 0.0  # BLAS's alpha and beta
+                gemv(ch[1:].ctypes, fi[0:].ctypes, fi[3:].ctypes, fd[0:].ctypes, Lw[j].ctypes, fi[1:].ctypes,
+                     u.ctypes, fi[2:].ctypes, fd[1:].ctypes, y.ctypes, fi[2:].ctypes)  # y = L_w0 u
+                for i in range(Wn):
+                    v[i] = c * K[j, n0 + i] - y[i]
+                symv(ch[3:].ctypes, fi[3:].ctypes, fd[0:].ctypes, ST[j].ctypes, fi[3:].ctypes, v.ctypes,
+                     fi[2:].ctypes, fd[1:].ctypes, y.ctypes, fi[2:].ctypes)  # y = S^-1 v
+                e = 0.0
+                for i in range(Wn):
+                    e += v[i] * y[i]
+                q += e
         w = max(prior[j] - q, 0.0)
         tj = ints[j, D + 1]
         if tj >= 0:
@@ -341,8 +344,7 @@ def jit_var_factors(factors: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...] |
     n = max(L.shape[0] for L in Lc)
     try:
         fn(blas_routine("dtrsv"), Lc, np.ones(N), np.ones(N), ints, np.zeros((N, n)), np.zeros(N), np.zeros(N),
-           np.zeros(n), np.zeros(4, dtype=np.int32), np.zeros(4, dtype=np.uint8), blas_routine("dgemv"),
-           blas_routine("dsymv"), 0, (_NO_K,) * N, (_NO_K,) * N, np.zeros(1), np.zeros(1), np.zeros(2))
+           np.zeros(n), np.zeros(4, dtype=np.int32), np.zeros(4, dtype=np.uint8), None)
     except Exception as exc:  # noqa: BLE001 - as in jit_args: the NumPy path still works
         _dropped("variance loop", exc)
         _compiled["var"] = None
@@ -354,14 +356,15 @@ def jit_var(args: tuple, Lc: tuple[np.ndarray, ...], scale: np.ndarray, prior: n
             G: np.ndarray, var: np.ndarray, window: tuple | None = None) -> bool:
     """Each joint's propagated latent variance into ``var`` from the kernel rows ``K`` and mean derivatives ``G``
     that :func:`jit_mean` wrote (``args``: its :func:`jit_args`; ``Lc``: :func:`jit_var_factors`; ``window``: an
-    online window's ``(held, Lw, ST)`` as :func:`_var_source` takes them). False (nothing written) if the compiled
-    loop has been dropped since."""
+    online window's ``(held, Lw, ST)``, :meth:`cascgp.models.online.OnlineWindow.compiled_var_terms`). False
+    (nothing written) if the compiled loop has been dropped since."""
     fn = _compiled.get("var")
     if fn is None:
         return False
-    held, Lw, ST = window if window is not None else (0, (_NO_K,) * len(Lc), (_NO_K,) * len(Lc))
-    nw = ST[0].shape[0]
-    fn(blas_routine("dtrsv"), Lc, scale, prior, args[0], K, G, var, np.empty(K.shape[1]),
-       np.empty(4, dtype=np.int32), np.empty(4, dtype=np.uint8), blas_routine("dgemv"), blas_routine("dsymv"), held,
-       Lw, ST, np.empty(nw), np.empty(nw), np.empty(2))
+    if window is not None:
+        held, Lw, ST = window
+        nw = ST[0].shape[0]
+        window = (blas_routine("dgemv"), blas_routine("dsymv"), held, Lw, ST, np.empty(nw), np.empty(nw), np.empty(2))
+    fn(blas_routine("dtrsv"), Lc, scale, prior, args[0], K, G, var, np.empty(K.shape[1]), np.empty(4, dtype=np.int32),
+       np.empty(4, dtype=np.uint8), window)
     return True

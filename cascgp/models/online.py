@@ -56,7 +56,7 @@ from cascgp.checks import check_count
 from cascgp.gp.checks import check_scale
 from cascgp.gp.kernels import get_kernel
 from cascgp.gp.likelihood import blas_threads
-from cascgp.models.fastkernel import JIT_WT, jit_enabled, kernel_id
+from cascgp.models.fastkernel import JIT_WT, jit_enabled, jit_var, kernel_id
 from cascgp.models.fastpath import FastPath, FastVariance
 from cascgp.models.queries import one_real, state_cols
 
@@ -307,7 +307,18 @@ class OnlineWindow:
         so that opening a window does not rebuild it."""
         if self._var is None:
             base = base if base is not None else FastVariance.build(self.model.posteriors())
-            self._var = FastVariance(L=base.L, scale=base.scale, prior=base.prior, window=self, Lc=base.Lc)
+            Lc = base.Lc
+            if Lc is not None and self.fast.jit is not None:  # compile (or load) the loop with the window's term now
+                N = len(self.joints)
+                try:
+                    jit_var(self.fast.jit, Lc, base.scale, base.prior, np.zeros(self.fast.alpha.shape), np.zeros(N),
+                            np.zeros(N), self.compiled_var_terms())
+                except Exception as exc:  # noqa: BLE001 - as for the sample: the per-joint path still works
+                    warnings.warn(f"cascgp: the compiled variance of the online window is not used "
+                                  f"({type(exc).__name__}: {exc}); the per-joint path runs", RuntimeWarning,
+                                  stacklevel=3)
+                    Lc = None
+            self._var = FastVariance(L=base.L, scale=base.scale, prior=base.prior, window=self, Lc=Lc)
         return self._var
 
     def compiled_var_terms(self) -> tuple[int, tuple, tuple]:
