@@ -3,18 +3,20 @@
     python -m scripts.bench_online --out out/bench [--data out/study/data] [--n 500] [--window 150]
 
 Fits the 6-joint SP inward cascade (default GP fit) on ``n`` rows of simulated Jaco 2 data (the study's
-``jaco_train.npz`` at 10 Hz; without ``--data`` a collection preset is recorded: the quick one (36 s of
-training motion, 360 rows) when it has ``n`` rows, else the full one (600 s, 6,000 rows)), then times on
-queries from the held-out motions: ``predict_one`` (the paper's feedforward), ``predict_one_var`` (mean and
-propagated variance, what the gated controller calls), ``add_sample`` (one online sample into every joint),
-and both single-query paths again with a full online window; the six triangular solves of the variance alone
-and one read of the same factors' triangles packed into one array (the memory floor of an exact variance at this
-n); one online sample's BLAS calls alone (with SciPy's wrappers' overhead: near the floor of its memory traffic);
-and whole controller ticks
-(:class:`cascgp.FeedforwardController`, PD plus feedforward): ungated, with the default innovation gate (RBD
-plus ``predict_one`` per tick) and its update per measured sample (``observe``: one more ``predict_one`` and RBD
-call), and with each variance gate (RBD plus ``predict_one_var``). Medians, 90th and 99th percentiles over
-``--reps`` calls, one thread; ``compiled`` says whether the compiled single-query loop ran
+``jaco_train.npz`` at 10 Hz; without ``--data`` a collection preset is recorded: the quick one (36 s of training
+motion, 360 rows) when it has ``n`` rows, else the full one (600 s, 6,000 rows)), then times on queries from the
+held-out motions: ``predict_one`` (the paper's feedforward), ``predict_one_var`` (mean and propagated variance, what
+the gated controller calls), ``add_sample`` (one online sample into every joint), and both single-query paths again
+with a full online window; the six triangular solves of the variance alone and one read of the same factors'
+triangles packed into one array (the memory floor of an exact variance at this n); one online sample's BLAS calls
+alone (with SciPy's wrappers' overhead: near the floor of its memory traffic); and whole controller ticks
+(:class:`cascgp.FeedforwardController`, PD plus feedforward): ungated, with the default innovation gate (RBD plus
+``predict_one`` per tick) and its update per measured sample (``observe``: one more ``predict_one`` and RBD call),
+and with each variance gate (RBD plus ``predict_one_var``); the innovation- and variance-gated ticks again one every
+25 ms (``--paced-reps`` of them; the 40 Hz control period of a robot), the process idle in between (asleep: the core
+may idle and the caches fill with other work) and busy-waiting (as a real-time loop on a dedicated core), and, as a
+reference, a NumPy dot product of 0.3 MB back to back and paced the same way. Medians, 90th and 99th percentiles
+over ``--reps`` calls, one thread; ``compiled`` says whether the compiled single-query loop ran
 (:mod:`cascgp.models.fastkernel`: Numba installed, ``CASCGP_JIT`` not 0). When it ran, the compiled online sample
 and variance loop are also timed against their reference paths (NumPy sample, per-joint BLAS solves) on the same
 model in alternating rounds. Prints tables and writes ``bench_online.json``.
@@ -40,10 +42,18 @@ from scripts.provenance import git_commit  # noqa: E402
 QUICK_ROWS = 360
 
 
-def _times(fn, args_list, reps: int) -> dict[str, float]:
+def _times(fn, args_list, reps: int, gap_s: float = 0.0, spin: bool = False) -> dict[str, float]:
+    """Median, 90th and 99th percentile (us) of ``reps`` calls, ``gap_s`` before each (0: back to back) spent asleep
+    or, with ``spin``, busy-waiting."""
     out = []
     for k in range(reps):
         a = args_list[k % len(args_list)]
+        if gap_s and spin:
+            end = time.perf_counter() + gap_s
+            while time.perf_counter() < end:
+                pass
+        elif gap_s:
+            time.sleep(gap_s)
         t0 = time.perf_counter()
         fn(*a)
         out.append(time.perf_counter() - t0)
@@ -120,6 +130,9 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--n", type=int, default=500, help="training rows (10 Hz)")
     ap.add_argument("--window", type=int, default=150, help="online window per joint")
     ap.add_argument("--reps", type=int, default=2000)
+    ap.add_argument("--paced-reps", type=int, default=200,
+                    help="ticks of the innovation- and variance-gated controllers timed again one every 25 ms (the "
+                         "40 Hz control period), asleep and busy-waiting between them (0: skip)")
     a = ap.parse_args(argv)
     import torch
 
@@ -165,8 +178,18 @@ def main(argv: list[str] | None = None) -> None:
                                      fallback=rbd, gate=gate, online_every=1)
         ctrl.start(None, {})
         rows[label + " (offline)"] = _times(ctrl, ticks, a.reps)
+        if gate in ("innovation", "variance") and a.paced_reps:  # as on a robot: 25 ms between ticks
+            rows[f"{label} (offline), one every 25 ms, idle between"] = _times(ctrl, ticks, a.paced_reps, 0.025)
+            rows[f"{label} (offline), one every 25 ms, busy-waiting between"] = _times(
+                ctrl, ticks, a.paced_reps, 0.025, spin=True)
         if gate == "innovation":
             innovation = ctrl
+    if a.paced_reps:  # the same pacing on a call that is not ours: what the machine does to a cold working set
+        x, y = np.random.default_rng(0).random((2, 20_000))
+        label = "reference: one dot product of two 20,000-element vectors (0.3 MB)"
+        rows[label] = _times(np.dot, [(x, y)], a.reps)
+        rows[label + ", one every 25 ms, busy-waiting between"] = _times(np.dot, [(x, y)], a.paced_reps, 0.025,
+                                                                        spin=True)
     measured = [(test.q[i], test.qd[i], test.tau[i], 0.025 * k) for k, i in enumerate(range(0, test.n_samples, 3))]
     rows["innovation update per sample (observe)"] = _times(innovation.observe, measured, a.reps)
     model.start_online(a.window)
