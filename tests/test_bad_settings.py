@@ -50,14 +50,17 @@ def test_gp_fit_config_refuses_a_negative_seed() -> None:
         GPFitConfig(seed=-1)
 
 
-@pytest.mark.parametrize("field", ["grad_tol", "noise_floor", "init_spread", "stall_tol"])
+@pytest.mark.parametrize("field", ["grad_tol", "rel_tol", "noise_floor", "jitter_max", "init_spread", "drop_margin",
+                                   "stall_tol", "screen_rel_tol"])
 @pytest.mark.parametrize("bad", [-1e-3, float("nan"), float("inf"), True, "0.1", None])
 def test_gp_fit_config_refuses_bad_tolerances(field, bad) -> None:
     from cascgp.gp import GPFitConfig
 
     with pytest.raises(ValueError, match=rf"^{field}: expected a finite number >= 0, got "):
         GPFitConfig(**{field: bad})
-    assert getattr(GPFitConfig(**{field: 0}), field) == 0
+    for good in (0, np.float32(0.25), np.int64(1)):  # stored as Python floats: the config saves as JSON
+        v = getattr(GPFitConfig(**{field: good}), field)
+        assert type(v) is float and v == float(good)
 
 
 def test_retrain_config_keeps_python_numbers() -> None:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import pytest
 import torch
@@ -83,10 +85,26 @@ def test_blas_threads_limits_every_blas_library_and_restores_each_one() -> None:
         assert before and set(before) == {2}
         with blas_threads(1):
             assert set(counts()) == {1}
-            with blas_threads(1):
+            with blas_threads(3):
+                assert set(counts()) == {3}
+            assert set(counts()) == {1}
+            with blas_threads(1):  # already 1: nothing set, nothing restored
                 assert set(counts()) == {1}
             assert set(counts()) == {1}
         assert counts() == before
         with pytest.raises(RuntimeError, match="inside"), blas_threads(1):
             raise RuntimeError("inside")
         assert counts() == before
+    # OpenBLAS (pthreads) obeys one Python thread at a time; a finished block leaves it to the next thread
+    with blas_threads(3):
+        pass
+    seen: list[list[int]] = []
+
+    def other_thread() -> None:
+        with blas_threads(3):
+            seen.append(counts())
+
+    worker = threading.Thread(target=other_thread)
+    worker.start()
+    worker.join()
+    assert seen and set(seen[0]) == {3}

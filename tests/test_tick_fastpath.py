@@ -215,8 +215,9 @@ def test_a_float64_query_and_the_general_form_give_the_same_answer_and_errors(mo
 @pytest.mark.parametrize("key", ["sp-inward", "np-outward", "np-standard", "rbf:sp-inward",
                                  "online:sp-inward", "online:np-outward"])
 def test_compiled_variance_solves_are_blas_solves(models, key) -> None:
-    """Given the same kernel rows, the compiled loop's variances equal the per-joint BLAS path's but for the order
-    of the sums (the solves and, with an online window, its products are the same BLAS calls)."""
+    """Given the same kernel rows, the compiled loop's variances equal the per-joint BLAS path's to round-off (the
+    solves are the same BLAS calls; with an online window, its product with the inverse is too, and its product
+    with L_w0 is SciPy's dgemv where the per-joint path uses NumPy's)."""
     from cascgp.models.fastkernel import jit_mean, jit_var
 
     online = key.startswith("online:")
@@ -293,7 +294,8 @@ def test_the_window_variance_is_compiled_when_the_window_opens_and_falls_back_if
     try:
         fv = model.prepare_variance()
         assert fv.Lc is not None
-        assert len(calls) == 1 and calls[0] is not None  # run once with the window's arrays when it opened
+        # run once when it opened, with the window's arrays and as with samples held (its BLAS calls included)
+        assert len(calls) == 1 and calls[0][0] == 1 and calls[0][1] is model._online.compiled_var_terms()[1]
         monkeypatch.undo()
         for i in range(7):
             model.add_sample(new.q[i], new.qd[i], new.qdd[i], new.tau[i])

@@ -114,7 +114,7 @@ class GPFitConfig:
             check_count(getattr(self, name), name)
         for name in ("grad_tol", "rel_tol", "noise_floor", "jitter_max", "init_spread", "drop_margin", "stall_tol",
                      "screen_rel_tol"):
-            check_positive(getattr(self, name), name, zero=True)
+            setattr(self, name, check_positive(getattr(self, name), name, zero=True))  # a Python float (JSON)
         for name in ("drop_after", "stall_window", "race_at", "threads"):
             check_count(getattr(self, name), name, optional=True)
         check_count(self.seed, "seed", minimum=0)  # NumPy's generators take seeds >= 0

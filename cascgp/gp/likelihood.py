@@ -72,6 +72,7 @@ import contextlib
 import math
 import time
 from collections.abc import Iterator
+from typing import Any
 
 import numpy as np
 import torch
@@ -89,6 +90,7 @@ LOG2PI = math.log(2.0 * math.pi)
 
 
 _BLAS_LIBS: list | None = None  # the BLAS libraries threadpoolctl finds in this process, looked up on first use
+_OWNERSHIP: Any = None  # threadpoolctl's per-thread count of limits that hold OpenBLAS's controlling thread
 
 
 @contextlib.contextmanager
@@ -99,16 +101,21 @@ def blas_threads(k: int) -> Iterator[None]:
     2-core machine, spun against the other process (measured: 25 ms instead of 8 ms per evaluation at n = 500).
     The libraries are found once per process by a ``threadpoolctl.ThreadpoolController`` (building one inspects
     the loaded libraries: 1.9 ms per ``threadpool_limits`` call); each call then reads and sets their thread
-    counts through its library controllers, setting only those that differ from ``k`` and restoring them after
-    (``controller.limit`` took 24 us per call, which mattered for the online updates between control ticks,
-    :mod:`cascgp.models.online`).
+    counts through its library controllers, setting only those that differ from ``k`` and restoring them after,
+    instead of ``controller.limit``, which also builds the report of every library (``info()``) at each call: this
+    runs around every online sample between control ticks (:mod:`cascgp.models.online`). As ``limit`` does, the
+    block holds threadpoolctl's ownership of OpenBLAS's controlling thread (a pthreads OpenBLAS obeys one Python
+    thread at a time), released when the thread's last limit ends.
     """
-    global _BLAS_LIBS
+    global _BLAS_LIBS, _OWNERSHIP
     if _BLAS_LIBS is None:
-        from threadpoolctl import ThreadpoolController
+        import threadpoolctl
 
-        _BLAS_LIBS = [lib for lib in ThreadpoolController().lib_controllers if lib.user_api == "blas"]
+        _BLAS_LIBS = [lib for lib in threadpoolctl.ThreadpoolController().lib_controllers if lib.user_api == "blas"]
+        _OWNERSHIP = getattr(threadpoolctl, "CONTROLLING_THREAD_OWNERSHIP", None)  # threadpoolctl >= 3.7
     changed = []
+    if _OWNERSHIP is not None:
+        _OWNERSHIP.increment()
     try:
         for lib in _BLAS_LIBS:
             prev = lib.get_num_threads()
@@ -119,6 +126,8 @@ def blas_threads(k: int) -> Iterator[None]:
     finally:
         for lib, prev in changed:
             lib.set_num_threads(prev)
+        if _OWNERSHIP is not None:
+            _OWNERSHIP.decrement()
 
 
 @contextlib.contextmanager

@@ -173,7 +173,8 @@ def _var_source(trsv: Any, Lc: tuple, scale: np.ndarray, prior: np.ndarray, ints
     (:meth:`cascgp.models.online._JointWindow.extra_var`) as ``(gemv, symv, held, Lw, ST, v, y, fd)``: BLAS
     ``dgemv`` and ``dsymv``, the samples held, per joint :math:`L_{w0}` (C-ordered) and the memory of the
     Fortran-ordered :math:`S^{-1}` (lower triangle), and work arrays; with samples held,
-    :math:`e_j = v^\top S^{-1} v`, :math:`v = c_j \kappa_{jw} - L_{w0} u`, by the BLAS calls the window makes."""
+    :math:`e_j = v^\top S^{-1} v`, :math:`v = c_j \kappa_{jw} - L_{w0} u`, by SciPy's BLAS ``dgemv`` and ``dsymv``
+    (the per-joint path calls the same ``dsymv``; its product :math:`L_{w0} u` runs in NumPy's BLAS)."""
     N = ints.shape[0]
     D = ints.shape[1] - 3
     ch[0], ch[1], ch[2], ch[3] = 85, 84, 78, 76  # "U", "T", "N": L^T upper, transposed, not unit; "L": lower
@@ -194,8 +195,11 @@ def _var_source(trsv: Any, Lc: tuple, scale: np.ndarray, prior: np.ndarray, ints
             gemv, symv, held, Lw, ST, v, y, fd = window
             if held:
                 Wn = ST[j].shape[0]
-                if not (Lw[j].flags.c_contiguous and ST[j].flags.c_contiguous and Lw[j].shape[1] == n0):
-                    raise ValueError("online variance: BLAS reads L_w0 and the inverse as contiguous blocks")
+                if not (Lw[j].flags.c_contiguous and ST[j].flags.c_contiguous and Lw[j].shape == (Wn, n0)
+                        and ST[j].shape[1] == Wn and K.shape[1] >= n0 + Wn and v.shape[0] >= Wn
+                        and y.shape[0] >= Wn):
+                    raise ValueError("online variance: BLAS reads L_w0 (W, n0) and the inverse (W, W) as contiguous "
+                                     "blocks, with W kernel values per joint after the fitted set's")
                 fi[3] = Wn
                 fd[0], fd[1] = 1.0, 0.0  # BLAS's alpha and beta
                 gemv(ch[1:].ctypes, fi[0:].ctypes, fi[3:].ctypes, fd[0:].ctypes, Lw[j].ctypes, fi[1:].ctypes,
@@ -364,7 +368,7 @@ def jit_var(args: tuple, Lc: tuple[np.ndarray, ...], scale: np.ndarray, prior: n
     if window is not None:
         held, Lw, ST = window
         nw = ST[0].shape[0]
-        window = (blas_routine("dgemv"), blas_routine("dsymv"), held, Lw, ST, np.empty(nw), np.empty(nw), np.empty(2))
+        window = (blas_routine("dgemv"), blas_routine("dsymv"), held, Lw, ST, np.zeros(nw), np.zeros(nw), np.empty(2))
     fn(blas_routine("dtrsv"), Lc, scale, prior, args[0], K, G, var, np.empty(K.shape[1]), np.empty(4, dtype=np.int32),
        np.empty(4, dtype=np.uint8), window)
     return True

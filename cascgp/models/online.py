@@ -265,15 +265,16 @@ class OnlineWindow:
         """The per-joint arrays the compiled loops take, gathered once per window (they are written in place, never
         replaced). Not copied or pickled with the window (``__getstate__``): a copy's views of its own arrays are
         gathered again."""
-        if self._gathered is None:
+        gathered = getattr(self, "_gathered", None)  # None also in a window pickled before it was kept
+        if gathered is None:
             per = self._per_joint
-            self._gathered = {
+            self._gathered = gathered = {
                 "fitted": (per(lambda J: J.P.x_mean), per(lambda J: J.P.x_scale), per(lambda J: J.Lf),
                            per(lambda J: J.P.Z), per(lambda J: J.Z2), per(lambda J: J.u0), per(lambda J: J.alpha_fit)),
                 **{nm: per(lambda J, nm=nm: getattr(J, nm)) for nm in ("Zw", "B", "Lw0", "S", "r", "alphaw",
                                                                      "alpha0")},
                 "ST": per(lambda J: J.Sinv.T)}  # the memory of each Fortran-ordered inverse
-        return self._gathered
+        return gathered
 
     def __getstate__(self) -> dict[str, Any]:
         return {**self.__dict__, "_gathered": None}
@@ -310,9 +311,10 @@ class OnlineWindow:
             Lc = base.Lc
             if Lc is not None and self.fast.jit is not None:  # compile (or load) the loop with the window's term now
                 N = len(self.joints)
-                try:
+                _, Lw, ST = self.compiled_var_terms()
+                try:  # run as with samples held (the window's term is 0: its arrays are still zero or hold samples)
                     jit_var(self.fast.jit, Lc, base.scale, base.prior, np.zeros(self.fast.alpha.shape), np.zeros(N),
-                            np.zeros(N), self.compiled_var_terms())
+                            np.zeros(N), (1, Lw, ST))
                 except Exception as exc:  # noqa: BLE001 - as for the sample: the per-joint path still works
                     warnings.warn(f"cascgp: the compiled variance of the online window is not used "
                                   f"({type(exc).__name__}: {exc}); the per-joint path runs", RuntimeWarning,
