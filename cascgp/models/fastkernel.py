@@ -35,7 +35,7 @@ import numpy as np
 
 from cascgp.data import F64 as _F64
 
-__all__ = ["jit_mean", "jit_enabled", "jit_var", "jit_var_factors"]
+__all__ = ["jit_mean", "jit_enabled", "jit_var", "jit_var_factors", "warn_dropped"]
 
 _KERNEL_IDS = {"matern52": 0, "rbf": 1}
 # exp(x), x = -s <= 0, as 2^k e^r: k = round(x / ln 2), r = x - k ln 2 (Cody-Waite: ln 2 in two parts, the first
@@ -219,10 +219,10 @@ def _var_source(trsv: Any, Lc: tuple, scale: np.ndarray, prior: np.ndarray, ints
         var[j] = w
 
 
-def _dropped(what: str, exc: Exception) -> None:
-    """Warn that a compiled loop is not used (the NumPy path runs)."""
-    warnings.warn(f"cascgp: the compiled {what} is not used ({type(exc).__name__}: {exc}); the NumPy path runs",
-                  RuntimeWarning, stacklevel=4)
+def warn_dropped(what: str, exc: Exception, instead: str = "the NumPy path", stacklevel: int = 4) -> None:
+    """Warn that a compiled loop (``what``) is not used because of ``exc``, and that ``instead`` runs."""
+    warnings.warn(f"cascgp: the compiled {what} is not used ({type(exc).__name__}: {exc}); {instead} runs",
+                  RuntimeWarning, stacklevel=stacklevel)
 
 
 def _kernel() -> Callable[..., Any] | None:
@@ -234,7 +234,7 @@ def _kernel() -> Callable[..., Any] | None:
         except ImportError:
             _compiled["mean"] = None
         except Exception as exc:  # noqa: BLE001 - e.g. no writable cache location (Numba checks when it decorates)
-            _dropped("single-query loop", exc)
+            warn_dropped("single-query loop", exc)
             _compiled["mean"] = None
     return _compiled["mean"]
 
@@ -248,7 +248,7 @@ def _var_kernel() -> Callable[..., Any] | None:
         except ImportError:
             _compiled["var"] = None
         except Exception as exc:  # noqa: BLE001 - as in _kernel
-            _dropped("variance loop", exc)
+            warn_dropped("variance loop", exc)
             _compiled["var"] = None
     return _compiled["var"]
 
@@ -305,7 +305,7 @@ def jit_args(kernel: str, arrays: tuple) -> tuple | None:
     try:
         jit_mean(args, np.zeros(D + 1), None, out)
     except Exception as exc:  # noqa: BLE001 - e.g. no writable cache location: the NumPy path still works
-        _dropped("single-query loop", exc)
+        warn_dropped("single-query loop", exc)
         _compiled["mean"] = None
         return None
     return args
@@ -350,7 +350,7 @@ def jit_var_factors(factors: tuple[np.ndarray, ...]) -> tuple[np.ndarray, ...] |
         fn(blas_routine("dtrsv"), Lc, np.ones(N), np.ones(N), ints, np.zeros((N, n)), np.zeros(N), np.zeros(N),
            np.zeros(n), np.zeros(4, dtype=np.int32), np.zeros(4, dtype=np.uint8), None)
     except Exception as exc:  # noqa: BLE001 - as in jit_args: the NumPy path still works
-        _dropped("variance loop", exc)
+        warn_dropped("variance loop", exc)
         _compiled["var"] = None
         return None
     return Lc

@@ -45,7 +45,6 @@ Derivative-based (``db``) models only.
 from __future__ import annotations
 
 import math
-import warnings
 from typing import Any
 
 import numpy as np
@@ -56,7 +55,7 @@ from cascgp.checks import check_count
 from cascgp.gp.checks import check_scale
 from cascgp.gp.kernels import get_kernel
 from cascgp.gp.likelihood import blas_threads
-from cascgp.models.fastkernel import JIT_WT, jit_enabled, jit_var, kernel_id
+from cascgp.models.fastkernel import JIT_WT, jit_enabled, jit_var, kernel_id, warn_dropped
 from cascgp.models.fastpath import FastPath, FastVariance
 from cascgp.models.queries import one_real, state_cols
 
@@ -230,8 +229,7 @@ class OnlineWindow:
         except ImportError:
             return None
         except Exception as exc:  # noqa: BLE001 - e.g. Numba finds no writable cache location when it decorates
-            warnings.warn(f"cascgp: the compiled online sample is not used ({type(exc).__name__}: {exc}); the "
-                          "NumPy path runs", RuntimeWarning, stacklevel=4)
+            warn_dropped("online sample", exc, stacklevel=5)
             return None
         N, W, n0 = len(self.joints), self.window, self.n0
         d = max(J.Zw.shape[1] for J in self.joints)
@@ -246,8 +244,7 @@ class OnlineWindow:
                     return None  # a window that refuses the trial sample: the NumPy path, untried
                 self._commit_compiled(online_kernel, work, consts, copies=True)
         except Exception as exc:  # noqa: BLE001 - as for the control tick's loop: the NumPy path still works
-            warnings.warn(f"cascgp: the compiled online sample is not used ({type(exc).__name__}: {exc}); the "
-                          "NumPy path runs", RuntimeWarning, stacklevel=4)
+            warn_dropped("online sample", exc, stacklevel=5)
             return None
         return work
 
@@ -316,9 +313,7 @@ class OnlineWindow:
                     jit_var(self.fast.jit, Lc, base.scale, base.prior, np.zeros(self.fast.alpha.shape), np.zeros(N),
                             np.zeros(N), (1, Lw, ST))
                 except Exception as exc:  # noqa: BLE001 - as for the sample: the per-joint path still works
-                    warnings.warn(f"cascgp: the compiled variance of the online window is not used "
-                                  f"({type(exc).__name__}: {exc}); the per-joint path runs", RuntimeWarning,
-                                  stacklevel=3)
+                    warn_dropped("variance of the online window", exc, "the per-joint path")
                     Lc = None
             self._var = FastVariance(L=base.L, scale=base.scale, prior=base.prior, window=self, Lc=Lc)
         return self._var

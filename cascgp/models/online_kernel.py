@@ -15,6 +15,7 @@ last bit). The compiler is Numba, as for the control tick (:mod:`cascgp.models.f
 
 from __future__ import annotations
 
+import functools
 import importlib
 import math
 from typing import Any
@@ -245,7 +246,8 @@ def commit(syr: Any, m: int, n_in: int, consts: np.ndarray, tfrom: np.ndarray, c
             falpha[j, n0 + i] = Paw[j, i] * scale
 
 
+@functools.cache
 def blas() -> dict[str, Any]:
     """SciPy's BLAS ``dtrsv``, ``dgemv``, ``dsymv`` and ``dsyr`` as ctypes functions that compiled code calls
-    (:func:`cascgp.models.fastkernel.blas_routine`)."""
+    (:func:`cascgp.models.fastkernel.blas_routine`), gathered once per process (two lookups per sample)."""
     return {name: blas_routine(name) for name in BLAS_ARGS}
