@@ -12,7 +12,8 @@ common               study names and labels, grids, Table I computation and numb
 execution            the parallel job layer (local processes / Ray, resume, retry, progress)
 job_cache            the job layer's cache: one JSON file per finished job, keyed by function and inputs
 ray_backend          the job layer's Ray backend (connection, token authentication, Ray tasks)
-curves               the nRMSE-vs-seconds curve engine (one job per model and subset, fit audit)
+curves               the nRMSE-vs-seconds curve engine (one job per subset and standard model with its cascades;
+                     fit audit)
 collect              the simulated Jaco data collection (sum-of-sinusoids, velocity mode; one job per motion)
 analyses             optimiser iteration counts per joint, Spearman correlation of states and torques
 study                the whole data-efficiency study (presets, ``run_study``, the SARCOS block)

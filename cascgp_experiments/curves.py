@@ -1,7 +1,8 @@
 """nRMSE-versus-seconds-of-data curves: the engine shared by the Jaco and SARCOS studies.
 
-One *job* is (model, subset): the model is trained on the first ``T`` seconds of the subset for
-every ``T`` of the grid (ascending) and evaluated on the test set after each fit.
+Each model is trained on the first ``T`` seconds of each subset for every ``T`` of the grid (ascending) and
+evaluated on the test set after each fit. One *job* is (models, subset): a standard model with the cascades of its
+kind in the run, or a model alone (:func:`job_groups`).
 
 Protocol (the paper's): every fit has ``n_restarts`` (10) starts; after the first grid point one
 of them is warm-started from the previous grid point's hyperparameters (``init=``), the others are
@@ -26,10 +27,12 @@ model's own prediction, the default of :meth:`cascgp.models.CascadedGPModel.pred
 
 Shared cells: a cascade's first joint in its chain direction (inward: joint N, outward: joint 1) takes every
 joint's state and no torque, the inputs of the standard model's GP of that joint, so it is the same model by
-construction. When the standard model of the same kind (NP/SP, derivative based/free) is in the run, that
-joint's scores (both scorings) are the standard job's, so the two are exactly equal; the cascade's own fit of
-the joint still feeds its chain. ``block["shared"]`` records each shared cell and the largest difference of the
-cascade's own fit from the standard's there.
+construction. When the standard model of the same kind (NP/SP, derivative based/free) is in the run, the
+cascade runs in the standard model's job and takes its GP of that joint at every grid point instead of fitting it
+again (``share`` of :meth:`cascgp.models.CascadedGPModel.fit`: the cascade's fit is the one it makes alone, bit
+for bit, with one GP fewer to optimise), and that joint's scores (both scorings) are the standard model's.
+``block["shared"]`` records each shared cell and the largest difference of the cascade's own scores from the
+standard's there (the round-off of the two prediction paths when the GP is shared).
 
 The RBD baseline is not trained: its test prediction is the nominal RNEA torque, the same for
 every subset and ``T``.
@@ -157,60 +160,95 @@ def audited(spec: CurveSpec, model: str, subset: int, grid_index: int) -> bool:
     return bool(u < spec.audit_fraction)
 
 
-def curve_job(spec: dict[str, Any], model: str, subset: int, data_sha256: dict[str, str] | None = None
+def job_groups(models: list[str]) -> list[list[str]]:
+    """The models of each job: a standard model with the cascades of its kind (NP/SP, derivative based/free) that
+    are in ``models``, which take its GP of their chain's first joint instead of fitting it again (``share`` of
+    :meth:`cascgp.models.CascadedGPModel.fit`: the same fits, bit for bit), and every other model alone."""
+    groups: dict[str, list[str]] = {}
+    for m in models:
+        st = standard_twin(m)
+        groups.setdefault(st if st in models else m, []).append(m)
+    return [sorted(g, key=lambda m: m != lead) for lead, g in groups.items()]  # the standard model first
+
+
+def curve_job(spec: dict[str, Any], models: list[str], subset: int, data_sha256: dict[str, str] | None = None
               ) -> dict[str, Any]:
-    """One job: train ``model`` on growing prefixes of subset ``subset``; nRMSE per joint after each fit.
+    """One job: train each of ``models`` (one of :func:`job_groups`) on growing prefixes of subset ``subset``;
+    nRMSE per joint after each fit. Returns ``{"models": [one result per model]}``.
 
     ``spec``: the :class:`CurveSpec` as a dict; ``data_sha256``: digests of its data files
     (:func:`npz_digest`), unused here but part of the job's inputs, so that the job cache is keyed
     by the data as well as by the settings."""
-    from cascgp.metrics import nrmse
-
-    from cascgp_experiments.execution import report_progress
-
     spec_ = CurveSpec(**spec)
     st = state_for(spec_)
-    spec = spec_
-    data = st["subsets"][subset]
-    test, mask = st["test"], st["mask"]
-    make = _resolve(spec.factory)
-    from cascgp.features import history_from_data
+    tracks = [_Track(spec_, st, m, subset) for m in models]
+    for gi, T in enumerate(spec_.grid):
+        std = tracks[0].step(gi, T)
+        for tr in tracks[1:]:  # cascades of the standard model tracks[0]
+            tr.step(gi, T, share=std)
+    return {"models": [tr.result() for tr in tracks]}
 
-    measured = _resolve(spec.measured) if spec.measured and model.split("-")[1] != "standard" else None
-    rows, rows_meas, walls, ntrain, audits = [], [], [], [], []
-    prev = None
-    for gi, T in enumerate(spec.grid):
-        d = data.first_seconds(T)
+
+class _Track:
+    """One model's curve within a job: its fits along the grid (each warm-started from the last), scores, audits."""
+
+    def __init__(self, spec: CurveSpec, state: dict[str, Any], model: str, subset: int) -> None:
+        self.spec, self.state, self.model, self.subset = spec, state, model, subset
+        self.data = state["subsets"][subset]
+        self.make = _resolve(spec.factory)
+        self.measured = (_resolve(spec.measured) if spec.measured and model.split("-")[1] != "standard"
+                         else None)
+        self.rbd = state["rbd"] if model.startswith("sp") else None
+        self.rows: list[list[float]] = []
+        self.rows_meas: list[list[float]] = []
+        self.walls: list[float] = []
+        self.ntrain: list[int] = []
+        self.audits: list[dict[str, Any]] = []
+        self.prev: Any = None
+
+    def step(self, gi: int, T: float, share: Any = None) -> Any:
+        """Fit on the first ``T`` seconds (taking ``share``'s GP of the chain's first joint, if given), score and
+        maybe audit the fit; returns the fitted model."""
+        from cascgp.features import history_from_data
+        from cascgp.metrics import nrmse
+
+        from cascgp_experiments.execution import report_progress
+
+        spec, model, subset = self.spec, self.model, self.subset
+        test, mask = self.state["test"], self.state["mask"]
+        d = self.data.first_seconds(T)
         if not model.endswith("-df"):
             # The rows a -df model cannot use (no history yet): dropped for every variant alike.
             d = d.take(history_from_data(d, spec.df_delta)[1])
-        sp = model.startswith("sp")
-        m = make(model, data.dof, rbd=st["rbd"] if sp else None, gp_config=_gp_config(spec, subset),
-                 df_delta=spec.df_delta)
+        m = self.make(model, self.data.dof, rbd=self.rbd, gp_config=_gp_config(spec, subset), df_delta=spec.df_delta)
         t0 = time.perf_counter()
-        m.fit(d, init=prev if spec.warm_start else None)
-        walls.append(time.perf_counter() - t0)
+        m.fit(d, init=self.prev if spec.warm_start else None, **({"share": share} if share is not None else {}))
+        self.walls.append(time.perf_counter() - t0)
         mean, _ = m.predict_data(test)
-        rows.append(nrmse(np.asarray(mean)[mask], test.tau[mask]).tolist())
-        if measured is not None:
-            rows_meas.append(nrmse(np.asarray(measured(m, test))[mask], test.tau[mask]).tolist())
-        ntrain.append(d.n_samples)
+        self.rows.append(nrmse(np.asarray(mean)[mask], test.tau[mask]).tolist())
+        if self.measured is not None:
+            self.rows_meas.append(nrmse(np.asarray(self.measured(m, test))[mask], test.tau[mask]).tolist())
+        self.ntrain.append(d.n_samples)
         if audited(spec, model, subset, gi):
-            ref = make(model, data.dof, rbd=st["rbd"] if sp else None, gp_config=_cold_config(spec, subset),
-                       df_delta=spec.df_delta)
+            ref = self.make(model, self.data.dof, rbd=self.rbd, gp_config=_cold_config(spec, subset),
+                            df_delta=spec.df_delta)
             t1 = time.perf_counter()
             ref.fit(d)
             nll = [float(f["best_nll"]) for f in m.fit_info]
             nll_ref = [float(f["best_nll"]) for f in ref.fit_info]
-            audits.append({"model": model, "subset": subset, "seconds": float(T), "n_train": d.n_samples,
-                           "nll": nll, "nll_cold": nll_ref, "gap": [a - b for a, b in zip(nll, nll_ref)],
-                           "wall_s": walls[-1], "wall_cold_s": time.perf_counter() - t1})
-        prev = m
+            self.audits.append({"model": model, "subset": subset, "seconds": float(T), "n_train": d.n_samples,
+                                "nll": nll, "nll_cold": nll_ref, "gap": [a - b for a, b in zip(nll, nll_ref)],
+                                "wall_s": self.walls[-1], "wall_cold_s": time.perf_counter() - t1})
+        self.prev = m
         report_progress(1, f"{model}#{subset} T={T:g} s")
-    out = {"model": model, "subset": subset, "nrmse": rows, "fit_wall_s": walls, "n_train": ntrain, "audit": audits}
-    if measured is not None:
-        out["nrmse_measured"] = rows_meas
-    return out
+        return m
+
+    def result(self) -> dict[str, Any]:
+        out = {"model": self.model, "subset": self.subset, "nrmse": self.rows, "fit_wall_s": self.walls,
+               "n_train": self.ntrain, "audit": self.audits}
+        if self.measured is not None:
+            out["nrmse_measured"] = self.rows_meas
+        return out
 
 
 def rbd_curve(state: dict[str, Any]) -> list[float]:
@@ -225,9 +263,9 @@ def rbd_curve(state: dict[str, Any]) -> list[float]:
 def run_curves(spec: CurveSpec, models: list[str], *, workers: int | None = None, ray_address: str | None = None,
                cache_dir: str | Path | None = None, desc: str = "fits", show_progress: bool = True
                ) -> dict[str, Any]:
-    """Run every (model, subset) job (:func:`curve_job`) with :func:`cascgp_experiments.execution.run_jobs`
-    (``workers`` local processes, default every core, or the Ray cluster at ``ray_address``); returns the
-    per-model curves block of the results JSON:
+    """Run every (models, subset) job (:func:`job_groups`, :func:`curve_job`) with
+    :func:`cascgp_experiments.execution.run_jobs` (``workers`` local processes, default every core, or the Ray
+    cluster at ``ray_address``); returns the per-model curves block of the results JSON:
 
     ``{"grid_s", "n_subsets", "n_test_rows", "models": {m: {"nrmse_mean" (G, N), "nrmse_std" (G, N),
     "nrmse_median", "nrmse_q25", "nrmse_q75" (G, N), "nrmse_all" (S, G, N), "fit_wall_s" (S, G), "n_train" (S, G),
@@ -242,14 +280,14 @@ def run_curves(spec: CurveSpec, models: list[str], *, workers: int | None = None
     gp_models = [m for m in models if m != RBD]
     digests = {"train": npz_digest(spec.train_path), "test": npz_digest(spec.test_path)}
     spec_d = asdict(spec)
-    pairs = [(m, s) for m in gp_models for s in range(spec.n_subsets)]
-    jobs = [{"spec": spec_d, "model": m, "subset": s, "data_sha256": digests} for m, s in pairs]
-    # big models first so the pool's tail is short
-    prio = [2 * (m.split("-")[1] == "standard") + (not m.endswith("df")) for m, _ in pairs]
+    pairs = [(g, s) for g in job_groups(gp_models) for s in range(spec.n_subsets)]
+    jobs = [{"spec": spec_d, "models": g, "subset": s, "data_sha256": digests} for g, s in pairs]
+    # big jobs first so the pool's tail is short
+    prio = [2 * len(g) + (not g[0].endswith("df")) for g, _ in pairs]
     res = run_jobs(curve_job, jobs, workers=workers, ray_address=ray_address, cache_dir=cache_dir, desc=desc,
-                   units=[len(spec.grid)] * len(jobs), unit="fit", priority=prio,
-                   label=lambda j: f"{j['model']}#{j['subset']}", show_progress=show_progress)
-    results = {pair: r for pair, r in zip(pairs, res)}
+                   units=[len(spec.grid) * len(g) for g, _ in pairs], unit="fit", priority=prio,
+                   label=lambda j: f"{'+'.join(j['models'])}#{j['subset']}", show_progress=show_progress)
+    results = {(r["model"], s): r for (_, s), job in zip(pairs, res) for r in job["models"]}
     state = state_for(spec)
     out: dict[str, Any] = {"grid_s": list(spec.grid), "n_subsets": spec.n_subsets,
                            "n_test_rows": int(state["mask"].sum()),
@@ -286,7 +324,7 @@ def run_curves(spec: CurveSpec, models: list[str], *, workers: int | None = None
                                  spec.audit_fraction, len(gp_models) * spec.n_subsets * len(spec.grid))
     out["wall_s"] = time.perf_counter() - t_start
     out["n_cached_jobs"] = res.n_cached
-    out["jobs"] = {**res.stats(), "labels": [f"{m}#{s}" for m, s in pairs]}
+    out["jobs"] = {**res.stats(), "labels": [f"{'+'.join(g)}#{s}" for g, s in pairs]}
     return out
 
 

@@ -173,7 +173,7 @@ def _table_legend(block: dict[str, Any]) -> str:
     pts = "; ".join(f"{lo:g}-{hi:g} s: " + ", ".join(f"{t:g}" for t in g[(g >= lo - 1e-9) & (g <= hi + 1e-9)])
                     for lo, hi in ((1, 2), (4, 5), (9, 10)))
     sh = block.get("shared")
-    how = ("scored once by the standard model's job and shared (exactly equal)" if sh else
+    how = ("fitted once, in the standard model's job, and shared (exactly equal)" if sh else
            "fitted separately in this run, not shared (largest difference from the standard model's per-subset "
            f"value there: {_shared_gap(block):.1e})")
     return (f"Each cell: nRMSE of the joint on the test rows; per grid point the **median over the "

@@ -90,11 +90,19 @@ class _LinearModel:
     def __init__(self, name: str, dof: int, rbd=None, **kw) -> None:
         self.name, self.dof, self.rbd = name, dof, rbd
 
-    def fit(self, data: DynamicsData, init=None) -> "_LinearModel":
+    def fit(self, data: DynamicsData, init=None, share=None) -> "_LinearModel":
         X = np.concatenate([data.q, data.qd, data.qdd, np.ones((data.n_samples, 1))], axis=1)
-        # another ridge for a cascade, so that its fit of a shared joint differs from the standard model's
-        A = X.T @ X + (1e-3 if self.name.endswith("standard") else 1.0) * np.eye(X.shape[1])
-        self.W = np.linalg.solve(A, X.T @ data.tau)
+        # another ridge for a cascade's joints but the first in its chain, which is the standard model's by
+        # construction, as in the real models
+        j0 = None if self.name.endswith("standard") else (self.dof - 1 if "inward" in self.name else 0)
+        lam = [1e-3 if j0 is None or j == j0 else 1.0 for j in range(self.dof)]
+        self.W = np.stack([np.linalg.solve(X.T @ X + lam[j] * np.eye(X.shape[1]), X.T @ data.tau[:, j])
+                           for j in range(self.dof)], axis=1)
+        self.n_train = data.n_samples
+        self.shared = share is not None
+        if share is not None:  # the standard model fitted on the same rows: take its chain-first joint
+            assert share.name == "np-standard" and share.n_train == data.n_samples and j0 is not None
+            self.W[:, j0] = share.W[:, j0]
         self.warm = init is not None
         # An "NLL" per joint that the audit can compare: the residual sum of squares, plus a
         # penalty on a warm start so that the audit gap is known (warm fits are 0.5 worse).
@@ -146,9 +154,11 @@ def test_run_curves_with_fake_factory_and_cache(tmp_path: Path) -> None:
     std, inw = (np.asarray(out["models"][m]["nrmse_all"]) for m in models)
     meas = np.asarray(out["models"]["np-inward"]["measured"]["nrmse_all"])
     assert meas.shape == inw.shape and np.all(meas[:, :, :2] < inw[:, :, :2])
-    # the inward cascade's last joint is the standard model's GP: its cells are the standard job's, bit-equal
+    # the inward cascade's last joint is the standard model's GP: the cascade runs in the standard model's job and
+    # takes it (share), so its cells there are the standard model's, bit-equal
+    assert out["jobs"]["labels"] == [f"np-standard+np-inward#{s}" for s in range(3)]
     assert out["shared"][0]["model"] == "np-inward" and out["shared"][0]["joint"] == 2
-    assert out["shared"][0]["max_abs_diff_own_fit"] > 0  # the cascade's own fit differed there
+    assert out["shared"][0]["max_abs_diff_own_fit"] == 0.0
     np.testing.assert_array_equal(inw[:, :, 2], std[:, :, 2])
     np.testing.assert_array_equal(meas[:, :, 2], std[:, :, 2])
     assert not np.array_equal(inw[:, :, 0], std[:, :, 0])
@@ -182,8 +192,43 @@ def test_run_curves_with_fake_factory_and_cache(tmp_path: Path) -> None:
     # test rows: 10 Hz, minus the first 0.2 s (2 rows) of each of the 2 segments
     assert out["n_test_rows"] == 2 * (60 - 2)
     again = run_curves(spec, models, workers=1, cache_dir=tmp_path / "cache")
-    assert again["n_cached_jobs"] == 6
+    assert again["n_cached_jobs"] == 3
     np.testing.assert_array_equal(again["models"]["np-inward"]["nrmse_all"], out["models"]["np-inward"]["nrmse_all"])
+
+
+def test_job_groups_put_cascades_in_their_standard_models_job() -> None:
+    from cascgp_experiments.curves import job_groups
+
+    assert job_groups(["np-inward", "sp-standard-df", "np-standard", "sp-outward-df", "sp-inward", "np-outward"]) == [
+        ["np-standard", "np-inward", "np-outward"], ["sp-standard-df", "sp-outward-df"], ["sp-inward"]]
+    assert sorted(m for g in job_groups(list(VARIANTS)) for m in g) == sorted(VARIANTS)
+    assert len(job_groups(list(VARIANTS))) == 4
+
+
+def test_cascade_in_its_standard_models_job_scores_as_alone(tmp_path: Path) -> None:
+    """The real models: a cascade that takes the standard model's GP of its chain's first joint at every grid point
+    (warm-started along the grid) scores bit for bit as when it fits that GP itself in a job of its own, on every
+    joint that the chain feeds; the first joint's cells are the standard model's scores (its own differ by the
+    round-off of the two prediction paths)."""
+    from cascgp_experiments.curves import CurveSpec, run_curves
+
+    tr = _synthetic(tmp_path / "train.npz", 1, 3.0, 50.0, 0)
+    te = _synthetic(tmp_path / "test.npz", 1, 3.0, 50.0, 1)
+    spec = CurveSpec(train_path=str(tr), test_path=str(te), n_subsets=1, grid=[1.0, 2.0], n_restarts=3,
+                     audit_fraction=0.0)
+    both = run_curves(spec, ["np-standard", "np-outward"], workers=1, show_progress=False)
+    alone = run_curves(spec, ["np-outward"], workers=1, show_progress=False)
+    assert both["jobs"]["labels"] == ["np-standard+np-outward#0"] and alone["jobs"]["labels"] == ["np-outward#0"]
+    b, a = both["models"]["np-outward"], alone["models"]["np-outward"]
+    np.testing.assert_array_equal(np.asarray(b["nrmse_all"])[:, :, 1:], np.asarray(a["nrmse_all"])[:, :, 1:])
+    np.testing.assert_array_equal(np.asarray(b["measured"]["nrmse_all"])[:, :, 1:],
+                                  np.asarray(a["measured"]["nrmse_all"])[:, :, 1:])
+    np.testing.assert_array_equal(np.asarray(b["nrmse_all"])[:, :, 0],
+                                  np.asarray(both["models"]["np-standard"]["nrmse_all"])[:, :, 0])
+    np.testing.assert_allclose(np.asarray(b["nrmse_all"])[:, :, 0], np.asarray(a["nrmse_all"])[:, :, 0], rtol=1e-12)
+    (sh,) = both["shared"]
+    assert (sh["model"], sh["joint"], sh["with"]) == ("np-outward", 0, "np-standard")
+    assert sh["max_abs_diff_own_fit"] <= 1e-12
 
 
 def test_curve_spec_errors(tmp_path: Path) -> None:

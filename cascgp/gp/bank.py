@@ -4,7 +4,7 @@ r"""The GP bank: ``B`` independent exact GPs (one per output) fitted together in
 keep the best start per GP, cache the factors) and batched prediction. The pieces it drives live next to it:
 :mod:`~cascgp.gp.likelihood` (NLL and gradient), :mod:`~cascgp.gp.lbfgs` (batched optimiser),
 :mod:`~cascgp.gp.restarts` (starts and early stopping), :mod:`~cascgp.gp.posterior` (factors, NumPy posterior),
-:mod:`~cascgp.gp.state` (save/load). (A little over 400 lines: the fit driver and batched prediction share one
+:mod:`~cascgp.gp.state` (save/load). (Under 500 lines: the fit driver and batched prediction share one
 state; everything separable lives in those modules.)
 
 Normalisation
@@ -28,9 +28,10 @@ Edge cases (documented behaviour)
 
 from __future__ import annotations
 
+import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -81,6 +82,13 @@ class _Objective:
         return fun
 
 
+def _settings_of(config: GPFitConfig, b: int) -> tuple[GPFitConfig, Any]:
+    """What decides GP ``b``'s fit besides its data and its place in the bank: the settings, with a per-GP noise
+    floor reduced to GP ``b``'s."""
+    t = config.noise_floor_target
+    return replace(config, noise_floor_target=None), (t[b] if isinstance(t, tuple) else t)
+
+
 @dataclass
 class _StartRecord:
     """Per GP and start: final NLL, iterations, evaluations, stop reason, subset NLL when screened."""
@@ -114,7 +122,7 @@ class GPBank:
             ``best`` (index of the kept start), ``best_nll``, ``converged`` (reason of the kept start), ``jitter``
             (jitter in the final factor, normalised units), ``max_jitter_fit`` (largest jitter met during the
             fit), ``constant_target``, ``warm_start`` (start 0 came from ``init``), ``screen_nll`` (subset NLL
-            per start when screening was used).
+            per start when screening was used), ``shared`` (taken from another bank: ``shared`` of :meth:`fit`).
         fit_summary: totals of the last fit (``time_s``, ``n_eval``, ``batch_rounds``).
     """
 
@@ -185,7 +193,8 @@ class GPBank:
         return int(b)
 
     # ------------------------------------------------------------------ fit
-    def fit(self, X: list[np.ndarray], y: list[np.ndarray], init: GPBank | None = None) -> GPBank:
+    def fit(self, X: list[np.ndarray], y: list[np.ndarray], init: GPBank | None = None, *,
+            shared: dict[int, tuple[GPBank, int]] | None = None) -> GPBank:
         """Normalise, optimise all GPs x all starts in one batch, keep the best start, cache the factors.
 
         Args:
@@ -193,6 +202,12 @@ class GPBank:
             y: per GP ``(n,)`` targets.
             init: a fitted bank with the same number of GPs and input dimensions; its hyperparameters (converted
                 to this data's normalisation) are used as start 0 of every GP.
+            shared: ``{b: (bank, b)}``: GP ``b`` was fitted already, as GP ``b`` of another fitted ``bank`` of
+                the same width with the same settings on the same inputs and targets (all checked) and the same
+                warm start (the caller's to ensure); it takes that GP's hyperparameters and ``fit_info`` (with
+                ``"shared": True``) instead of being fitted again. Its random starts are still drawn and the GPs
+                of a batch are optimised independently, so every GP ends where a fit without ``shared`` puts it,
+                bit for bit.
 
         Returns:
             ``self``.
@@ -201,7 +216,7 @@ class GPBank:
         thread settings afterwards (:func:`cascgp.gp.likelihood.fit_threads`).
         """
         with fit_threads(self.config.threads):
-            return self._fit(X, y, init)
+            return self._fit(X, y, init, shared)
 
     @staticmethod
     def _checked_inputs(X: Any, y: Any, init: GPBank | None) -> tuple[list[np.ndarray], list[np.ndarray]]:
@@ -226,10 +241,51 @@ class GPBank:
                 raise ValueError(f"init: input dimensions {init.dims} do not match X's {dims}")
         return Xs, ys
 
-    def _fit(self, X: list[np.ndarray], y: list[np.ndarray], init: GPBank | None) -> GPBank:
+    def _checked_shared(self, shared: Any, Xs: list[np.ndarray], ys: list[np.ndarray], warm: bool
+                        ) -> dict[int, tuple[BankData, dict[str, Any]]]:
+        """``shared`` of :meth:`fit` as ``{b: (the other bank's data, a copy of its fit_info[b])}``; ``ValueError``
+        naming the entry that does not hold GP ``b`` fitted as this fit would fit it."""
+        if shared is None:
+            return {}
+        if not isinstance(shared, dict):
+            raise TypeError(f"shared: expected a dict {{GP: (GPBank, GP)}} or None, got {type(shared).__name__}")
+        out: dict[int, tuple[BankData, dict[str, Any]]] = {}
+        for b, entry in shared.items():
+            if isinstance(b, bool) or not isinstance(b, (int, np.integer)) or not 0 <= int(b) < len(Xs):
+                raise ValueError(f"shared: key {b!r} is not a GP of this fit (expected an integer in [0, {len(Xs)}))")
+            where = f"shared[{int(b)}]"
+            if not (isinstance(entry, tuple) and len(entry) == 2 and isinstance(entry[0], GPBank)
+                    and entry[0].fitted):
+                raise ValueError(f"{where}: expected (a fitted GPBank, the index of its GP), got {entry!r}")
+            src, c = entry
+            sd = src._require_fitted()
+            width = max(a.shape[1] for a in Xs)
+            if (isinstance(c, bool) or not isinstance(c, (int, np.integer)) or int(c) != int(b)
+                    or c >= src.n_gps or sd.X.shape[2] != width):
+                raise ValueError(f"{where}: expected GP {int(b)} of a bank of width {width} (the same place, so the "
+                                 f"same random starts), got GP {c!r} of a bank of {src.n_gps} GPs and width "
+                                 f"{sd.X.shape[2]}")
+            c = int(c)
+            if src.fit_info[c].get("warm_start") != warm:
+                raise ValueError(f"{where}: GP {c} was fitted {'without' if warm else 'with'} a warm start, this "
+                                 f"fit {'has' if warm else 'has none'}")
+            if _settings_of(src.config, c) != _settings_of(self.config, c):
+                raise ValueError(f"{where}: GP {c} was fitted with other settings ({src.config}) than this fit's "
+                                 f"({self.config})")
+            d = int(sd.dims[c])
+            if (Xs[b].shape != (sd.X.shape[1], d) or not np.array_equal(sd.X[c, :, :d], Xs[b])
+                    or not np.array_equal(sd.y[c], ys[b])):
+                raise ValueError(f"{where}: GP {c} was fitted on other inputs or targets than X[{int(b)}], "
+                                 f"y[{int(b)}]")
+            out[c] = (sd, json.loads(json.dumps(src.fit_info[c])))
+        return out
+
+    def _fit(self, X: list[np.ndarray], y: list[np.ndarray], init: GPBank | None,
+             shared: dict[int, tuple[GPBank, int]] | None = None) -> GPBank:
         t0 = time.perf_counter()
         cfg = self.config
         Xs, ys = self._checked_inputs(X, y, init)
+        taken = self._checked_shared(shared, Xs, ys, init is not None)
         B, n, D = len(Xs), Xs[0].shape[0], max(a.shape[1] for a in Xs)
         chunk = plan_chunk(cfg, n, D, B)  # memory guard: before any large allocation
         data = BankData.normalise(Xs, ys, D)
@@ -248,9 +304,11 @@ class GPBank:
                          torch.as_tensor(data.mask, dtype=DTYPE), chunk, np.zeros(B), floor_gp)
         rec = _StartRecord.empty(B, R)
         final_theta = theta0[:, 0, :].copy()
-        opt_gps = np.flatnonzero(~data.const_y)
+        opt_gps = np.flatnonzero(~data.const_y & ~np.isin(np.arange(B), list(taken)))
         if opt_gps.size:
             self._optimise(obj, theta0, opt_gps, warm, rng, rec, final_theta)
+        for g, (sd, _) in taken.items():  # the same data and width, so the same normalisation and layout
+            final_theta[g] = sd.theta[g]
         best_r = np.zeros(B, dtype=np.int64)
         for b in opt_gps:
             best_r[b] = int(np.argmin(np.where(np.isfinite(rec.nll[b]), rec.nll[b], np.inf)))
@@ -270,7 +328,10 @@ class GPBank:
             "constant_target": bool(data.const_y[b]),
             "warm_start": warm,
             "screen_nll": [json_num(v) for v in rec.screen_nll[b]],
+            "shared": False,
         } for b in range(B)]
+        for g, (_, info) in taken.items():
+            self.fit_info[g] = {**info, "best_nll": float(factors.nll[g]), "shared": True}
         self.fit_summary = {"time_s": time.perf_counter() - t0, "n_eval": int(obj.n_eval),
                             "batch_rounds": obj.rounds, "n_eval_screen": obj.stage_evals["screen"],
                             "n_eval_full": obj.stage_evals["full"]}

@@ -23,6 +23,7 @@ from cascgp.gp import GPBank, GPFitConfig
 from cascgp.gp.config import check_target_floor
 from cascgp.gp.checks import check_scale
 from cascgp.models.fastpath import FastPath, FastVariance
+from cascgp.models.fit_start import shared_chain_first, warm_start_banks
 from cascgp.models.jacobian import check_input_var, mean_jacobian_arrays
 from cascgp.models.queries import check_queries, clipped, load_query, state_cols
 
@@ -154,11 +155,16 @@ class CascadedGPModel:
                 q_hist: np.ndarray | None) -> np.ndarray:
         return states_from_arrays(self.feature_kind, q, qd, qdd, q_hist)
 
-    def fit(self, data: DynamicsData, init: "CascadedGPModel | Any | None" = None) -> "CascadedGPModel":
+    def fit(self, data: DynamicsData, init: "CascadedGPModel | Any | None" = None, *,
+            share: "CascadedGPModel | None" = None) -> "CascadedGPModel":
         """Train every joint's GP on ``data`` (see the module docstring).
 
         ``init``: a fitted model of the same name and DOF (or, for the default one-bank layout,
         a fitted ``GPBank``) whose hyperparameters warm-start the fit (as one start).
+        ``share`` (cascades, one-bank layout): the standard model of the same kind fitted with the same settings
+        on the same ``data`` (warm-started from the standard twin of ``init``, if any); the cascade takes its GP of
+        the chain's first joint, which has the same inputs, instead of fitting it again. The result is the fit
+        without ``share``, bit for bit (:mod:`cascgp.models.fit_start`).
         Returns ``self``.
         """
         arr = self._training_arrays(data)
@@ -168,26 +174,19 @@ class CascadedGPModel:
         targets = tau - tau_rbd if tau_rbd is not None else tau
         N = self.dof
         sequential = self.train_on_predicted and self.structure != "standard"
-        init_banks: list[Any] | None = None
-        if init is not None:
-            if isinstance(init, CascadedGPModel):
-                if init.name != self.name or init.dof != self.dof or not init.fitted:
-                    raise ValueError(f"init: expected a fitted {self.name!r} model with dof={self.dof}, got {init!r}")
-                if len(init.banks) != (N if sequential else 1):
-                    init_banks = None  # layouts differ (train_on_predicted changed): cold start
-                else:
-                    init_banks = list(init.banks)
-            elif isinstance(init, GPBank):
-                if sequential:
-                    raise ValueError("init: a GPBank cannot warm-start a train_on_predicted cascade; pass a model")
-                init_banks = [init]
-            else:
-                raise TypeError(f"init: expected a CascadedGPModel, a GPBank or None, got {type(init).__name__}")
+        init_banks = warm_start_banks(self, init, sequential)
+        shared = shared_chain_first(self, share, sequential)
 
         if not sequential:
             X = build_inputs(S, tau, self.structure)  # measured neighbour torques
-            bank = GPBank(self.gp_config).fit(X, [targets[:, j] for j in range(N)],
-                                              init=init_banks[0] if init_banks else None)
+            try:
+                bank = GPBank(self.gp_config).fit(X, [targets[:, j] for j in range(N)],
+                                                  init=init_banks[0] if init_banks else None, shared=shared)
+            except ValueError as e:
+                if shared and str(e).startswith("shared["):
+                    raise ValueError(f"share: {share!r} cannot stand in for this fit of joint "
+                                     f"{self.order[0] + 1}: {e}") from None
+                raise
             self.banks = [bank]
             self.where = [(0, j) for j in range(N)]
         else:
