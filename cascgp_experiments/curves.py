@@ -2,7 +2,7 @@
 
 Each model is trained on the first ``T`` seconds of each subset for every ``T`` of the grid (ascending) and
 evaluated on the test set after each fit. One *job* is (models, subset): a standard model with the cascades of its
-kind in the run, or a model alone (:func:`job_groups`).
+kind in the run, or a model alone (:func:`job_groups`); on many workers, one model (:func:`jobs_models`).
 
 Protocol (the paper's): every fit has ``n_restarts`` (10) starts; after the first grid point one
 of them is warm-started from the previous grid point's hyperparameters (``init=``), the others are
@@ -27,12 +27,13 @@ model's own prediction, the default of :meth:`cascgp.models.CascadedGPModel.pred
 
 Shared cells: a cascade's first joint in its chain direction (inward: joint N, outward: joint 1) takes every
 joint's state and no torque, the inputs of the standard model's GP of that joint, so it is the same model by
-construction. When the standard model of the same kind (NP/SP, derivative based/free) is in the run, the
-cascade runs in the standard model's job and takes its GP of that joint at every grid point instead of fitting it
+construction. When the standard model of the same kind (NP/SP, derivative based/free) is in the run, its scores
+of that joint (both scorings) are the standard model's; and, unless the run has many workers, the cascade runs in
+the standard model's job and takes its GP of that joint at every grid point instead of fitting it
 again (``share`` of :meth:`cascgp.models.CascadedGPModel.fit`: the cascade's fit is the one it makes alone, bit
-for bit, with one GP fewer to optimise), and that joint's scores (both scorings) are the standard model's.
+for bit, with one GP fewer to optimise).
 ``block["shared"]`` records each shared cell and the largest difference of the cascade's own scores from the
-standard's there (the round-off of the two prediction paths when the GP is shared).
+standard's there (round-off: the two models predict that joint along different paths).
 
 The RBD baseline is not trained: its test prediction is the nominal RNEA torque, the same for
 every subset and ``T``.
@@ -50,7 +51,7 @@ from typing import Any
 
 import numpy as np
 from cascgp_experiments.common import RBD
-from cascgp_experiments.execution import default_workers, run_jobs  # noqa: F401  (default_workers: re-exported)
+from cascgp_experiments.execution import default_workers, run_jobs
 from cascgp_experiments.pooled_stats import chain_first, standard_twin
 
 
@@ -171,6 +172,19 @@ def job_groups(models: list[str]) -> list[list[str]]:
     return [sorted(g, key=lambda m: m != lead) for lead, g in groups.items()]  # the standard model first
 
 
+def jobs_models(models: list[str], n_subsets: int, workers: int | None, ray_address: str | None) -> list[list[str]]:
+    """The models of each subset's jobs: :func:`job_groups` when there are at least two such jobs per worker (or one
+    worker), so that their longer jobs do not lengthen the run; otherwise, and on a Ray cluster of unstated size,
+    one model per job, because with more workers the longest job bounds the wall time. The numbers are the same
+    either way."""
+    groups = job_groups(models)
+    if workers is None:
+        if ray_address is not None:
+            return [[m] for m in models]
+        workers = default_workers()
+    return groups if workers == 1 or len(groups) * n_subsets >= 2 * workers else [[m] for m in models]
+
+
 def curve_job(spec: dict[str, Any], models: list[str], subset: int, data_sha256: dict[str, str] | None = None
               ) -> dict[str, Any]:
     """One job: train each of ``models`` (one of :func:`job_groups`) on growing prefixes of subset ``subset``;
@@ -280,7 +294,8 @@ def run_curves(spec: CurveSpec, models: list[str], *, workers: int | None = None
     gp_models = [m for m in models if m != RBD]
     digests = {"train": npz_digest(spec.train_path), "test": npz_digest(spec.test_path)}
     spec_d = asdict(spec)
-    pairs = [(g, s) for g in job_groups(gp_models) for s in range(spec.n_subsets)]
+    pairs = [(g, s) for g in jobs_models(gp_models, spec.n_subsets, workers, ray_address)
+             for s in range(spec.n_subsets)]
     jobs = [{"spec": spec_d, "models": g, "subset": s, "data_sha256": digests} for g, s in pairs]
     # big jobs first so the pool's tail is short
     prio = [2 * len(g) + (not g[0].endswith("df")) for g, _ in pairs]

@@ -205,6 +205,18 @@ def test_job_groups_put_cascades_in_their_standard_models_job() -> None:
     assert len(job_groups(list(VARIANTS))) == 4
 
 
+def test_jobs_models_groups_only_while_the_longer_jobs_do_not_lengthen_the_run() -> None:
+    from cascgp_experiments.curves import job_groups, jobs_models
+
+    grouped, alone = job_groups(list(VARIANTS)), [[m] for m in VARIANTS]
+    assert jobs_models(list(VARIANTS), 10, 2, None) == grouped  # 40 jobs on 2 workers
+    assert jobs_models(list(VARIANTS), 10, 20, None) == grouped
+    assert jobs_models(list(VARIANTS), 10, 21, None) == alone  # fewer than two grouped jobs per worker
+    assert jobs_models(list(VARIANTS), 1, 1, None) == grouped  # one worker: every fit saved counts
+    assert jobs_models(list(VARIANTS), 10, None, "auto") == alone  # a cluster of unstated size
+    assert jobs_models(list(VARIANTS), 10, 2, "local") == grouped
+
+
 def test_cascade_in_its_standard_models_job_scores_as_alone(tmp_path: Path) -> None:
     """The real models: a cascade that takes the standard model's GP of its chain's first joint at every grid point
     (warm-started along the grid) scores bit for bit as when it fits that GP itself in a job of its own, on every
