@@ -2,7 +2,8 @@
 
 Each model is trained on the first ``T`` seconds of each subset for every ``T`` of the grid (ascending) and
 evaluated on the test set after each fit. One *job* is (models, subset): a standard model with the cascades of its
-kind in the run, or a model alone (:func:`job_groups`); on many workers, one model (:func:`jobs_models`).
+kind in the run, or a model alone (:func:`job_groups`), whatever the number of workers, so that the numbers do not
+depend on it.
 
 Protocol (the paper's): every fit has ``n_restarts`` (10) starts; after the first grid point one
 of them is warm-started from the previous grid point's hyperparameters (``init=``), the others are
@@ -27,13 +28,13 @@ model's own prediction, the default of :meth:`cascgp.models.CascadedGPModel.pred
 
 Shared cells: a cascade's first joint in its chain direction (inward: joint N, outward: joint 1) takes every
 joint's state and no torque, the inputs of the standard model's GP of that joint, so it is the same model by
-construction. When the standard model of the same kind (NP/SP, derivative based/free) is in the run, its scores
-of that joint (both scorings) are the standard model's; and, unless the run has many workers, the cascade runs in
-the standard model's job and takes its GP of that joint at every grid point instead of fitting it
-again (``share`` of :meth:`cascgp.models.CascadedGPModel.fit`: the cascade's fit is the one it makes alone, bit
-for bit, with one GP fewer to optimise).
-``block["shared"]`` records each shared cell and the largest difference of the cascade's own scores from the
-standard's there (round-off: the two models predict that joint along different paths).
+construction. When the standard model of the same kind (NP/SP, derivative based/free) is in the run, the cascade
+runs in the standard model's job and takes its GP of that joint at every grid point instead of fitting it again
+(``share`` of :meth:`cascgp.models.CascadedGPModel.fit`: the same data, settings and random starts, so the same
+fit with one GP fewer to optimise), and that joint's scores (both scorings) are the standard model's. The
+cascade's ``fit_wall_s`` then leaves out that GP's fit. ``block["shared"]`` records each shared cell and the
+largest difference of the cascade's own scores from the standard's there (round-off: the two models predict that
+joint along different paths).
 
 The RBD baseline is not trained: its test prediction is the nominal RNEA torque, the same for
 every subset and ``T``.
@@ -51,7 +52,7 @@ from typing import Any
 
 import numpy as np
 from cascgp_experiments.common import RBD
-from cascgp_experiments.execution import default_workers, run_jobs
+from cascgp_experiments.execution import default_workers, run_jobs  # noqa: F401  (default_workers: re-exported)
 from cascgp_experiments.pooled_stats import chain_first, standard_twin
 
 
@@ -72,7 +73,7 @@ class CurveSpec:
     seed: int = 0
     audit_fraction: float = 0.05
     df_delta: float = 0.1
-    factory: str = "cascgp.models:make_model"
+    factory: str = "cascgp.models:make_model"  # its cascades' fit takes share= (the standard model of their job)
     measured: str | None = "cascgp.models.measured:predict_measured_neighbour"  # None: predicted scoring only
     gp_overrides: dict = field(default_factory=dict)
 
@@ -164,25 +165,12 @@ def audited(spec: CurveSpec, model: str, subset: int, grid_index: int) -> bool:
 def job_groups(models: list[str]) -> list[list[str]]:
     """The models of each job: a standard model with the cascades of its kind (NP/SP, derivative based/free) that
     are in ``models``, which take its GP of their chain's first joint instead of fitting it again (``share`` of
-    :meth:`cascgp.models.CascadedGPModel.fit`: the same fits, bit for bit), and every other model alone."""
+    :meth:`cascgp.models.CascadedGPModel.fit`: the same fits), and every other model alone."""
     groups: dict[str, list[str]] = {}
     for m in models:
         st = standard_twin(m)
         groups.setdefault(st if st in models else m, []).append(m)
     return [sorted(g, key=lambda m: m != lead) for lead, g in groups.items()]  # the standard model first
-
-
-def jobs_models(models: list[str], n_subsets: int, workers: int | None, ray_address: str | None) -> list[list[str]]:
-    """The models of each subset's jobs: :func:`job_groups` when there are at least two such jobs per worker (or one
-    worker), so that their longer jobs do not lengthen the run; otherwise, and on a Ray cluster of unstated size,
-    one model per job, because with more workers the longest job bounds the wall time. The numbers are the same
-    either way."""
-    groups = job_groups(models)
-    if workers is None:
-        if ray_address is not None:
-            return [[m] for m in models]
-        workers = default_workers()
-    return groups if workers == 1 or len(groups) * n_subsets >= 2 * workers else [[m] for m in models]
 
 
 def curve_job(spec: dict[str, Any], models: list[str], subset: int, data_sha256: dict[str, str] | None = None
@@ -294,11 +282,10 @@ def run_curves(spec: CurveSpec, models: list[str], *, workers: int | None = None
     gp_models = [m for m in models if m != RBD]
     digests = {"train": npz_digest(spec.train_path), "test": npz_digest(spec.test_path)}
     spec_d = asdict(spec)
-    pairs = [(g, s) for g in jobs_models(gp_models, spec.n_subsets, workers, ray_address)
-             for s in range(spec.n_subsets)]
+    pairs = [(g, s) for g in job_groups(gp_models) for s in range(spec.n_subsets)]
     jobs = [{"spec": spec_d, "models": g, "subset": s, "data_sha256": digests} for g, s in pairs]
-    # big jobs first so the pool's tail is short
-    prio = [2 * len(g) + (not g[0].endswith("df")) for g, _ in pairs]
+    # big jobs first so the pool's tail is short (a standard model's fit is the largest)
+    prio = [2 * sum(1 + 2 * (m == standard_twin(m)) for m in g) + (not g[0].endswith("df")) for g, _ in pairs]
     res = run_jobs(curve_job, jobs, workers=workers, ray_address=ray_address, cache_dir=cache_dir, desc=desc,
                    units=[len(spec.grid) * len(g) for g, _ in pairs], unit="fit", priority=prio,
                    label=lambda j: f"{'+'.join(j['models'])}#{j['subset']}", show_progress=show_progress)

@@ -709,7 +709,7 @@ def test_quick_study_killed_and_resumed_identical(quick_study_serial: Path, tmp_
                          stderr=subprocess.DEVNULL)
     _kill_when(p, lambda: len(_cache_files(cache, "curve_job")) >= 4)
     n_done = len(_cache_files(cache, "curve_job"))
-    assert n_done < 12  # 4 jobs (a standard model with its two cascades) x 3 subsets
+    assert n_done < 12  # 4 jobs per subset (a standard model with its two cascades) x 3 subsets
     _cli("scripts.data_efficiency", "--out", str(out), "--quick", "--workers", "2")
     assert read_json(out / "results.json")["jaco"]["n_cached_jobs"] >= n_done
     assert _study_numbers(out) == _study_numbers(quick_study_serial)

@@ -1,6 +1,10 @@
 """A GP taken from another fitted bank instead of being fitted again (``GPBank.fit(shared=...)``), and a cascade
-that takes the standard model's GP of its chain's first joint (``CascadedGPModel.fit(share=...)``): the fits are
-the ones made without sharing, bit for bit, and every mismatch is refused before any work."""
+that takes the standard model's GP of its chain's first joint (``CascadedGPModel.fit(share=...)``): the shared GP
+is copied exactly, the other GPs start where they would without sharing (compared after one optimiser iteration)
+and end at the same optimum, and every mismatch is refused before any work.
+
+The optimum is compared to 1e-6, not bit for bit: torch's batched kernels may round the last bit differently for a
+block of another size on some CPU, which the optimiser can carry forward."""
 
 from __future__ import annotations
 
@@ -22,38 +26,68 @@ def _bank_data(seed: int = 0, n: int = 40) -> tuple[list[np.ndarray], list[np.nd
     return X, y
 
 
-def _same_fit(a: GPBank, b: GPBank, gps: range | list[int]) -> None:
+def _same_fit(a: GPBank, b: GPBank, gps: range | list[int], rtol: float = 1e-6) -> None:
     for g in gps:
-        np.testing.assert_array_equal(a.theta[g], b.theta[g])
-        np.testing.assert_array_equal(a.posterior(g).alpha, b.posterior(g).alpha)
-        np.testing.assert_array_equal(a.posterior(g).L, b.posterior(g).L)
+        np.testing.assert_allclose(a.theta[g], b.theta[g], rtol=rtol, atol=rtol)
+        np.testing.assert_allclose(a.posterior(g).alpha, b.posterior(g).alpha, rtol=rtol, atol=rtol)
 
 
-def test_shared_gp_gives_the_unshared_fit_bit_for_bit() -> None:
+def _same_starts(a: GPBank, b: GPBank, gps: range | list[int]) -> None:
+    """After one optimiser iteration (max_iter=1) every start is still next to where it began: starts drawn
+    otherwise would differ at O(1)."""
+    for g in gps:
+        np.testing.assert_allclose(np.array(a.fit_info[g]["nll"], float), np.array(b.fit_info[g]["nll"], float),
+                                   rtol=1e-10)
+        np.testing.assert_allclose(a.theta[g], b.theta[g], rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize("shared_gp", [0, 1])  # the first GP draws its starts first, the middle one between others
+@pytest.mark.parametrize("cfg", [CFG, replace(CFG, screen_n=20, max_iter=1), replace(CFG, max_iter=1)],
+                         ids=["optimum", "screened, starts", "starts"])
+def test_shared_gp_gives_the_unshared_fit(shared_gp: int, cfg: GPFitConfig) -> None:
     X, y = _bank_data()
-    ref = GPBank(CFG).fit(X, y)
-    # another bank with GP 0 on the same data but other GPs beside it
+    ref = GPBank(cfg).fit(X, y)
+    # another bank with the shared GP on the same data but other GPs beside it
     X2, y2 = _bank_data(seed=1)
-    src = GPBank(CFG).fit([X[0], X2[1], X2[2]], [y[0], y2[1], y2[2]])
-    _same_fit(src, ref, [0])
-    got = GPBank(CFG).fit(X, y, shared={0: (src, 0)})
-    _same_fit(got, ref, range(3))
-    assert [fi["shared"] for fi in got.fit_info] == [True, False, False]
+    Xs = [X[b] if b == shared_gp else X2[b] for b in range(3)]
+    ys = [y[b] if b == shared_gp else y2[b] for b in range(3)]
+    src = GPBank(cfg).fit(Xs, ys)
+    got = GPBank(cfg).fit(X, y, shared={shared_gp: (src, shared_gp)})
+    np.testing.assert_array_equal(got.theta[shared_gp], src.theta[shared_gp])  # copied
+    np.testing.assert_array_equal(got.posterior(shared_gp).alpha, src.posterior(shared_gp).alpha)
+    check = _same_starts if cfg.max_iter == 1 else _same_fit
+    check(got, ref, range(3))
+    assert [fi["shared"] for fi in got.fit_info] == [b == shared_gp for b in range(3)]
     assert [fi["shared"] for fi in ref.fit_info] == [False] * 3
-    assert {k: v for k, v in got.fit_info[0].items() if k != "shared"} == \
-        {k: v for k, v in src.fit_info[0].items() if k != "shared"}
-    assert got.fit_summary["n_eval"] < ref.fit_summary["n_eval"]  # GP 0 was not optimised again
+    assert {k: v for k, v in got.fit_info[shared_gp].items() if k not in ("shared", "best_nll")} == \
+        {k: v for k, v in src.fit_info[shared_gp].items() if k not in ("shared", "best_nll")}
+    assert got.fit_info[shared_gp]["best_nll"] == pytest.approx(src.fit_info[shared_gp]["best_nll"], rel=1e-12)
+    assert got.fit_summary["n_eval"] < ref.fit_summary["n_eval"]  # the shared GP was not optimised again
     # warm-started fits share too
-    ref_w = GPBank(CFG).fit(X, y, init=ref)
-    src_w = GPBank(CFG).fit([X[0], X2[1], X2[2]], [y[0], y2[1], y2[2]], init=src)
-    _same_fit(GPBank(CFG).fit(X, y, init=got, shared={0: (src_w, 0)}), ref_w, range(3))
+    ref_w = GPBank(cfg).fit(X, y, init=ref)
+    src_w = GPBank(cfg).fit(Xs, ys, init=src)
+    check(GPBank(cfg).fit(X, y, init=got, shared={shared_gp: (src_w, shared_gp)}), ref_w, range(3))
+
+
+def test_shared_gp_with_a_noise_floor_per_gp() -> None:
+    """Per-GP noise floors: the shared GP's must match; the other GPs' may differ."""
+    X, y = _bank_data()
+    cfg = replace(CFG, noise_floor_target=(1e-4, 2e-4, 3e-4))
+    src = GPBank(replace(cfg, noise_floor_target=(1e-4, 5e-4, 5e-4))).fit(X, y)
+    got = GPBank(cfg).fit(X, y, shared={0: (src, 0)})
+    np.testing.assert_array_equal(got.theta[0], src.theta[0])
+    _same_fit(got, GPBank(cfg).fit(X, y), range(3))
+    with pytest.raises(ValueError, match=r"shared\[1\]: GP 1 was fitted with other settings"):
+        GPBank(cfg).fit(X, y, shared={1: (src, 1)})
 
 
 @pytest.mark.parametrize("case, match", [
     ("not a dict", "shared: expected a dict"),
     ("key out of range", r"shared: key 3 is not a GP"),
-    ("other index", r"shared\[2\]: expected GP 2 of a bank of width 4"),
-    ("other width", r"shared\[0\]: expected GP 0 of a bank of width 4"),
+    ("other index", r"shared\[2\]: expected GP 2 of a bank of 3 GPs and width 4"),
+    ("boolean index", r"shared\[1\]: expected GP 1 of a bank of 3 GPs and width 4"),
+    ("other width", r"shared\[0\]: expected GP 0 of a bank of 3 GPs and width 4"),
+    ("other number of GPs", r"shared\[0\]: expected GP 0 of a bank of 3 GPs and width 4 .*, got GP 0 of a bank of 2"),
     ("unfitted", r"shared\[0\]: expected \(a fitted GPBank"),
     ("other seed", r"shared\[0\]: GP 0 was fitted with other settings"),
     ("other targets", r"shared\[0\]: GP 0 was fitted on other inputs or targets"),
@@ -71,8 +105,12 @@ def test_shared_gp_mismatch_is_refused_and_changes_nothing(case: str, match: str
         shared = {3: (src, 3)}
     elif case == "other index":
         shared = {2: (src, 0)}
+    elif case == "boolean index":
+        shared = {1: (src, True)}
     elif case == "other width":
-        shared = {0: (GPBank(CFG).fit([X[0][:, :3], X[1]], [y[0], y[1]]), 0)}
+        shared = {0: (GPBank(CFG).fit([X[0], X[1], np.hstack([X[2], X[2][:, :2]])], y), 0)}
+    elif case == "other number of GPs":
+        shared = {0: (GPBank(CFG).fit([X[0], X[1]], [y[0], y[1]]), 0)}
     elif case == "unfitted":
         shared = {0: (GPBank(CFG), 0)}
     elif case == "other seed":
@@ -97,20 +135,32 @@ def _arm_data(seed: int, n: int = 60, dof: int = 3) -> DynamicsData:
     return DynamicsData(q=q, qd=qd, qdd=qdd, tau=tau, t=np.arange(n) * 0.01, segment=np.zeros(n, dtype=np.int64))
 
 
-@pytest.mark.parametrize("name", ["np-inward", "np-outward", "np-inward-df", "np-outward-df"])
+class _LinearRBD:
+    """A rigid-body stand-in for the SP models: tau = 1.5 qdd + 0.2 qd."""
+
+    dof = 3
+
+    def inverse_dynamics(self, q, qd, qdd):
+        return 1.5 * np.asarray(qdd) + 0.2 * np.asarray(qd)
+
+
+@pytest.mark.parametrize("name", ["np-inward", "np-outward", "np-inward-df", "sp-outward", "sp-inward-df"])
 def test_cascade_sharing_the_standard_models_gp_is_its_own_fit(name: str) -> None:
     data = [_arm_data(0, 40), _arm_data(0, 70)]  # a growing prefix: the second fit is warm-started
     std_name = name.replace("inward", "standard").replace("outward", "standard")
-    prev_std = prev_own = prev_sh = None
-    for d in data:
-        std = make_model(std_name, 3, gp_config=CFG).fit(d, init=prev_std)
-        own = make_model(name, 3, gp_config=CFG).fit(d, init=prev_own)
-        sh = make_model(name, 3, gp_config=CFG).fit(d, init=prev_sh, share=std)
-        _same_fit(sh.banks[0], own.banks[0], range(3))
-        j0 = sh.order[0]
-        assert [fi["shared"] for fi in sh.fit_info] == [j == j0 for j in range(3)]
-        np.testing.assert_array_equal(sh.predict_data(d)[0], own.predict_data(d)[0])
-        prev_std, prev_own, prev_sh = std, own, sh
+    rbd = _LinearRBD() if name.startswith("sp") else None
+    for cfg, check in ((CFG, _same_fit), (replace(CFG, max_iter=1), _same_starts)):
+        prev_std = prev_own = prev_sh = None
+        for d in data:
+            std = make_model(std_name, 3, rbd, gp_config=cfg).fit(d, init=prev_std)
+            own = make_model(name, 3, rbd, gp_config=cfg).fit(d, init=prev_own)
+            sh = make_model(name, 3, rbd, gp_config=cfg).fit(d, init=prev_sh, share=std)
+            j0 = sh.order[0]
+            np.testing.assert_array_equal(sh.banks[0].theta[j0], std.banks[0].theta[j0])
+            check(sh.banks[0], own.banks[0], range(3))
+            assert [fi["shared"] for fi in sh.fit_info] == [j == j0 for j in range(3)]
+            np.testing.assert_allclose(sh.predict_data(d)[0], own.predict_data(d)[0], rtol=1e-6, atol=1e-6)
+            prev_std, prev_own, prev_sh = std, own, sh
 
 
 def test_cascade_share_errors_name_share_and_change_nothing() -> None:

@@ -86,7 +86,7 @@ def _settings_of(config: GPFitConfig, b: int) -> tuple[GPFitConfig, Any]:
     """What decides GP ``b``'s fit besides its data and its place in the bank: the settings, with a per-GP noise
     floor reduced to GP ``b``'s."""
     t = config.noise_floor_target
-    return replace(config, noise_floor_target=None), (t[b] if isinstance(t, tuple) else t)
+    return replace(config, noise_floor_target=None), (t[b] if isinstance(t, tuple) and b < len(t) else t)
 
 
 @dataclass
@@ -202,12 +202,14 @@ class GPBank:
             y: per GP ``(n,)`` targets.
             init: a fitted bank with the same number of GPs and input dimensions; its hyperparameters (converted
                 to this data's normalisation) are used as start 0 of every GP.
-            shared: ``{b: (bank, b)}``: GP ``b`` was fitted already, as GP ``b`` of another fitted ``bank`` of
-                the same width with the same settings on the same inputs and targets (all checked) and the same
-                warm start (the caller's to ensure); it takes that GP's hyperparameters and ``fit_info`` (with
-                ``"shared": True``) instead of being fitted again. Its random starts are still drawn and the GPs
-                of a batch are optimised independently, so every GP ends where a fit without ``shared`` puts it,
-                bit for bit.
+            shared: ``{b: (bank, b)}``: GP ``b`` was fitted already, as GP ``b`` of another fitted ``bank`` with
+                as many GPs, of the same width, with the same settings, on the same inputs and targets (all
+                checked) and from the same warm start (the caller's to ensure), so with the random starts this
+                fit draws for it; it takes that GP's hyperparameters and ``fit_info`` (with ``"shared": True``)
+                instead of being fitted again. The other GPs draw their starts as without ``shared`` and the GPs
+                of a batch are optimised independently, so each GP ends where a fit without ``shared`` puts it,
+                up to the rounding of torch's batched kernels, which can differ in the last bit for a batch of
+                another size (the same bits in practice; see :mod:`cascgp.models.fit_start`).
 
         Returns:
             ``self``.
@@ -261,10 +263,10 @@ class GPBank:
             sd = src._require_fitted()
             width = max(a.shape[1] for a in Xs)
             if (isinstance(c, bool) or not isinstance(c, (int, np.integer)) or int(c) != int(b)
-                    or c >= src.n_gps or sd.X.shape[2] != width):
-                raise ValueError(f"{where}: expected GP {int(b)} of a bank of width {width} (the same place, so the "
-                                 f"same random starts), got GP {c!r} of a bank of {src.n_gps} GPs and width "
-                                 f"{sd.X.shape[2]}")
+                    or src.n_gps != len(Xs) or sd.X.shape[2] != width):
+                raise ValueError(f"{where}: expected GP {int(b)} of a bank of {len(Xs)} GPs and width {width} (so "
+                                 f"that it drew the same random starts), got GP {c!r} of a bank of {src.n_gps} GPs "
+                                 f"and width {sd.X.shape[2]}")
             c = int(c)
             if src.fit_info[c].get("warm_start") != warm:
                 raise ValueError(f"{where}: GP {c} was fitted {'without' if warm else 'with'} a warm start, this "

@@ -164,7 +164,7 @@ class CascadedGPModel:
         ``share`` (cascades, one-bank layout): the standard model of the same kind fitted with the same settings
         on the same ``data`` (warm-started from the standard twin of ``init``, if any); the cascade takes its GP of
         the chain's first joint, which has the same inputs, instead of fitting it again. The result is the fit
-        without ``share``, bit for bit (:mod:`cascgp.models.fit_start`).
+        without ``share`` (:mod:`cascgp.models.fit_start`).
         Returns ``self``.
         """
         arr = self._training_arrays(data)

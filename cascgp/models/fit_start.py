@@ -4,8 +4,11 @@ A cascade's first joint in its chain order (inward: joint :math:`N`, outward: jo
 no torque, the inputs of the standard model's GP of that joint, so with the same data and settings it *is* that
 GP. :func:`shared_chain_first` lets a cascade take it from a fitted standard model instead of fitting it again: the
 cascade's bank draws the same random starts as the standard's, and the GPs of a bank are optimised independently
-(:meth:`cascgp.gp.GPBank.fit`, ``shared``), so the cascade's fit is the one it would have made alone, bit for bit,
-at 1/N less optimisation.
+(:meth:`cascgp.gp.GPBank.fit`, ``shared``), so the cascade's fit is the one it would have made alone, at 1/N less
+optimisation. "The one" up to the last bit: torch's batched kernels may round a block of starts differently from
+a smaller block (one gradient entry in its last bit, at one of 13 sizes tried), which the optimiser can carry
+forward. In practice the fits compared were the same bits (the data-efficiency study's cascades: see the
+performance page of the documentation).
 """
 
 from __future__ import annotations
