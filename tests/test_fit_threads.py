@@ -24,10 +24,10 @@ def test_fit_runs_with_its_threads_and_restores_the_callers(monkeypatch, threads
     seen: dict[str, object] = {}
     real_fit = GPBank._fit
 
-    def spy(self, X, y, init):
+    def spy(self, X, y, init, shared=None):
         seen["torch"] = torch.get_num_threads()
         seen["blas"] = {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"}
-        return real_fit(self, X, y, init)
+        return real_fit(self, X, y, init, shared)
 
     monkeypatch.setattr(GPBank, "_fit", spy)
     before = torch.get_num_threads()
@@ -46,7 +46,7 @@ def test_threads_are_restored_when_the_fit_raises(monkeypatch) -> None:
     before = torch.get_num_threads()
     torch.set_num_threads(3)
 
-    def boom(self, X, y, init):
+    def boom(self, X, y, init, shared=None):
         raise RuntimeError("inside the fit")
 
     monkeypatch.setattr(GPBank, "_fit", boom)
