@@ -73,6 +73,7 @@ Modules
 
 =================================  ==========================================================
 :mod:`cascgp.models.cascade`       :class:`CascadedGPModel`: training and batched prediction
+:mod:`cascgp.models.fit_start`     what a fit starts from: a warm start, a GP shared with the standard model
 :mod:`cascgp.models.fastpath`      the single-query path a controller calls every tick
 :mod:`cascgp.models.queries`       checks of the queries; each joint's GP input
 :mod:`cascgp.models.jacobian`      derivatives of the cascaded mean (the input-noise term)
