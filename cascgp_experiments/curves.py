@@ -52,7 +52,7 @@ from typing import Any
 
 import numpy as np
 from cascgp_experiments.common import RBD
-from cascgp_experiments.execution import default_workers, run_jobs  # noqa: F401  (default_workers: re-exported)
+from cascgp_experiments.execution import run_jobs
 from cascgp_experiments.pooled_stats import chain_first, standard_twin
 
 

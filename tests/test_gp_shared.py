@@ -15,6 +15,7 @@ import pytest
 
 from cascgp import DynamicsData, GPFitConfig, make_model
 from cascgp.gp import GPBank
+from cascgp.gp.bank import SharedGPError
 
 CFG = GPFitConfig(n_restarts=4, seed=3)
 
@@ -123,8 +124,10 @@ def test_shared_gp_mismatch_is_refused_and_changes_nothing(case: str, match: str
         init = src
     bank = GPBank(CFG).fit(X, y)
     before = bank.theta
-    with pytest.raises((ValueError, TypeError), match=match):
+    with pytest.raises((ValueError, TypeError), match=match) as err:
         bank.fit(X, y, init=init, shared=shared)  # type: ignore[arg-type]
+    # an entry's mismatch is a SharedGPError (a ValueError), which a cascade rewraps as its ``share`` error
+    assert isinstance(err.value, SharedGPError) == match.startswith(r"shared\[")
     np.testing.assert_array_equal(bank.theta, before)
 
 

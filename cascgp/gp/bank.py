@@ -28,7 +28,7 @@ Edge cases (documented behaviour)
 
 from __future__ import annotations
 
-import json
+import copy
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -46,7 +46,11 @@ from cascgp.gp.posterior import Factors, GPPosterior, compute_factors
 from cascgp.gp.restarts import initial_thetas, make_pruner, warm_theta
 from cascgp.gp.state import BankData, bank_from_state, bank_state
 
-__all__ = ["GPBank"]
+__all__ = ["GPBank", "SharedGPError"]
+
+
+class SharedGPError(ValueError):
+    """An entry of :meth:`GPBank.fit`'s ``shared`` that does not hold its GP fitted as this fit would fit it."""
 
 
 @dataclass
@@ -245,7 +249,7 @@ class GPBank:
 
     def _checked_shared(self, shared: Any, Xs: list[np.ndarray], ys: list[np.ndarray], warm: bool
                         ) -> dict[int, tuple[BankData, dict[str, Any]]]:
-        """``shared`` of :meth:`fit` as ``{b: (the other bank's data, a copy of its fit_info[b])}``; ``ValueError``
+        """``shared`` of :meth:`fit` as ``{b: (the other bank's data, a copy of its fit_info[b])}``; ``SharedGPError``
         naming the entry that does not hold GP ``b`` fitted as this fit would fit it."""
         if shared is None:
             return {}
@@ -258,28 +262,28 @@ class GPBank:
             where = f"shared[{int(b)}]"
             if not (isinstance(entry, tuple) and len(entry) == 2 and isinstance(entry[0], GPBank)
                     and entry[0].fitted):
-                raise ValueError(f"{where}: expected (a fitted GPBank, the index of its GP), got {entry!r}")
+                raise SharedGPError(f"{where}: expected (a fitted GPBank, the index of its GP), got {entry!r}")
             src, c = entry
             sd = src._require_fitted()
             width = max(a.shape[1] for a in Xs)
             if (isinstance(c, bool) or not isinstance(c, (int, np.integer)) or int(c) != int(b)
                     or src.n_gps != len(Xs) or sd.X.shape[2] != width):
-                raise ValueError(f"{where}: expected GP {int(b)} of a bank of {len(Xs)} GPs and width {width} (so "
-                                 f"that it drew the same random starts), got GP {c!r} of a bank of {src.n_gps} GPs "
-                                 f"and width {sd.X.shape[2]}")
+                raise SharedGPError(f"{where}: expected GP {int(b)} of a bank of {len(Xs)} GPs and width {width} (so "
+                                     f"that it drew the same random starts), got GP {c!r} of a bank of {src.n_gps} GPs "
+                                     f"and width {sd.X.shape[2]}")
             c = int(c)
             if src.fit_info[c].get("warm_start") != warm:
-                raise ValueError(f"{where}: GP {c} was fitted {'without' if warm else 'with'} a warm start, this "
-                                 f"fit {'has' if warm else 'has none'}")
+                raise SharedGPError(f"{where}: GP {c} was fitted {'without' if warm else 'with'} a warm start, this "
+                                     f"fit {'has' if warm else 'has none'}")
             if _settings_of(src.config, c) != _settings_of(self.config, c):
-                raise ValueError(f"{where}: GP {c} was fitted with other settings ({src.config}) than this fit's "
-                                 f"({self.config})")
+                raise SharedGPError(f"{where}: GP {c} was fitted with other settings ({src.config}) than this fit's "
+                                     f"({self.config})")
             d = int(sd.dims[c])
             if (Xs[b].shape != (sd.X.shape[1], d) or not np.array_equal(sd.X[c, :, :d], Xs[b])
                     or not np.array_equal(sd.y[c], ys[b])):
-                raise ValueError(f"{where}: GP {c} was fitted on other inputs or targets than X[{int(b)}], "
-                                 f"y[{int(b)}]")
-            out[c] = (sd, json.loads(json.dumps(src.fit_info[c])))
+                raise SharedGPError(f"{where}: GP {c} was fitted on other inputs or targets than X[{int(b)}], "
+                                     f"y[{int(b)}]")
+            out[c] = (sd, copy.deepcopy(src.fit_info[c]))
         return out
 
     def _fit(self, X: list[np.ndarray], y: list[np.ndarray], init: GPBank | None,

@@ -20,6 +20,7 @@ import numpy as np
 from cascgp.data import DynamicsData, all_finite
 from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
 from cascgp.gp import GPBank, GPFitConfig
+from cascgp.gp.bank import SharedGPError
 from cascgp.gp.config import check_target_floor
 from cascgp.gp.checks import check_scale
 from cascgp.models.fastpath import FastPath, FastVariance
@@ -182,11 +183,9 @@ class CascadedGPModel:
             try:
                 bank = GPBank(self.gp_config).fit(X, [targets[:, j] for j in range(N)],
                                                   init=init_banks[0] if init_banks else None, shared=shared)
-            except ValueError as e:
-                if shared and str(e).startswith("shared["):
-                    raise ValueError(f"share: {share!r} cannot stand in for this fit of joint "
-                                     f"{self.order[0] + 1}: {e}") from None
-                raise
+            except SharedGPError as e:
+                raise ValueError(f"share: {share!r} cannot stand in for this fit of joint "
+                                 f"{self.order[0] + 1}: {e}") from None
             self.banks = [bank]
             self.where = [(0, j) for j in range(N)]
         else:
