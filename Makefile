@@ -38,6 +38,6 @@ test-studies: $(STAMP)
 test-all: $(STAMP)
 	$(VENV)/bin/python -m pytest -m ''
 
-# The installable distribution (wheel and sdist) in dist/.
+# The installable distribution: the wheel, in dist/.
 wheel: $(STAMP)
 	$(VENV)/bin/python -m pip wheel --no-deps -w dist .

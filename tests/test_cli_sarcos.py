@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from cascgp.logs import read_log, write_log
 from cascgp.metrics import nrmse
@@ -88,3 +89,17 @@ def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_pat
         assert json.loads((tmp_path / "o" / "sarcos.json").read_text())["grid_s"] == list(preset.sarcos_grid)
     cli.main(["--sarcos", str(mat), "--out", str(tmp_path / "o"), "--workers", "1", "--restarts", "2", "--seed", "7"])
     assert (seen[-1]["n_restarts"], seen[-1]["seed"]) == (2, 7)
+
+
+def test_sarcos_command_without_a_path_names_the_option_and_the_variable(monkeypatch, tmp_path: Path, capsys) -> None:
+    """With no ``--sarcos``, no ``$CASCGP_SARCOS`` and no checkout copy, the error says how to give the file."""
+    import cascgp_experiments.cli.sarcos as cli
+    from cascgp_experiments.common import SARCOS_ENV
+
+    monkeypatch.setattr(cli, "default_sarcos", lambda: None)
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--out", str(tmp_path / "o")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--sarcos: expected the path of ias_sarcos_data.mat" in err and f"${SARCOS_ENV}" in err
+    assert not (tmp_path / "o").exists()

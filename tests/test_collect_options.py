@@ -183,3 +183,19 @@ def test_nominal_urdf_follows_the_recorded_arm() -> None:
     assert nominal_urdf_for({"collection": old}) == nominal_urdf("dm_control")
     with pytest.raises(ValueError, match=r"meta\['collection'\]"):
         nominal_urdf_for({})
+
+
+def test_collect_command_prints_a_summary_and_reuses_its_files(tmp_path: Path, capsys) -> None:
+    """``cascgp collect`` names each file with its size, then says whether it collected or reused them."""
+    from cascgp_experiments.cli.collect import main
+
+    args = ["--smoke", "--out", str(tmp_path), "--workers", "1"]
+    main(args)
+    first = capsys.readouterr().out.splitlines()
+    train = DynamicsData.load(tmp_path / "jaco_train.npz")
+    assert first[0] == (f"{tmp_path / 'jaco_train.npz'}: {train.n_samples} samples, {len(train.segments)} "
+                        f"motion(s), 6 joints, dt {train.dt:g} s")
+    assert first[1].startswith(f"{tmp_path / 'jaco_test.npz'}: ") and first[2].startswith("collected in ")
+    main(args)
+    again = capsys.readouterr().out.splitlines()
+    assert again[:2] == first[:2] and again[2].startswith(f"reused the files in {tmp_path}")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import asdict
+from pathlib import Path
 
 from cascgp_experiments.cli.options import settings_error
 from cascgp_experiments.collect import PRESETS, CollectConfig, collect
@@ -28,7 +29,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     g = ap.add_mutually_exclusive_group()
     g.add_argument("--quick", action="store_true", help="3 x 12 s training, 2 x 20 s test")
     g.add_argument("--smoke", action="store_true", help="2 x 3 s training, 1 x 4 s test")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0,
+                    help="seed of the excitation motions and the sensor noise (default: 0)")
     ap.add_argument("--payload-mass", type=float, default=None, help="kg (default 0.8)")
     ap.add_argument("--sensor-noise", default="default", choices=("default", "none"),
                     help="the env's SensorNoise() (default) or noiseless sensors (an ablation)")
@@ -64,7 +66,11 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     with session(a.ray, a.workers):
         train, test, info = collect(a.out, cfg, force=a.force, workers=a.workers, ray_address=a.ray,
                                     vector_env=a.vector_env)
-    print(f"train: {train}\ntest: {test}\n{info}")
+    for split, d in (("train", train), ("test", test)):
+        print(f"{Path(a.out) / f'jaco_{split}.npz'}: {d.n_samples} samples, {len(d.segments)} motion(s), {d.dof} "
+              f"joints, dt {d.dt:g} s")
+    print(f"reused the files in {a.out} (same settings; --force collects again)" if info["reused"]
+          else f"collected in {info['wall_s']:.1f} s")
 
 
 if __name__ == "__main__":

@@ -29,7 +29,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     """``cascgp sarcos``: parse ``argv`` (``sys.argv[1:]`` when ``None``) and run the SARCOS curves."""
     ap = argparse.ArgumentParser(prog=prog, description="SARCOS NP standard/inward/outward data-efficiency curves")
     found = default_sarcos()
-    ap.add_argument("--sarcos", default=None if found is None else str(found), required=found is None,
+    ap.add_argument("--sarcos", default=None if found is None else str(found),
                     help=f"path of ias_sarcos_data.mat (default: ${SARCOS_ENV}, or a source checkout's ../shared copy)")
     ap.add_argument("--out", required=True, metavar="DIR",
                     help="output folder: sarcos.json, the prepared data and the job cache (a rerun resumes)")
@@ -43,6 +43,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                     help=f"seed of the random starts (default: the preset's, {full.seed})")
     add_execution_args(ap)
     a = ap.parse_args(argv)
+    if a.sarcos is None:
+        ap.error(f"--sarcos: expected the path of ias_sarcos_data.mat (or set ${SARCOS_ENV})")
     if not Path(a.sarcos).is_file():
         ap.error(f"--sarcos: file not found: {a.sarcos}")
     require_at_least(ap, a, 1, "restarts")

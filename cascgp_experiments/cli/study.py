@@ -45,7 +45,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     ap.add_argument("--max-seconds", type=float, default=None,
                     help="drop grid points above this many seconds (Jaco and SARCOS), e.g. 10 for Table I's "
                          "intervals only: the 14-50 s points cost most of the fitting time")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0,
+                    help="seed of the data collection, the GP fits' random starts and the audit's sample (default: 0)")
     ap.add_argument("--sensor-pipeline", default="jaco2",
                     help="the simulated arm's sensing (CollectConfig.sensor_pipeline): jaco2 (default: the real Jaco "
                          "2's signal, Kinova's link inertials, causal q̈ filter), ideal or ideal+FACTOR[+FACTOR...]")

@@ -64,16 +64,24 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
     p = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, required=True, help="output folder (created; should be new or empty)")
     p.add_argument("--quick", action="store_true",
-                   help=f"short demo: controllers {QUICK_CONTROLLERS}, tasks {QUICK_TASKS}, 3 attempts each")
-    p.add_argument("--controllers", type=str, default=None, help="comma-separated controller names")
-    p.add_argument("--tasks", type=str, default=None, help="comma-separated task names (JacoPour-v0 defaults)")
-    p.add_argument("--attempts", type=int, default=3, help="attempts per task")
+                   help=f"short demo: controllers {','.join(QUICK_CONTROLLERS)}, tasks {','.join(QUICK_TASKS)}")
+    p.add_argument("--controllers", type=str, default=None,
+                   help=f"comma-separated controller names: pd, rbd, or a model name optionally followed by a gate "
+                        f"(-gated, -fgated, -vgated, -igated) and -online (default: "
+                        f"{','.join(FULL_CONTROLLERS)}; with --quick, {','.join(QUICK_CONTROLLERS)})")
+    p.add_argument("--tasks", type=str, default=None,
+                   help=f"comma-separated JacoPour-v0 task names (default: {','.join(FULL_TASKS)}; with --quick, "
+                        f"{','.join(QUICK_TASKS)})")
+    p.add_argument("--attempts", type=int, default=3, help="attempts per task (default: %(default)s)")
     p.add_argument("--no-revisit", action="store_true", help="do not revisit the first task at the end")
-    p.add_argument("--payload", type=float, default=1.2, help="unknown payload mass in the hand (kg)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--rate", type=float, default=10.0, help="training data rate (Hz)")
-    p.add_argument("--cap", type=int, default=500, help="maximum training-set size")
-    p.add_argument("--restarts", type=int, default=3, help="GP optimiser restarts per retraining")
+    p.add_argument("--payload", type=float, default=1.2,
+                   help="unknown payload mass in the hand (kg; default: %(default)s)")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the run: attempt i's episode is seeded seed * 1000 + i (default: %(default)s)")
+    p.add_argument("--rate", type=float, default=10.0, help="training data rate (Hz; default: %(default)s)")
+    p.add_argument("--cap", type=int, default=500, help="maximum training-set size (default: %(default)s)")
+    p.add_argument("--restarts", type=int, default=3,
+                   help="GP optimiser restarts per retraining (default: %(default)s)")
     p.add_argument("--sensor-pipeline", default="jaco2",
                    help="the env's sensing pipeline: jaco2 (default: the real Jaco 2's signal and link inertials), "
                         "ideal or ideal+FACTOR[+FACTOR...]")
