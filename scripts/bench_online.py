@@ -9,7 +9,8 @@ held-out motions: ``predict_one`` (the paper's feedforward), ``predict_one_var``
 the gated controller calls), ``add_sample`` (one online sample into every joint), and both single-query paths again
 with a full online window; the six triangular solves of the variance alone and one read of the same factors'
 triangles packed into one array (the memory floor of an exact variance at this n); one online sample's BLAS calls
-alone (with SciPy's wrappers' overhead: near the floor of its memory traffic); and whole controller ticks
+alone, with SciPy's wrappers' overhead and (with the compiled sample) from one compiled call without it (the
+floor of its memory traffic); and whole controller ticks
 (:class:`cascgp.FeedforwardController`, PD plus feedforward): ungated, with the default innovation gate (RBD plus
 ``predict_one`` per tick) and its update per measured sample (``observe``: one more ``predict_one`` and RBD call),
 and with each variance gate (RBD plus ``predict_one_var``); the innovation- and variance-gated ticks again one every
@@ -86,6 +87,45 @@ def _sample_blas_calls(model: Any) -> Callable[[], None]:
             dsyr(-1e-12, x, lower=1, a=S, overwrite_a=1)
 
     return calls
+
+
+def _sample_blas_calls_compiled(model: Any) -> Callable[[], None] | None:
+    """The same BLAS calls as :func:`_sample_blas_calls` made from one compiled call, as the compiled online sample
+    makes them (:mod:`cascgp.models.online_kernel`'s helpers, on the window's own factor, ``B`` and a copy of its
+    inverse): no wrapper overhead, so what is left is their memory traffic. None without the compiled sample."""
+    win = model._online
+    if win._jit is None:
+        return None
+    import numba
+
+    from cascgp.models import online_kernel as ok
+
+    @numba.njit(nogil=True)
+    def calls(trsv: Any, gemv: Any, symv: Any, syr: Any, Lf: tuple, B: tuple, ST: tuple, k0: np.ndarray,
+              work: np.ndarray, xw: np.ndarray, yw: np.ndarray, y0: np.ndarray, fi: np.ndarray, fd: np.ndarray,
+              ch: np.ndarray) -> None:  # pragma: no cover - runs compiled
+        for j in range(len(Lf)):
+            n0, W = Lf[j].shape[0], B[j].shape[0]
+            work[j, :] = k0[j]
+            ok._trsv(trsv, 84, Lf[j], work[j], fi, ch)  # L00^-1 k0
+            ok._trsv(trsv, 78, Lf[j], work[j], fi, ch)  # L00^-T (...)
+            ok._gemv(gemv, 84, n0, W, B[j], k0[j], yw[j], fi, fd, ch)  # B @ k0
+            ok._gemv(gemv, 78, n0, W, B[j], xw[j], y0[j], fi, fd, ch)  # x @ B
+            ok._without(symv, 0, ST[j], xw[j], xw[j], False, yw[j], fi, fd, ch)
+            ok._without(symv, 0, ST[j], xw[j], xw[j], False, yw[j], fi, fd, ch)
+            ok._syr(syr, 1e-12, xw[j], ST[j], fi, fd, ch)
+            ok._syr(syr, -1e-12, xw[j], ST[j], fi, fd, ch)
+
+    f, a = ok.blas(), win._arrays()
+    Lf, B = a["fitted"][2], a["B"]
+    ST = tuple(x.copy() for x in a["ST"])
+    N, n0, W = len(Lf), Lf[0].shape[0], B[0].shape[0]
+    rng = np.random.default_rng(0)
+    k0, xw = np.abs(rng.standard_normal((N, n0))), rng.standard_normal((N, W))
+    args = (f["dtrsv"], f["dgemv"], f["dsymv"], f["dsyr"], Lf, B, ST, k0, np.zeros((N, n0)), xw, np.zeros((N, W)),
+            np.zeros((N, n0)), np.zeros(4, dtype=np.int32), np.zeros(2), np.zeros(3, dtype=np.uint8))
+    calls(*args)  # compile now
+    return lambda: calls(*args)
 
 
 #: Alternating rounds of :func:`_paths_side_by_side`.
@@ -197,6 +237,10 @@ def main(argv: list[str] | None = None) -> None:
     rows["add_sample (window filling and full)"] = _times(model.add_sample, samples, max(3 * a.window, 300))
     rows["add_sample's BLAS calls alone (full window, through SciPy's wrappers)"] = _times(
         _sample_blas_calls(model), [()], a.reps)
+    compiled_calls = _sample_blas_calls_compiled(model)
+    if compiled_calls is not None:
+        rows["add_sample's BLAS calls alone (full window, from one compiled call)"] = _times(compiled_calls, [()],
+                                                                                            a.reps)
     rows["predict_one (online, full window)"] = _times(model.predict_one, q, a.reps)
     rows["predict_one_var (online, full window)"] = _times(model.predict_one_var, q, a.reps)
     from cascgp.models.fastkernel import jit_enabled
