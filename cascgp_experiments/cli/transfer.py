@@ -77,7 +77,8 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
     p.add_argument("--payload", type=float, default=1.2,
                    help="unknown payload mass in the hand (kg; default: %(default)s)")
     p.add_argument("--seed", type=int, default=0,
-                   help="seed of the run: attempt i's episode is seeded seed * 1000 + i (default: %(default)s)")
+                   help="seed of the run: attempt i's episode is seeded seed * 1000 + i, the refit after it seed + i "
+                        "(default: %(default)s)")
     p.add_argument("--rate", type=float, default=10.0, help="training data rate (Hz; default: %(default)s)")
     p.add_argument("--cap", type=int, default=500, help="maximum training-set size (default: %(default)s)")
     p.add_argument("--restarts", type=int, default=3,
