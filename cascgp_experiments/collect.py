@@ -412,6 +412,11 @@ def _assemble(cfg: CollectConfig, split: str, parts: list[DynamicsData]) -> Dyna
     return DynamicsData.concat(parts, meta=meta)
 
 
+def data_path(folder: str | Path, split: str) -> Path:
+    """The file of the collection's ``split`` (``"train"`` or ``"test"``) in ``folder``: ``jaco_<split>.npz``."""
+    return Path(folder) / f"jaco_{split}.npz"
+
+
 def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: bool = False, workers: int | None = None,
             ray_address: str | None = None, vector_env: bool = False) -> tuple[DynamicsData, DynamicsData, dict]:
     """Collect (or reuse) ``<out>/jaco_train.npz`` and ``<out>/jaco_test.npz``.
@@ -426,7 +431,7 @@ def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: boo
 
     workers = check_workers(workers)
     out = Path(out)
-    paths = {s: out / f"jaco_{s}.npz" for s in ("train", "test")}
+    paths = {s: data_path(out, s) for s in ("train", "test")}
     if not force and all(p.exists() for p in paths.values()):
         loaded = {s: DynamicsData.load(p) for s, p in paths.items()}
         if all(same_collection(d.meta.get("collection"), cfg) for d in loaded.values()):
@@ -453,7 +458,7 @@ def study_data(folder: str | Path | None, out: str | Path, *, preset: str = "qui
         if (sensor_noise, qdd_source) != ("default", "savgol"):
             raise ValueError(f"sensor_noise={sensor_noise!r}/qdd_source={qdd_source!r} only apply to a new "
                              f"collection, not to the files in {folder!s} (leave out the data folder)")
-        return tuple(DynamicsData.load(Path(folder) / f"jaco_{s}.npz") for s in ("train", "test"))
+        return tuple(DynamicsData.load(data_path(folder, s)) for s in ("train", "test"))
     if preset not in PRESETS:
         raise ValueError(f"preset: expected one of {tuple(PRESETS)}, got {preset!r}")
     cfg = replace(PRESETS[preset], sensor_noise=sensor_noise, qdd_source=qdd_source)

@@ -43,10 +43,11 @@ CASES: dict[str, tuple[str, list[str]]] = {
 def job_stats(module: str, out: Path) -> tuple[dict[str, Any], Any]:
     """(job statistics, the experiment's numbers) of one run's results JSON."""
     if module == "scripts.collect_jaco_data":  # no job statistics; the numbers are the files' arrays
+        from cascgp_experiments.collect import data_path
         from cascgp_experiments.curves import npz_digest
 
         return ({"n_jobs": 0, "job_seconds_sum": 0.0, "job_seconds_max": 0.0, "backend": "", "workers": None},
-                {s: npz_digest(out / f"jaco_{s}.npz") for s in ("train", "test")})
+                {s: npz_digest(data_path(out, s)) for s in ("train", "test")})
     res = read_json(out / "results.json")
     if module == "scripts.task_transfer":
         numbers = {n: [{k: v for k, v in a.items() if k != "fit_seconds"} for a in att]

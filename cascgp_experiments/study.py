@@ -203,8 +203,9 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
                                      "qdd": train.meta.get("qdd_source")}
 
     # 2. curves (12 variants + RBD)
-    spec = CurveSpec(train_path=str(out / "data" / "jaco_train.npz"), test_path=str(out / "data" / "jaco_test.npz"),
-                     n_subsets=settings.n_subsets, grid=list(settings.grid), train_hz=10.0,
+    spec = CurveSpec(train_path=str(col.data_path(out / "data", "train")),
+                     test_path=str(col.data_path(out / "data", "test")), n_subsets=settings.n_subsets,
+                     grid=list(settings.grid), train_hz=10.0,
                      test_hz=settings.test_hz, split_by="segment", urdf=str(col.nominal_urdf_for(train.meta)),
                      n_restarts=settings.n_restarts, warm_start=settings.warm_start, seed=settings.seed,
                      audit_fraction=settings.audit_fraction)

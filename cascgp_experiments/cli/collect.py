@@ -13,10 +13,9 @@ from __future__ import annotations
 
 import argparse
 from dataclasses import asdict
-from pathlib import Path
 
 from cascgp_experiments.cli.options import settings_error
-from cascgp_experiments.collect import PRESETS, CollectConfig, collect
+from cascgp_experiments.collect import PRESETS, CollectConfig, collect, data_path
 from cascgp_experiments.execution import add_execution_args, check_args, session
 
 
@@ -67,7 +66,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
         train, test, info = collect(a.out, cfg, force=a.force, workers=a.workers, ray_address=a.ray,
                                     vector_env=a.vector_env)
     for split, d in (("train", train), ("test", test)):
-        print(f"{Path(a.out) / f'jaco_{split}.npz'}: {d.n_samples} samples, {len(d.segments)} motion(s), {d.dof} "
+        print(f"{data_path(a.out, split)}: {d.n_samples} samples, {len(d.segments)} motion(s), {d.dof} "
               f"joints, dt {d.dt:g} s")
     print(f"reused the files in {a.out} (same settings; --force collects again)" if info["reused"]
           else f"collected in {info['wall_s']:.1f} s")
