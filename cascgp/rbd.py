@@ -13,9 +13,12 @@ with :math:`a` the armature. Pinocchio's ``rnea`` (4.1.0) adds
 ``model.armature * qdd`` itself (checked in ``tests/test_rbd.py``), so the
 armature is stored in ``model.armature`` and nothing is added by hand.
 
-Only fixed-base models whose configuration and velocity spaces coincide
-(``nq == nv``: revolute / prismatic joints) are accepted: the callers pass
-joint angles as ``(N,)`` vectors.
+Fixed-base models with one position per joint are accepted: revolute and
+prismatic joints, and continuous joints, which become revolute joints whose
+position is the angle (:func:`cascgp.rbd_joints.angle_joints`); the callers pass
+joint positions as ``(N,)`` vectors. Joints that a log does not have (a
+gripper's fingers) can be locked: ``joints=`` names the model's joints and
+``locked=`` the others' positions (:func:`cascgp.rbd_joints.lock_joints`).
 
 ``load_nominal(urdf_path)`` reads the JSON sidecar written next to the URDF by
 :mod:`cascgp_experiments.urdf_export` (armature, torque and velocity limits, gravity,
@@ -34,6 +37,7 @@ from __future__ import annotations
 import json
 import os
 import warnings
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -41,6 +45,7 @@ import numpy as np
 import pinocchio as pin
 
 from cascgp.data import F64, all_finite
+from cascgp.rbd_joints import angle_joints, check_joint_selection, lock_joints
 
 __all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
            "SUPPORTED_SIDECAR_VERSIONS", "SIDECAR_REQUIRED_FIELDS"]
@@ -51,6 +56,10 @@ SIDECAR_FORMAT_VERSION = 1
 SUPPORTED_SIDECAR_VERSIONS = (SIDECAR_FORMAT_VERSION,)
 #: Fields every sidecar must hold (besides ``format_version``).
 SIDECAR_REQUIRED_FIELDS = ("armature", "torque_limits", "velocity_limits", "joint_names")
+
+
+#: What a dof mismatch with more joints in the URDF than expected suggests.
+_JOINTS_HINT = "; name the model's joints with joints= (the others are locked, at 0 unless locked= says)"
 
 
 def sidecar_path(urdf_path: str | os.PathLike) -> Path:
@@ -73,8 +82,11 @@ class RigidBodyModel:
     """Inverse dynamics of a fixed-base N-DOF arm from Pinocchio's RNEA.
 
     Attributes:
-        dof: number of joints N (``nq == nv``).
-        joint_names: names of the N joints, in URDF/Pinocchio order.
+        dof: number of joints N (one position each: a continuous joint's is its angle).
+        joint_names: names of the N joints, in URDF/Pinocchio order (the URDF's joints less the locked ones).
+        locked: the URDF's joints that are not the model's, locked at a position (rad or m), ``{name: q}``;
+            empty when the model has every joint. ``joints=`` (the model's joints, in the URDF's order)
+            and ``locked=`` (positions of the others; default 0) choose them when the model is built.
         armature: (N,) rotor inertia per joint (kg m^2), included in the inverse dynamics.
         gravity: (3,) gravity vector in the world frame (m/s^2).
         torque_limits, velocity_limits: (N,) or ``None`` (from the sidecar).
@@ -96,14 +108,19 @@ class RigidBodyModel:
         meta: dict | None = None,
         source: str | None = None,
         urdf_text: str | None = None,
+        joints: Sequence[str] | None = None,
+        locked: Mapping[str, float] | None = None,
     ) -> None:
-        if model.nq != model.nv:
-            raise ValueError(
-                f"model has nq={model.nq} != nv={model.nv} (continuous, spherical or floating joints);"
-                " only fixed-base models with revolute/prismatic joints are supported"
-            )
+        model = angle_joints(model)
+        if joints is not None or locked:
+            keep, values = check_joint_selection(list(model.names)[1:], joints, locked)
+            values = {n: values.get(n, 0.0) for n in list(model.names)[1:] if n not in keep}
+            model = lock_joints(model, keep, values)
+        else:
+            values = {}
         if model.nv == 0:
             raise ValueError("model has no degrees of freedom")
+        self.locked: dict[str, float] = values
         self.pin_model = model
         self.dof: int = int(model.nv)
         self.joint_names: tuple[str, ...] = tuple(model.names[1:])
@@ -130,6 +147,8 @@ class RigidBodyModel:
         *,
         gravity: Any = None,
         dof: int | None = None,
+        joints: Sequence[str] | None = None,
+        locked: Mapping[str, float] | None = None,
     ) -> "RigidBodyModel":
         """Build from a fixed-base URDF.
 
@@ -138,6 +157,8 @@ class RigidBodyModel:
             armature: rotor inertia per joint, (N,) or a scalar; ``None`` keeps the URDF's (zero).
             gravity: (3,) world gravity; ``None`` keeps Pinocchio's default (0, 0, -9.81).
             dof: if given, the expected number of joints; a mismatch raises ``ValueError``.
+            joints: the model's joints (default: all the URDF's), in the URDF's order from the base.
+            locked: positions (rad or m) of joints not in ``joints``, ``{name: q}``; the others lock at 0.
         """
         path = Path(path)
         if not path.is_file():
@@ -147,16 +168,19 @@ class RigidBodyModel:
             model = pin.buildModelFromUrdf(str(path))
         except Exception as exc:  # Pinocchio raises a bare ValueError/RuntimeError with a terse message
             raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}") from exc
-        rbd = cls(model, armature=armature, gravity=gravity, source=str(path), urdf_text=text)
+        rbd = cls(model, armature=armature, gravity=gravity, source=str(path), urdf_text=text, joints=joints,
+                  locked=locked)
         if dof is not None and rbd.dof != dof:
-            raise ValueError(f"dof mismatch: expected {dof} joints, URDF {str(path)!r} has {rbd.dof}")
+            raise ValueError(f"dof mismatch: expected {dof} joints, URDF {str(path)!r} has {rbd.dof} "
+                             f"({', '.join(rbd.joint_names)}){_JOINTS_HINT if rbd.dof > dof else ''}")
         return rbd
 
     @classmethod
     def from_urdf_text(cls, text: str, *, dof: int | None = None, **kwargs: Any) -> "RigidBodyModel":
         """Build from a URDF document held in a string (e.g. embedded in a model file); ``kwargs`` are those of
         the constructor (``armature``, ``gravity``, ``torque_limits``, ``velocity_limits``, ``meta``,
-        ``source``). ``ValueError`` if it does not parse or has another number of joints than ``dof``."""
+        ``source``, ``joints``, ``locked``). ``ValueError`` if it does not parse or has another number of joints
+        than ``dof``."""
         if not isinstance(text, str) or not text.strip():
             raise ValueError("urdf_text: expected a non-empty URDF document")
         try:
@@ -165,7 +189,8 @@ class RigidBodyModel:
             raise ValueError(f"urdf_text: cannot parse the URDF document: {exc}") from exc
         rbd = cls(model, urdf_text=text, **kwargs)
         if dof is not None and rbd.dof != dof:
-            raise ValueError(f"urdf_text: dof mismatch: expected {dof} joints, the URDF has {rbd.dof}")
+            raise ValueError(f"urdf_text: dof mismatch: expected {dof} joints, the URDF has {rbd.dof} "
+                             f"({', '.join(rbd.joint_names)}){_JOINTS_HINT if rbd.dof > dof else ''}")
         return rbd
 
     # ------------------------------------------------------------------ properties
@@ -275,7 +300,8 @@ class RigidBodyModel:
         return M
 
     def __repr__(self) -> str:
-        return f"RigidBodyModel(dof={self.dof}, joints={list(self.joint_names)}, source={self.source!r})"
+        lock = f", locked={self.locked}" if self.locked else ""
+        return f"RigidBodyModel(dof={self.dof}, joints={list(self.joint_names)}{lock}, source={self.source!r})"
 
 
 def _urdf_limits(values: np.ndarray) -> np.ndarray | None:
@@ -284,9 +310,10 @@ def _urdf_limits(values: np.ndarray) -> np.ndarray | None:
     return v.copy() if v.size and np.all(np.isfinite(v)) and np.all(v > 0) else None
 
 
-def _without_sidecar(urdf_path: Path, js: Path, dof: int | None) -> RigidBodyModel:
+def _without_sidecar(urdf_path: Path, js: Path, dof: int | None, joints: Sequence[str] | None,
+                     locked: Mapping[str, float] | None) -> RigidBodyModel:
     """:func:`load_nominal` for a URDF without a sidecar (see its docstring)."""
-    rbd = RigidBodyModel.from_urdf(urdf_path, dof=dof)
+    rbd = RigidBodyModel.from_urdf(urdf_path, dof=dof, joints=joints, locked=locked)
     model = rbd.pin_model
     torque = _urdf_limits(model.effortLimit)
     velocity = _urdf_limits(model.velocityLimit)
@@ -300,11 +327,14 @@ def _without_sidecar(urdf_path: Path, js: Path, dof: int | None) -> RigidBodyMod
         f"torque limits {'from the URDF' if torque is not None else 'unknown (a joint has no positive effort)'}, "
         f"velocity limits {'from the URDF' if velocity is not None else 'unknown (a joint has no positive velocity)'}, "
         f"gravity {tuple(gravity.tolist())} m/s^2", UserWarning, stacklevel=3)
-    return RigidBodyModel(model, armature=np.zeros(rbd.dof), torque_limits=torque, velocity_limits=velocity,
-                          meta=assumed, source=str(urdf_path), urdf_text=rbd.urdf_text)
+    out = RigidBodyModel(model, armature=np.zeros(rbd.dof), torque_limits=torque, velocity_limits=velocity,
+                         meta=assumed, source=str(urdf_path), urdf_text=rbd.urdf_text)
+    out.locked = rbd.locked  # rbd.pin_model has them locked already
+    return out
 
 
-def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> RigidBodyModel:
+def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints: Sequence[str] | None = None,
+                 locked: Mapping[str, float] | None = None) -> RigidBodyModel:
     """Load a nominal model: the URDF plus, when present, its JSON sidecar (same name, ``.json``).
 
     Example:
@@ -331,9 +361,16 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> Rig
     * gravity Pinocchio's default :math:`(0, 0, -9.81)` m/s² (world z up);
     * ``model.meta`` records these assumptions (``meta["sidecar"]`` is ``None``).
 
+    A manufacturer's URDF often has joints that a log does not (a gripper's fingers): ``joints`` names the
+    model's joints, in the URDF's order from the base, and the others are locked, at 0 or at the positions
+    ``locked`` gives; a sidecar's fields are then those of the model's joints. Continuous joints are revolute
+    joints whose position is the angle (:mod:`cascgp.rbd_joints`).
+
     Args:
         urdf_path: the URDF file.
         dof: if given, the expected number of joints.
+        joints: the model's joints (default: every joint of the URDF).
+        locked: positions (rad or m) of joints not in ``joints``, ``{name: q}``.
 
     Raises:
         FileNotFoundError: the URDF is missing.
@@ -345,7 +382,7 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> Rig
         raise FileNotFoundError(f"URDF file not found: {str(urdf_path)!r}")
     js = sidecar_path(urdf_path)
     if not js.exists():
-        return _without_sidecar(urdf_path, js, dof)
+        return _without_sidecar(urdf_path, js, dof, joints, locked)
     try:
         meta = json.loads(js.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
@@ -360,7 +397,7 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> Rig
     for key in SIDECAR_REQUIRED_FIELDS:
         if key not in meta:
             raise ValueError(f"sidecar {str(js)!r} lacks the field {key!r}")
-    rbd = RigidBodyModel.from_urdf(urdf_path, dof=dof)
+    rbd = RigidBodyModel.from_urdf(urdf_path, dof=dof, joints=joints, locked=locked)
     if "dof" in meta and meta["dof"] != rbd.dof:
         raise ValueError(f"sidecar {str(js)!r}: dof {meta['dof']} does not match the URDF's {rbd.dof} joints")
     if list(meta["joint_names"]) != list(rbd.joint_names):
@@ -368,7 +405,7 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> Rig
             f"sidecar {str(js)!r}: joint_names {meta['joint_names']} do not match the URDF's {list(rbd.joint_names)}"
         )
     try:
-        return RigidBodyModel(
+        out = RigidBodyModel(
             rbd.pin_model,
             armature=meta["armature"],
             gravity=meta.get("gravity"),
@@ -380,3 +417,5 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None) -> Rig
         )
     except ValueError as exc:
         raise ValueError(f"sidecar {str(js)!r}: {exc}") from exc
+    out.locked = rbd.locked  # rbd.pin_model has them locked already
+    return out

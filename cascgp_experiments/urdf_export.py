@@ -20,8 +20,9 @@ rigid-body dynamics only.
 
 Not in the URDF: armature (rotor inertia; URDF has no field for it, the sidecar's ``armature`` entry
 holds it and ``load_nominal`` applies it), joint friction and damping. Joints that MuJoCo leaves
-unlimited are written as ``revolute`` with ``+-UNLIMITED_RAD`` because a URDF ``continuous`` joint is
-a (cos, sin) joint in Pinocchio (nq = 2 per joint), which would break nq = nv.
+unlimited are written as ``revolute`` with ``+-UNLIMITED_RAD``: a URDF ``continuous`` joint is a (cos, sin)
+joint in Pinocchio (nq = 2 per joint), which :mod:`cascgp.rbd_joints` would convert back to a revolute one
+on loading; writing it revolute keeps the file the model it is loaded as.
 
 Calibration error (documented, seeded)
 --------------------------------------

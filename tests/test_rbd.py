@@ -317,23 +317,6 @@ def test_construction_errors(tmp, exact_urdf):
         RigidBodyModel.from_urdf(garbage)
 
 
-def test_continuous_joint_rejected(tmp):
-    """A URDF 'continuous' joint is (cos, sin) in Pinocchio: nq != nv, arrays of N angles cannot match."""
-    urdf = tmp / "continuous.urdf"
-    urdf.write_text(
-        """<?xml version="1.0"?>
-<robot name="c">
-  <link name="base"/>
-  <link name="l1"><inertial><origin xyz="0 0 0.1"/><mass value="1"/>
-    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
-  <joint name="j1" type="continuous"><parent link="base"/><child link="l1"/><axis xyz="0 0 1"/></joint>
-</robot>
-"""
-    )
-    with pytest.raises(ValueError, match="nq=2 != nv=1"):
-        RigidBodyModel.from_urdf(urdf)
-
-
 def test_generator_errors(tmp):
     for error in (-0.1, 1.0, float("nan")):
         with pytest.raises(ValueError, match="error must be a finite relative error"):

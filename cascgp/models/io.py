@@ -87,7 +87,16 @@ def _embedded_rbd(rbd: Any) -> dict[str, np.ndarray]:
         "rbd/meta_json": np.array(json.dumps(getattr(rbd, "meta", {}) or {})),
         "rbd/limits_json": np.array(json.dumps({k: None if v is None else np.asarray(v, float).tolist()
                                                 for k, v in opt.items()})),
+        **_embedded_joints(rbd),
     }
+
+
+def _embedded_joints(rbd: Any) -> dict[str, np.ndarray]:
+    """``rbd/joints_json`` (the model's joints and the URDF's locked ones) when the URDF has locked joints."""
+    locked = getattr(rbd, "locked", None)
+    if not locked:
+        return {}
+    return {"rbd/joints_json": np.array(json.dumps({"joints": list(rbd.joint_names), "locked": dict(locked)}))}
 
 
 def _rbd_from_file(z: dict[str, np.ndarray], path: str | os.PathLike, dof: int) -> Any:
@@ -99,10 +108,12 @@ def _rbd_from_file(z: dict[str, np.ndarray], path: str | os.PathLike, dof: int) 
         if hashlib.sha256(text.encode("utf-8")).hexdigest() != str(z["rbd/sha256"]):
             raise ValueError("rbd/urdf: the embedded URDF does not match its SHA-256 (corrupt file)")
         limits = json.loads(str(z["rbd/limits_json"]))
+        sel = json.loads(str(z["rbd/joints_json"])) if "rbd/joints_json" in z else {}
         return RigidBodyModel.from_urdf_text(
             text, dof=dof, armature=z["rbd/armature"], gravity=z["rbd/gravity"],
             torque_limits=limits.get("torque_limits"), velocity_limits=limits.get("velocity_limits"),
-            meta=json.loads(str(z["rbd/meta_json"])), source=None)
+            meta=json.loads(str(z["rbd/meta_json"])), source=None, joints=sel.get("joints"),
+            locked=sel.get("locked"))
     except KeyError as exc:
         raise ValueError(f"{path}: {exc.args[0]}: missing (the file embeds only part of its rigid-body model)") \
             from exc

@@ -114,6 +114,12 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
                    help="model name: " + ", ".join(MODEL_NAMES))
     p.add_argument("--urdf", type=Path, default=None,
                    help="the robot's URDF (sp-* models only; a sidecar JSON next to it is optional)")
+    p.add_argument("--joints", default=None, metavar="NAME,...",
+                   help="the URDF joints that are the log's q1..qN, in the URDF's order from the base (default: "
+                        "all; the others, a gripper's fingers say, are locked). Continuous joints are revolute "
+                        "joints whose q is the angle")
+    p.add_argument("--lock", default=None, metavar="NAME=Q,...",
+                   help="positions (rad or m) at which joints not in --joints are locked (default 0)")
     p.add_argument("--out", type=Path, required=True, help="model file to write (.npz; replaced atomically)")
     p.add_argument("--restarts", type=int, default=None,
                    help=f"optimiser starts per joint's GP (default: {GPFitConfig().n_restarts}, the library's "
@@ -138,7 +144,40 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
     if a.model.startswith("np-") and a.urdf is not None:
         p.error(f"--urdf: the non-parametric model {a.model!r} uses no rigid-body model; drop --urdf or choose "
                 f"{'sp' + a.model[2:]!r}")
+    for opt in ("joints", "lock"):
+        if getattr(a, opt) is not None and a.urdf is None:
+            p.error(f"--{opt}: chooses joints of the URDF; it needs --urdf (an sp-* model)")
+    a.joints = _names(p, a.joints)
+    a.lock = _positions(p, a.lock)
     return _run(prog, lambda: _fit(a, prog))
+
+
+def _names(p: argparse.ArgumentParser, text: str | None) -> list[str] | None:
+    """``--joints``: comma-separated joint names."""
+    if text is None:
+        return None
+    names = [n.strip() for n in text.split(",")]
+    if not all(names):
+        p.error(f"--joints: expected joint names separated by commas, got {text!r}")
+    return names
+
+
+def _positions(p: argparse.ArgumentParser, text: str | None) -> dict[str, float] | None:
+    """``--lock``: ``NAME=Q`` pairs separated by commas."""
+    if text is None:
+        return None
+    out: dict[str, float] = {}
+    for item in text.split(","):
+        name, eq, value = item.partition("=")
+        try:
+            q = float(value)
+        except ValueError:
+            q = float("nan")
+        if not eq or not name.strip() or not np.isfinite(q):
+            p.error(f"--lock: expected NAME=Q pairs (Q a finite position in rad or m) separated by commas, "
+                    f"got {item!r}")
+        out[name.strip()] = q
+    return out
 
 
 def _fit(a: argparse.Namespace, prog: str) -> int:
@@ -150,11 +189,13 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
     _describe(prog, data, a.data)
     rbd = None
     if a.urdf is not None:
-        rbd = load_nominal(a.urdf)
+        rbd = load_nominal(a.urdf, joints=a.joints, locked=a.lock)
         if rbd.dof != data.dof:
+            more = "; name the log's joints with --joints (the others are locked)" if rbd.dof > data.dof else ""
             raise _Fail(f"{a.urdf}: the URDF has {rbd.dof} joints ({', '.join(rbd.joint_names)}), the log "
-                        f"{a.data} has {data.dof}")
-        _note(prog, f"rigid-body model: {a.urdf} ({rbd.dof} joints: {', '.join(rbd.joint_names)})")
+                        f"{a.data} has {data.dof}{more}")
+        locked = "".join(f"; {n} locked at {q:g}" for n, q in rbd.locked.items())
+        _note(prog, f"rigid-body model: {a.urdf} ({rbd.dof} joints: {', '.join(rbd.joint_names)}{locked})")
     if a.rate_hz is not None:
         n0 = data.n_samples
         data = data.subsample(a.rate_hz)

@@ -1,0 +1,199 @@
+"""A manufacturer's URDF as the rigid-body model: continuous joints as angles, joints the log lacks locked.
+
+References: the same arm written with ``revolute`` joints (continuous joints), Pinocchio's own model of the
+continuous joints at :math:`(\\cos q, \\sin q)`, and the same arm with the locked joints written as ``fixed``
+joints at the locked positions (locked joints).
+"""
+
+from __future__ import annotations
+
+import csv
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from cascgp.data import DynamicsData
+from cascgp.gp import GPFitConfig
+from cascgp.models import load_model, make_model
+from cascgp.rbd import RigidBodyModel, load_nominal
+from cascgp_experiments.cli.model_commands import fit_main
+
+_INERTIAL = ('<inertial><origin xyz="{c}"/><mass value="{m}"/>'
+             '<inertia ixx="{i}" ixy="0.001" ixz="0" iyy="{i2}" iyz="0.0005" izz="{i}"/></inertial>')
+# (name, parent, child, origin xyz, origin rpy, axis, link mass, link centre of mass)
+_ARM = [("j1", "base", "l1", "0 0 0.1", "0 0 0", "0 0 1", 1.2, "0 0.01 0.1"),
+        ("j2", "l1", "l2", "0 0 0.2", "1.5707963 0 0", "0 0.6 0.8", 0.9, "0.1 0 0.02"),  # an unaligned axis
+        ("j3", "l2", "l3", "0.3 0 0", "0 0 0.3", "1 0 0", 0.6, "0.05 0.01 0")]
+
+
+def arm_urdf(types: tuple[str, str, str], fingers: str | None = None, at: tuple[float, float] = (0.0, 0.0)) -> str:
+    """Three joints of ``types``; ``fingers``: None, ``"prismatic"`` (two finger joints) or ``"fixed"`` (the
+    fingers welded at positions ``at``, the reference of locking them there)."""
+    parts = ['<?xml version="1.0"?>', '<robot name="arm">', '<link name="base"/>']
+    for (name, parent, child, xyz, rpy, axis, m, c), kind in zip(_ARM, types):
+        limit = '<limit effort="30" velocity="2"/>' if kind == "continuous" else \
+            '<limit effort="30" velocity="2" lower="-3" upper="3"/>'
+        parts += [f'<link name="{child}">{_INERTIAL.format(c=c, m=m, i=0.01 * m, i2=0.02 * m)}</link>',
+                  f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
+                  f'<origin xyz="{xyz}" rpy="{rpy}"/><axis xyz="{axis}"/>{limit}</joint>']
+    if fingers:
+        for k, (sign, q) in enumerate(((1, at[0]), (-1, at[1])), start=1):
+            parts.append(f'<link name="f{k}">{_INERTIAL.format(c=f"0 {0.02 * sign} 0", m=0.1, i=1e-4, i2=2e-4)}'
+                         '</link>')
+            if fingers == "fixed":
+                parts.append(f'<joint name="finger{k}" type="fixed"><parent link="l3"/><child link="f{k}"/>'
+                             f'<origin xyz="0.1 {sign * q} 0"/></joint>')
+            else:
+                parts.append(f'<joint name="finger{k}" type="prismatic"><parent link="l3"/><child link="f{k}"/>'
+                             f'<origin xyz="0.1 0 0"/><axis xyz="0 {sign} 0"/>'
+                             '<limit effort="20" velocity="0.2" lower="0" upper="0.04"/></joint>')
+    return "\n".join([*parts, "</robot>"]) + "\n"
+
+
+def write(folder: Path, name: str, text: str) -> Path:
+    path = folder / name
+    path.write_text(text)
+    return path
+
+
+def states(n: int, seed: int, scale: float = 3.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    return rng.uniform(-scale, scale, (n, 3)), rng.uniform(-2, 2, (n, 3)), rng.uniform(-5, 5, (n, 3))
+
+
+def test_continuous_joints_are_revolute_joints_in_their_angle(tmp_path: Path) -> None:
+    cont = write(tmp_path, "cont.urdf", arm_urdf(("continuous", "continuous", "revolute")))
+    ref = RigidBodyModel.from_urdf(write(tmp_path, "rev.urdf", arm_urdf(("revolute",) * 3)))
+    rbd = RigidBodyModel.from_urdf(cont)
+    assert rbd.dof == 3 and rbd.joint_names == ("j1", "j2", "j3") and rbd.locked == {}
+    q, qd, qdd = states(20, seed=0, scale=7.0)  # beyond +-pi: angles of any range
+    np.testing.assert_allclose(rbd.inverse_dynamics(q, qd, qdd), ref.inverse_dynamics(q, qd, qdd),
+                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(rbd.inverse_dynamics(q + 2 * np.pi, qd, qdd), rbd.inverse_dynamics(q, qd, qdd),
+                               rtol=1e-9, atol=1e-9)  # a turn later, the same torque
+    for a, b in zip(rbd.inverse_dynamics_derivatives(q[:3], qd[:3], qdd[:3]),
+                    ref.inverse_dynamics_derivatives(q[:3], qd[:3], qdd[:3])):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(rbd.mass_matrix(q[0]), ref.mass_matrix(q[0]), rtol=1e-12, atol=1e-12)
+
+    # Pinocchio's own model of the continuous joints, at (cos q, sin q)
+    native = pin.buildModelFromUrdf(str(cont))
+    assert (native.nq, native.nv) == (5, 3)
+    data = native.createData()
+    for t in range(len(q)):
+        x = np.array([np.cos(q[t, 0]), np.sin(q[t, 0]), np.cos(q[t, 1]), np.sin(q[t, 1]), q[t, 2]])
+        np.testing.assert_allclose(rbd.inverse_dynamics(q[t], qd[t], qdd[t]), pin.rnea(native, data, x, qd[t], qdd[t]),
+                                   rtol=1e-12, atol=1e-12)
+    # limits and frames kept; a continuous joint has no position limits
+    np.testing.assert_array_equal(rbd.pin_model.effortLimit, [30.0, 30.0, 30.0])
+    np.testing.assert_array_equal(rbd.pin_model.lowerPositionLimit, [-np.inf, -np.inf, -3.0])
+    assert [f.name for f in rbd.pin_model.frames] == [f.name for f in native.frames]
+
+
+def test_locked_joints_are_welded_at_their_positions(tmp_path: Path) -> None:
+    urdf = write(tmp_path, "gripper.urdf", arm_urdf(("continuous", "revolute", "revolute"), fingers="prismatic"))
+    assert RigidBodyModel.from_urdf(urdf).dof == 5
+    q, qd, qdd = states(15, seed=1)
+    for locked, at in ((None, (0.0, 0.0)), ({"finger1": 0.03, "finger2": 0.01}, (0.03, 0.01))):
+        welded = RigidBodyModel.from_urdf(write(tmp_path, "welded.urdf",
+                                                arm_urdf(("revolute",) * 3, fingers="fixed", at=at)))
+        with pytest.warns(UserWarning, match="no sidecar"):
+            rbd = load_nominal(urdf, joints=["j1", "j2", "j3"], locked=locked)
+        assert rbd.dof == 3 and rbd.joint_names == ("j1", "j2", "j3")
+        assert rbd.locked == {"finger1": at[0], "finger2": at[1]}
+        np.testing.assert_allclose(rbd.inverse_dynamics(q, qd, qdd), welded.inverse_dynamics(q, qd, qdd),
+                                   rtol=1e-12, atol=1e-12)
+        np.testing.assert_array_equal(rbd.torque_limits, [30.0] * 3)  # the kept joints' <limit>s
+        assert "locked={'finger1'" in repr(rbd)
+
+
+def test_joint_selection_errors(tmp_path: Path) -> None:
+    urdf = write(tmp_path, "gripper.urdf", arm_urdf(("revolute",) * 3, fingers="prismatic"))
+    bad = [
+        ({"joints": ["j1", "j2", "nope"]}, r"joints: \['nope'\] are not joints of the URDF"),
+        ({"joints": ["j2", "j1", "j3"]}, r"in the URDF's order from the base, \['j1', 'j2', 'j3'\]"),
+        ({"joints": ["j1", "j1"]}, "distinct joint names"),
+        ({"joints": []}, "distinct joint names"),
+        ({"joints": ["j1", "j2", "j3"], "locked": {"j3": 0.1}}, "locked: 'j3' is one of the model's joints"),
+        ({"joints": ["j1", "j2", "j3"], "locked": {"hand": 0.1}}, "locked: 'hand' is not a joint of the URDF"),
+        ({"joints": ["j1", "j2", "j3"], "locked": {"finger1": float("nan")}}, "locked: 'finger1': expected a finite"),
+        ({"joints": ["j1", "j2", "j3"], "locked": {"finger1": "open"}}, "locked: 'finger1': expected a number"),
+    ]
+    for kwargs, match in bad:
+        with pytest.raises(ValueError, match=match):
+            RigidBodyModel.from_urdf(urdf, **kwargs)
+    with pytest.raises(ValueError, match=r"expected 3 joints, URDF .* has 5 \(j1, j2, j3, finger1, finger2\); "
+                                         r"name the model's joints with joints="):
+        RigidBodyModel.from_urdf(urdf, dof=3)
+
+    floating = write(tmp_path, "floating.urdf", arm_urdf(("revolute",) * 3).replace(
+        '<joint name="j1" type="revolute">', '<joint name="j1" type="floating">'))
+    with pytest.raises(ValueError, match=r"joints \['j1'\] have more than one position"):
+        RigidBodyModel.from_urdf(floating)
+
+
+def _log(urdf_text: str, n: int, seed: int) -> DynamicsData:
+    """Torques of the arm of ``urdf_text`` along smooth motions (segments of n rows at 20 Hz)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) / 20.0
+    w, ph = rng.uniform(0.5, 1.5, 3), rng.uniform(0, 6, 3)
+    q = 0.8 * np.sin(w * t[:, None] + ph)
+    qd = 0.8 * w * np.cos(w * t[:, None] + ph)
+    qdd = -0.8 * w**2 * np.sin(w * t[:, None] + ph)
+    ref = RigidBodyModel(pin.buildModelFromXML(urdf_text))
+    tau = ref.inverse_dynamics(q, qd, qdd) + 0.3 * qd + 0.01 * rng.standard_normal(q.shape)
+    return DynamicsData(q=q, qd=qd, qdd=qdd, tau=tau, t=t)
+
+
+def test_a_model_with_locked_joints_saves_and_loads(tmp_path: Path) -> None:
+    urdf = write(tmp_path, "gripper.urdf", arm_urdf(("continuous", "revolute", "revolute"), fingers="prismatic"))
+    data = _log(arm_urdf(("revolute",) * 3, fingers="fixed", at=(0.02, 0.02)), 60, seed=2)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rbd = load_nominal(urdf, joints=["j1", "j2", "j3"], locked={"finger1": 0.02, "finger2": 0.02})
+    model = make_model("sp-standard", 3, rbd, gp_config=GPFitConfig(n_restarts=1, seed=0))
+    model.fit(data)
+    model.save(tmp_path / "m.npz")
+    urdf.unlink()  # the file embeds the URDF and the locked joints
+    loaded = load_model(tmp_path / "m.npz")
+    assert loaded.rbd.locked == {"finger1": 0.02, "finger2": 0.02} and loaded.rbd.joint_names == ("j1", "j2", "j3")
+    q, qd, qdd = data.q[:10], data.qd[:10], data.qdd[:10]
+    np.testing.assert_allclose(loaded.predict(q, qd, qdd)[0], model.predict(q, qd, qdd)[0], rtol=1e-12, atol=1e-12)
+
+
+def test_fit_command_takes_joints_and_lock(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    urdf = write(tmp_path, "gripper.urdf", arm_urdf(("continuous", "revolute", "revolute"), fingers="prismatic"))
+    data = _log(arm_urdf(("revolute",) * 3, fingers="fixed", at=(0.04, 0.04)), 60, seed=3)
+    log = tmp_path / "train.csv"
+    with log.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["t", *(f"{g}{j}" for g in ("q", "qd", "qdd", "tau") for j in (1, 2, 3))])
+        w.writerows(np.column_stack([data.t, data.q, data.qd, data.qdd, data.tau]).tolist())
+    base = ["--data", str(log), "--urdf", str(urdf), "--model", "sp-standard", "--restarts", "1"]
+
+    assert fit_main([*base, "--out", str(tmp_path / "m0.npz")]) == 2
+    err = capsys.readouterr().err
+    assert "the URDF has 5 joints" in err and "the log" in err and "name the log's joints with --joints" in err
+
+    out = tmp_path / "m.npz"
+    assert fit_main([*base, "--out", str(out), "--joints", "j1,j2,j3", "--lock", "finger1=0.04,finger2=0.04"]) == 0
+    err = capsys.readouterr().err
+    assert "3 joints: j1, j2, j3; finger1 locked at 0.04; finger2 locked at 0.04" in err
+    assert load_model(out).rbd.locked == {"finger1": 0.04, "finger2": 0.04}
+
+    for extra, match in ((["--lock", "finger1:0.04"], "--lock: expected NAME=Q pairs"),  # argparse: exit 2
+                         (["--lock", "finger1=inf"], "--lock: expected NAME=Q pairs"),
+                         (["--joints", "j1,,j3"], "--joints: expected joint names")):
+        with pytest.raises(SystemExit) as exit_info:
+            fit_main([*base, "--out", str(tmp_path / "x.npz"), *extra])
+        assert exit_info.value.code == 2 and match in capsys.readouterr().err
+    assert fit_main([*base, "--out", str(tmp_path / "x.npz"), "--joints", "j3,j2,j1"]) == 2  # the library's check
+    assert "joints: list them in the URDF's order" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        fit_main(["--data", str(log), "--model", "np-standard", "--out", str(tmp_path / "x.npz"),
+                  "--joints", "j1,j2,j3"])
+    assert "--joints: chooses joints of the URDF; it needs --urdf" in capsys.readouterr().err
+    assert not (tmp_path / "x.npz").exists()
