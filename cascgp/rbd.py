@@ -58,10 +58,6 @@ SUPPORTED_SIDECAR_VERSIONS = (SIDECAR_FORMAT_VERSION,)
 SIDECAR_REQUIRED_FIELDS = ("armature", "torque_limits", "velocity_limits", "joint_names")
 
 
-#: What a dof mismatch with more joints in the URDF than expected suggests.
-_JOINTS_HINT = "; name the model's joints with joints= (the others are locked, at 0 unless locked= says)"
-
-
 def sidecar_path(urdf_path: str | os.PathLike) -> Path:
     """The JSON sidecar of a URDF: same path with the ``.json`` suffix."""
     return Path(urdf_path).with_suffix(".json")
@@ -85,8 +81,9 @@ class RigidBodyModel:
         dof: number of joints N (one position each: a continuous joint's is its angle).
         joint_names: names of the N joints, in URDF/Pinocchio order (the URDF's joints less the locked ones).
         locked: the URDF's joints that are not the model's, locked at a position (rad or m), ``{name: q}``;
-            empty when the model has every joint. ``joints=`` (the model's joints, in the URDF's order)
-            and ``locked=`` (positions of the others; default 0) choose them when the model is built.
+            empty when the model has every joint. ``joints=`` (the model's joints, in Pinocchio's order of
+            the URDF's joints; default: every joint not in ``locked=``) and ``locked=`` (positions of the
+            others; default 0) choose them when the model is built (:mod:`cascgp.rbd_joints`).
         armature: (N,) rotor inertia per joint (kg m^2), included in the inverse dynamics.
         gravity: (3,) gravity vector in the world frame (m/s^2).
         torque_limits, velocity_limits: (N,) or ``None`` (from the sidecar).
@@ -111,13 +108,11 @@ class RigidBodyModel:
         joints: Sequence[str] | None = None,
         locked: Mapping[str, float] | None = None,
     ) -> None:
-        model = angle_joints(model)
+        model = angle_joints(model)  # a copy: the caller's model is never changed
+        values: dict[str, float] = {}
         if joints is not None or locked:
-            keep, values = check_joint_selection(list(model.names)[1:], joints, locked)
-            values = {n: values.get(n, 0.0) for n in list(model.names)[1:] if n not in keep}
-            model = lock_joints(model, keep, values)
-        else:
-            values = {}
+            _, values = check_joint_selection(model, joints, locked)
+            model = lock_joints(model, values)
         if model.nv == 0:
             raise ValueError("model has no degrees of freedom")
         self.locked: dict[str, float] = values
@@ -157,8 +152,9 @@ class RigidBodyModel:
             armature: rotor inertia per joint, (N,) or a scalar; ``None`` keeps the URDF's (zero).
             gravity: (3,) world gravity; ``None`` keeps Pinocchio's default (0, 0, -9.81).
             dof: if given, the expected number of joints; a mismatch raises ``ValueError``.
-            joints: the model's joints (default: all the URDF's), in the URDF's order from the base.
-            locked: positions (rad or m) of joints not in ``joints``, ``{name: q}``; the others lock at 0.
+            joints: the model's joints, in Pinocchio's order of the URDF's joints (default: every joint not in
+                ``locked``).
+            locked: positions (rad or m) of the joints not in ``joints``, ``{name: q}``; default 0 for each.
         """
         path = Path(path)
         if not path.is_file():
@@ -170,9 +166,7 @@ class RigidBodyModel:
             raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}") from exc
         rbd = cls(model, armature=armature, gravity=gravity, source=str(path), urdf_text=text, joints=joints,
                   locked=locked)
-        if dof is not None and rbd.dof != dof:
-            raise ValueError(f"dof mismatch: expected {dof} joints, URDF {str(path)!r} has {rbd.dof} "
-                             f"({', '.join(rbd.joint_names)}){_JOINTS_HINT if rbd.dof > dof else ''}")
+        rbd._check_dof(dof, f"URDF {str(path)!r}")
         return rbd
 
     @classmethod
@@ -188,10 +182,22 @@ class RigidBodyModel:
         except Exception as exc:
             raise ValueError(f"urdf_text: cannot parse the URDF document: {exc}") from exc
         rbd = cls(model, urdf_text=text, **kwargs)
-        if dof is not None and rbd.dof != dof:
-            raise ValueError(f"urdf_text: dof mismatch: expected {dof} joints, the URDF has {rbd.dof} "
-                             f"({', '.join(rbd.joint_names)}){_JOINTS_HINT if rbd.dof > dof else ''}")
+        rbd._check_dof(dof, "urdf_text: the URDF")
         return rbd
+
+    def _check_dof(self, dof: int | None, what: str) -> None:
+        """``ValueError`` naming ``what`` and its joints unless the model has ``dof`` joints (or ``dof`` is None)."""
+        if dof is not None and self.dof != dof:
+            hint = ("; name the model's joints with joints= (the others are locked, at 0 unless locked= says)"
+                    if self.dof > dof else "")
+            raise ValueError(f"dof mismatch: expected {dof} joints, {what} has {self.dof} "
+                             f"({', '.join(self.joint_names)}){hint}")
+
+    def _with(self, **fields: Any) -> "RigidBodyModel":
+        """A model of the same (converted, locked) Pinocchio model and URDF with other constructor ``fields``."""
+        out = RigidBodyModel(self.pin_model, source=self.source, urdf_text=self.urdf_text, **fields)
+        out.locked = dict(self.locked)  # self.pin_model has them locked already
+        return out
 
     # ------------------------------------------------------------------ properties
     @property
@@ -327,10 +333,7 @@ def _without_sidecar(urdf_path: Path, js: Path, dof: int | None, joints: Sequenc
         f"torque limits {'from the URDF' if torque is not None else 'unknown (a joint has no positive effort)'}, "
         f"velocity limits {'from the URDF' if velocity is not None else 'unknown (a joint has no positive velocity)'}, "
         f"gravity {tuple(gravity.tolist())} m/s^2", UserWarning, stacklevel=3)
-    out = RigidBodyModel(model, armature=np.zeros(rbd.dof), torque_limits=torque, velocity_limits=velocity,
-                         meta=assumed, source=str(urdf_path), urdf_text=rbd.urdf_text)
-    out.locked = rbd.locked  # rbd.pin_model has them locked already
-    return out
+    return rbd._with(armature=np.zeros(rbd.dof), torque_limits=torque, velocity_limits=velocity, meta=assumed)
 
 
 def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints: Sequence[str] | None = None,
@@ -362,15 +365,16 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints
     * ``model.meta`` records these assumptions (``meta["sidecar"]`` is ``None``).
 
     A manufacturer's URDF often has joints that a log does not (a gripper's fingers): ``joints`` names the
-    model's joints, in the URDF's order from the base, and the others are locked, at 0 or at the positions
-    ``locked`` gives; a sidecar's fields are then those of the model's joints. Continuous joints are revolute
-    joints whose position is the angle (:mod:`cascgp.rbd_joints`).
+    model's joints, in Pinocchio's order of the URDF's joints (depth first from the base), and the others are
+    locked, at 0 (the URDF's zero) or at the positions ``locked`` gives; a sidecar then lists the model's
+    joints only. Continuous joints are revolute joints whose position is the angle in rad, zero at the URDF's
+    zero, in any range (:mod:`cascgp.rbd_joints`).
 
     Args:
         urdf_path: the URDF file.
         dof: if given, the expected number of joints.
-        joints: the model's joints (default: every joint of the URDF).
-        locked: positions (rad or m) of joints not in ``joints``, ``{name: q}``.
+        joints: the model's joints (default: every joint not in ``locked``).
+        locked: positions (rad or m) of the joints not in ``joints``, ``{name: q}``; default 0 for each.
 
     Raises:
         FileNotFoundError: the URDF is missing.
@@ -405,17 +409,7 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints
             f"sidecar {str(js)!r}: joint_names {meta['joint_names']} do not match the URDF's {list(rbd.joint_names)}"
         )
     try:
-        out = RigidBodyModel(
-            rbd.pin_model,
-            armature=meta["armature"],
-            gravity=meta.get("gravity"),
-            torque_limits=meta["torque_limits"],
-            velocity_limits=meta["velocity_limits"],
-            meta=meta,
-            source=str(urdf_path),
-            urdf_text=rbd.urdf_text,
-        )
+        return rbd._with(armature=meta["armature"], gravity=meta.get("gravity"), torque_limits=meta["torque_limits"],
+                         velocity_limits=meta["velocity_limits"], meta=meta)
     except ValueError as exc:
         raise ValueError(f"sidecar {str(js)!r}: {exc}") from exc
-    out.locked = rbd.locked  # rbd.pin_model has them locked already
-    return out

@@ -11,9 +11,10 @@ Pinocchio model before :class:`cascgp.rbd.RigidBodyModel` uses it:
   position is then its angle, in any range (multi-turn angles included). The Kinova Jaco 2's own URDF has
   three such joints.
 * **Joints the log does not have.** A gripper's fingers, for instance. :func:`lock_joints` keeps the joints
-  named (the log's, in the URDF's order from the base) and locks every other one at a given position
-  (default 0), with Pinocchio's ``buildReducedModel``: the locked joint's bodies become rigid parts of their
-  parent body, inertia included.
+  named (the log's, in Pinocchio's order of the URDF's joints: depth first from the base) and locks every
+  other one at a given position (default 0, the URDF's zero), with Pinocchio's ``buildReducedModel``: the
+  locked joint's bodies become rigid parts of their parent body, inertia included. Pinocchio reads a URDF
+  ``<mimic>`` joint as a joint of its own, so a locked mimic joint needs its own position too.
 
 Spherical, planar and floating joints are refused: the log format gives each joint one position.
 """
@@ -28,6 +29,9 @@ import pinocchio as pin
 
 __all__ = ["angle_joints", "lock_joints", "check_joint_selection"]
 
+#: Per-dof vectors of a ``pinocchio.Model`` that :func:`angle_joints` copies as they are (those present).
+_PER_VELOCITY = ("armature", "damping", "lowerDryFrictionLimit", "upperDryFrictionLimit", "lowerEffortLimit",
+                 "upperEffortLimit", "lowerVelocityLimit", "upperVelocityLimit")
 # Pinocchio's unbounded revolute joints and the bounded joint on the same axis.
 _ANGLE_JOINT = {"JointModelRUBX": pin.JointModelRX, "JointModelRUBY": pin.JointModelRY,
                 "JointModelRUBZ": pin.JointModelRZ}
@@ -47,11 +51,17 @@ def _with_angle(jm: Any) -> Any | None:
 
 
 def angle_joints(model: pin.Model) -> pin.Model:
-    """``model`` with every continuous (unbounded revolute) joint made a revolute joint whose position is its angle.
+    r"""A copy of ``model`` in which every continuous (unbounded revolute) joint is a revolute joint in its angle.
 
-    Returns ``model`` itself when it has none. The joints keep their order, names, placements, bodies, limits
-    (a continuous joint's position limits become :math:`\\pm\\infty`), armature and frames, so the inverse
-    dynamics at angle :math:`q` equals Pinocchio's at :math:`(\\cos q, \\sin q)`.
+    The joints keep their order, names, placements, bodies, limits (a continuous joint's position limits
+    become :math:`\pm\infty`), armature, friction and damping, and the frames are copied, so the inverse
+    dynamics at angle :math:`q` equals Pinocchio's at :math:`(\cos q, \sin q)`. ``model`` is not changed.
+
+    Args:
+        model: a fixed-base Pinocchio model, e.g. from ``pinocchio.buildModelFromUrdf``.
+
+    Returns:
+        A new model with one position per joint (``nq == nv``).
 
     Raises:
         ValueError: a joint has more than one position (spherical, planar, floating); names the joints.
@@ -63,74 +73,103 @@ def angle_joints(model: pin.Model) -> pin.Model:
         raise ValueError(f"joints {other} have more than one position (spherical, planar or floating joints); "
                          "only revolute, continuous and prismatic joints are supported")
     if all(jm is None for jm in new_joints):
-        return model
+        return pin.Model(model)
     out = pin.Model()
     out.name = model.name
     out.gravity = model.gravity
     for j in range(1, model.njoints):
         old, jm = model.joints[j], new_joints[j - 1]
-        v, nv = model.idx_vs[j], old.nv
         if jm is None:
             q, nq = model.idx_qs[j], old.nq
             lo, hi = model.lowerPositionLimit[q:q + nq], model.upperPositionLimit[q:q + nq]
             jm = old
         else:
             lo, hi = np.full(1, -np.inf), np.full(1, np.inf)
+        v, nv = model.idx_vs[j], old.nv
         jid = out.addJoint(model.parents[j], jm, model.jointPlacements[j], model.names[j],
                            np.array(model.effortLimit[v:v + nv]), np.array(model.velocityLimit[v:v + nv]),
                            np.array(lo), np.array(hi))
         out.appendBodyToJoint(jid, model.inertias[j], pin.SE3.Identity())
     for f in list(model.frames)[1:]:  # frame 0 is the universe, which a new model already has
         out.addFrame(pin.Frame(f.name, f.parentJoint, f.parentFrame, f.placement, f.type, f.inertia), False)
-    out.armature = np.array(model.armature)
+    for name in _PER_VELOCITY:  # the per-dof vectors that addJoint's arguments do not set (nv is unchanged)
+        if hasattr(model, name):
+            setattr(out, name, np.array(getattr(model, name)))
     return out
 
 
-def check_joint_selection(all_names: Sequence[str], joints: Sequence[str] | None,
+def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
                           locked: Mapping[str, float] | None) -> tuple[list[str], dict[str, float]]:
-    """``(joints, locked)`` checked against the URDF's joint names ``all_names``; ``ValueError`` naming the field.
+    """The model's joints and the locked joints' positions, checked against ``model``'s joints.
 
-    ``joints`` (default: all) must be distinct names of ``all_names`` in their order (from the base);
-    ``locked`` may give a finite position (rad or m) of joints not in ``joints``; the others lock at 0.
+    Args:
+        model: a model with one position per joint (see :func:`angle_joints`).
+        joints: the joints to keep, distinct names of ``model``'s joints in its order (depth first from the
+            base); default: every joint not in ``locked``.
+        locked: positions (rad or m, the URDF's zero at 0) of joints not kept; default 0 for each.
+
+    Returns:
+        ``(joints, locked)``: the kept joints, and every other joint's position.
+
+    Raises:
+        ValueError: naming ``joints`` or ``locked`` and what was expected (a name not in the URDF, another
+            order, a repeated name, a position that is not a finite number or is outside the joint's limits).
     """
-    all_names = list(all_names)
-    keep = all_names if joints is None else [str(n) for n in joints]
-    unknown = [n for n in keep if n not in all_names]
+    names = list(model.names)[1:]
+    if isinstance(joints, (str, bytes)):
+        raise ValueError(f"joints: expected a list of joint names, got the string {joints!r}")
+    if locked is not None and not isinstance(locked, Mapping):
+        raise ValueError(f"locked: expected a mapping of joint names to positions, got {type(locked).__name__}")
+    given = dict(locked or {})
+    keep = [n for n in names if n not in given] if joints is None else [str(n) for n in joints]
+    unknown = [n for n in [*keep, *given] if n not in names]
     if unknown:
-        raise ValueError(f"joints: {unknown} are not joints of the URDF; its joints are {all_names}")
+        field = "joints" if unknown[0] in keep else "locked"
+        raise ValueError(f"{field}: {unknown} are not joints of the URDF; its joints are {names}")
     if len(set(keep)) != len(keep) or not keep:
         raise ValueError(f"joints: expected distinct joint names (at least one), got {keep}")
-    ordered = [n for n in all_names if n in keep]
+    ordered = [n for n in names if n in keep]
     if ordered != keep:
-        raise ValueError(f"joints: list them in the URDF's order from the base, {ordered}; got {keep}")
+        raise ValueError(f"joints: list them in the URDF model's order (depth first from the base), {ordered}; "
+                         f"got {keep}")
     values: dict[str, float] = {}
-    for name, value in dict(locked or {}).items():
-        if name not in all_names:
-            raise ValueError(f"locked: {name!r} is not a joint of the URDF; its joints are {all_names}")
+    for name in names:
         if name in keep:
-            raise ValueError(f"locked: {name!r} is one of the model's joints (joints= names them, default all); "
-                             "only the other joints are locked")
+            if name in given:
+                raise ValueError(f"locked: {name!r} is one of the model's joints (joints= names them); only the "
+                                 "other joints are locked")
+            continue
+        value = given.get(name, 0.0)
         try:
             x = float(value)
         except (TypeError, ValueError):
             raise ValueError(f"locked: {name!r}: expected a number (rad or m), got {value!r}") from None
-        if not np.isfinite(x):
-            raise ValueError(f"locked: {name!r}: expected a finite position, got {value!r}")
+        j = model.getJointId(name)
+        lo, hi = model.lowerPositionLimit[model.idx_qs[j]], model.upperPositionLimit[model.idx_qs[j]]
+        if not np.isfinite(x) or not lo <= x <= hi:
+            where = "" if name in given else " (the default; give its position in locked=)"
+            raise ValueError(f"locked: {name!r}: expected a finite position within the joint's limits "
+                             f"[{lo:g}, {hi:g}], got {value!r}{where}")
         values[name] = x
     return keep, values
 
 
-def lock_joints(model: pin.Model, joints: Sequence[str], locked: Mapping[str, float]) -> pin.Model:
-    """``model`` with only ``joints`` movable; every other joint fixed at ``locked.get(name, 0.0)``.
+def lock_joints(model: pin.Model, locked: Mapping[str, float]) -> pin.Model:
+    """``model`` with the joints of ``locked`` fixed at their positions; ``model`` itself when ``locked`` is empty.
 
-    ``model`` must have one position per joint (see :func:`angle_joints`); the arguments as checked by
-    :func:`check_joint_selection`. Returns ``model`` itself when every joint is kept.
+    Args:
+        model: a model with one position per joint (see :func:`angle_joints`).
+        locked: ``{name: position}`` as returned by :func:`check_joint_selection`.
+
+    Returns:
+        Pinocchio's ``buildReducedModel`` of ``model`` (the locked joints' bodies welded to their parents).
     """
-    names = list(model.names)[1:]
-    drop = [j for j, n in enumerate(names, start=1) if n not in joints]
-    if not drop:
+    if not locked:
         return model
     q_ref = pin.neutral(model)
-    for j in drop:
-        q_ref[model.idx_qs[j]] = locked.get(names[j - 1], 0.0)
-    return pin.buildReducedModel(model, drop, q_ref)
+    drop = []
+    for name, x in locked.items():
+        j = model.getJointId(name)
+        q_ref[model.idx_qs[j]] = x
+        drop.append(j)
+    return pin.buildReducedModel(model, sorted(drop), q_ref)

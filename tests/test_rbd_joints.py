@@ -19,6 +19,7 @@ from cascgp.data import DynamicsData
 from cascgp.gp import GPFitConfig
 from cascgp.models import load_model, make_model
 from cascgp.rbd import RigidBodyModel, load_nominal
+from cascgp.rbd_joints import angle_joints
 from cascgp_experiments.cli.model_commands import fit_main
 
 _INERTIAL = ('<inertial><origin xyz="{c}"/><mass value="{m}"/>'
@@ -29,11 +30,13 @@ _ARM = [("j1", "base", "l1", "0 0 0.1", "0 0 0", "0 0 1", 1.2, "0 0.01 0.1"),
         ("j3", "l2", "l3", "0.3 0 0", "0 0 0.3", "1 0 0", 0.6, "0.05 0.01 0")]
 
 
-def arm_urdf(types: tuple[str, str, str], fingers: str | None = None, at: tuple[float, float] = (0.0, 0.0)) -> str:
-    """Three joints of ``types``; ``fingers``: None, ``"prismatic"`` (two finger joints) or ``"fixed"`` (the
-    fingers welded at positions ``at``, the reference of locking them there)."""
+def arm_urdf(types: tuple[str, str, str], fingers: str | None = None, at: tuple[float, float] = (0.0, 0.0),
+             axes: tuple[str, str, str] | None = None) -> str:
+    """Three joints of ``types`` (and ``axes``, default ``_ARM``'s); ``fingers``: None, ``"prismatic"`` (two
+    finger joints) or ``"fixed"`` (the fingers welded at positions ``at``, the reference of locking them there)."""
     parts = ['<?xml version="1.0"?>', '<robot name="arm">', '<link name="base"/>']
-    for (name, parent, child, xyz, rpy, axis, m, c), kind in zip(_ARM, types):
+    arm = _ARM if axes is None else [(*j[:5], a, *j[6:]) for j, a in zip(_ARM, axes)]
+    for (name, parent, child, xyz, rpy, axis, m, c), kind in zip(arm, types):
         limit = '<limit effort="30" velocity="2"/>' if kind == "continuous" else \
             '<limit effort="30" velocity="2" lower="-3" upper="3"/>'
         parts += [f'<link name="{child}">{_INERTIAL.format(c=c, m=m, i=0.01 * m, i2=0.02 * m)}</link>',
@@ -64,9 +67,10 @@ def states(n: int, seed: int, scale: float = 3.0) -> tuple[np.ndarray, np.ndarra
     return rng.uniform(-scale, scale, (n, 3)), rng.uniform(-2, 2, (n, 3)), rng.uniform(-5, 5, (n, 3))
 
 
-def test_continuous_joints_are_revolute_joints_in_their_angle(tmp_path: Path) -> None:
-    cont = write(tmp_path, "cont.urdf", arm_urdf(("continuous", "continuous", "revolute")))
-    ref = RigidBodyModel.from_urdf(write(tmp_path, "rev.urdf", arm_urdf(("revolute",) * 3)))
+@pytest.mark.parametrize("axes", [None, ("0 0 -1", "0 -1.2 -1.6", "-1 -1 -1")])  # signs, unnormalised axes
+def test_continuous_joints_are_revolute_joints_in_their_angle(tmp_path: Path, axes: tuple[str, ...] | None) -> None:
+    cont = write(tmp_path, "cont.urdf", arm_urdf(("continuous", "continuous", "revolute"), axes=axes))
+    ref = RigidBodyModel.from_urdf(write(tmp_path, "rev.urdf", arm_urdf(("revolute",) * 3, axes=axes)))
     rbd = RigidBodyModel.from_urdf(cont)
     assert rbd.dof == 3 and rbd.joint_names == ("j1", "j2", "j3") and rbd.locked == {}
     q, qd, qdd = states(20, seed=0, scale=7.0)  # beyond +-pi: angles of any range
@@ -91,6 +95,28 @@ def test_continuous_joints_are_revolute_joints_in_their_angle(tmp_path: Path) ->
     np.testing.assert_array_equal(rbd.pin_model.effortLimit, [30.0, 30.0, 30.0])
     np.testing.assert_array_equal(rbd.pin_model.lowerPositionLimit, [-np.inf, -np.inf, -3.0])
     assert [f.name for f in rbd.pin_model.frames] == [f.name for f in native.frames]
+    for f, g in zip(rbd.pin_model.frames, native.frames):
+        assert (f.parentJoint, f.type) == (g.parentJoint, g.type) and f.placement.isApprox(g.placement, 1e-15)
+
+
+def test_angle_joints_keeps_the_model_and_leaves_the_callers(tmp_path: Path) -> None:
+    native = pin.buildModelFromUrdf(str(write(tmp_path, "c.urdf", arm_urdf(("continuous", "revolute", "revolute")))))
+    native.armature = np.array([0.1, 0.2, 0.3])
+    native.damping = np.array([0.4, 0.5, 0.6])
+    native.upperDryFrictionLimit = np.array([0.7, 0.8, 0.9])
+    out = angle_joints(native)
+    assert out.nq == out.nv == 3 and native.nq == 4
+    for name in ("armature", "damping", "upperDryFrictionLimit", "effortLimit", "velocityLimit"):
+        np.testing.assert_array_equal(getattr(out, name), getattr(native, name), err_msg=name)
+    np.testing.assert_array_equal(out.gravity.linear, native.gravity.linear)
+    # a rejected construction changes nothing of the caller's model, whatever its joints
+    for model in (native, pin.buildModelFromUrdf(str(write(tmp_path, "r.urdf", arm_urdf(("revolute",) * 3))))):
+        before = np.array(model.armature)
+        with pytest.raises(ValueError, match=r"gravity must have shape \(3,\)"):
+            RigidBodyModel(model, armature=[1.0, 2.0, 3.0], gravity=[1.0, 2.0])
+        np.testing.assert_array_equal(model.armature, before)
+        assert RigidBodyModel(model, armature=[1.0, 2.0, 3.0]).pin_model is not model
+        np.testing.assert_array_equal(model.armature, before)
 
 
 def test_locked_joints_are_welded_at_their_positions(tmp_path: Path) -> None:
@@ -108,17 +134,40 @@ def test_locked_joints_are_welded_at_their_positions(tmp_path: Path) -> None:
                                    rtol=1e-12, atol=1e-12)
         np.testing.assert_array_equal(rbd.torque_limits, [30.0] * 3)  # the kept joints' <limit>s
         assert "locked={'finger1'" in repr(rbd)
+    with pytest.warns(UserWarning, match="no sidecar"):  # locked= alone: the model's joints are the others
+        alone = load_nominal(urdf, locked={"finger1": 0.03, "finger2": 0.01})
+    assert alone.joint_names == ("j1", "j2", "j3")
+    np.testing.assert_array_equal(alone.inverse_dynamics(q, qd, qdd), rbd.inverse_dynamics(q, qd, qdd))
+
+
+def test_a_joint_locked_mid_chain_is_held_still(tmp_path: Path) -> None:
+    """Locking j2 at 0.4 rad: the other joints' torques are the full model's with j2 at 0.4, at rest."""
+    urdf = write(tmp_path, "arm.urdf", arm_urdf(("continuous", "revolute", "revolute")))
+    full = RigidBodyModel.from_urdf(urdf)
+    rbd = RigidBodyModel.from_urdf(urdf, joints=["j1", "j3"], locked={"j2": 0.4})
+    assert rbd.joint_names == ("j1", "j3") and rbd.locked == {"j2": 0.4}
+    q, qd, qdd = states(10, seed=4)
+    ins = np.column_stack
+    ref = full.inverse_dynamics(ins([q[:, 0], np.full(10, 0.4), q[:, 2]]), ins([qd[:, 0], np.zeros(10), qd[:, 2]]),
+                                ins([qdd[:, 0], np.zeros(10), qdd[:, 2]]))
+    np.testing.assert_allclose(rbd.inverse_dynamics(q[:, [0, 2]], qd[:, [0, 2]], qdd[:, [0, 2]]), ref[:, [0, 2]],
+                               rtol=1e-12, atol=1e-12)
 
 
 def test_joint_selection_errors(tmp_path: Path) -> None:
     urdf = write(tmp_path, "gripper.urdf", arm_urdf(("revolute",) * 3, fingers="prismatic"))
     bad = [
         ({"joints": ["j1", "j2", "nope"]}, r"joints: \['nope'\] are not joints of the URDF"),
-        ({"joints": ["j2", "j1", "j3"]}, r"in the URDF's order from the base, \['j1', 'j2', 'j3'\]"),
+        ({"joints": ["j2", "j1", "j3"]}, r"in the URDF model's order \(depth first from the base\), "
+                                         r"\['j1', 'j2', 'j3'\]; got \['j2', 'j1', 'j3'\]"),
+        ({"joints": "j1"}, "joints: expected a list of joint names, got the string 'j1'"),
+        ({"joints": ["j1", "j2"], "locked": {"j3": 5.0}}, r"locked: 'j3': expected a finite position within the "
+                                                         r"joint's limits \[-3, 3\], got 5.0"),
+        ({"locked": [("finger1", 0.0)]}, "locked: expected a mapping"),
         ({"joints": ["j1", "j1"]}, "distinct joint names"),
         ({"joints": []}, "distinct joint names"),
         ({"joints": ["j1", "j2", "j3"], "locked": {"j3": 0.1}}, "locked: 'j3' is one of the model's joints"),
-        ({"joints": ["j1", "j2", "j3"], "locked": {"hand": 0.1}}, "locked: 'hand' is not a joint of the URDF"),
+        ({"joints": ["j1", "j2", "j3"], "locked": {"hand": 0.1}}, r"locked: \['hand'\] are not joints of the URDF"),
         ({"joints": ["j1", "j2", "j3"], "locked": {"finger1": float("nan")}}, "locked: 'finger1': expected a finite"),
         ({"joints": ["j1", "j2", "j3"], "locked": {"finger1": "open"}}, "locked: 'finger1': expected a number"),
     ]
@@ -163,6 +212,12 @@ def test_a_model_with_locked_joints_saves_and_loads(tmp_path: Path) -> None:
     q, qd, qdd = data.q[:10], data.qd[:10], data.qdd[:10]
     np.testing.assert_allclose(loaded.predict(q, qd, qdd)[0], model.predict(q, qd, qdd)[0], rtol=1e-12, atol=1e-12)
 
+    z = dict(np.load(tmp_path / "m.npz"))
+    for damaged, match in (("{", "rbd/joints_json: not valid JSON"), ("[]", "rbd/joints_json: expected an object")):
+        np.savez(tmp_path / "bad.npz", **{**z, "rbd/joints_json": np.array(damaged)})
+        with pytest.raises(ValueError, match=match):
+            load_model(tmp_path / "bad.npz")
+
 
 def test_fit_command_takes_joints_and_lock(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     urdf = write(tmp_path, "gripper.urdf", arm_urdf(("continuous", "revolute", "revolute"), fingers="prismatic"))
@@ -186,12 +241,15 @@ def test_fit_command_takes_joints_and_lock(tmp_path: Path, capsys: pytest.Captur
 
     for extra, match in ((["--lock", "finger1:0.04"], "--lock: expected NAME=Q pairs"),  # argparse: exit 2
                          (["--lock", "finger1=inf"], "--lock: expected NAME=Q pairs"),
+                         (["--lock", "finger1=0.01,finger1=0.02"], "--lock: 'finger1' is given twice"),
                          (["--joints", "j1,,j3"], "--joints: expected joint names")):
         with pytest.raises(SystemExit) as exit_info:
             fit_main([*base, "--out", str(tmp_path / "x.npz"), *extra])
         assert exit_info.value.code == 2 and match in capsys.readouterr().err
     assert fit_main([*base, "--out", str(tmp_path / "x.npz"), "--joints", "j3,j2,j1"]) == 2  # the library's check
-    assert "joints: list them in the URDF's order" in capsys.readouterr().err
+    assert "--joints: list them in the URDF model's order" in capsys.readouterr().err
+    assert fit_main([*base, "--out", str(tmp_path / "x.npz"), "--joints", "j1,j2,j3", "--lock", "j3=0"]) == 2
+    assert "--lock: 'j3' is one of the model's joints (--joints names them)" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         fit_main(["--data", str(log), "--model", "np-standard", "--out", str(tmp_path / "x.npz"),
                   "--joints", "j1,j2,j3"])

@@ -108,7 +108,7 @@ def _rbd_from_file(z: dict[str, np.ndarray], path: str | os.PathLike, dof: int) 
         if hashlib.sha256(text.encode("utf-8")).hexdigest() != str(z["rbd/sha256"]):
             raise ValueError("rbd/urdf: the embedded URDF does not match its SHA-256 (corrupt file)")
         limits = json.loads(str(z["rbd/limits_json"]))
-        sel = json.loads(str(z["rbd/joints_json"])) if "rbd/joints_json" in z else {}
+        sel = _joints_from_file(z)
         return RigidBodyModel.from_urdf_text(
             text, dof=dof, armature=z["rbd/armature"], gravity=z["rbd/gravity"],
             torque_limits=limits.get("torque_limits"), velocity_limits=limits.get("velocity_limits"),
@@ -119,6 +119,19 @@ def _rbd_from_file(z: dict[str, np.ndarray], path: str | os.PathLike, dof: int) 
             from exc
     except (ValueError, TypeError, AttributeError) as exc:
         raise ValueError(f"{path}: {exc}") from exc
+
+
+def _joints_from_file(z: dict[str, np.ndarray]) -> dict[str, Any]:
+    """``rbd/joints_json``'s ``{"joints": [...], "locked": {...}}`` ({} when absent); ``ValueError`` naming it."""
+    if "rbd/joints_json" not in z:
+        return {}
+    try:
+        sel = json.loads(str(z["rbd/joints_json"]))
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"rbd/joints_json: not valid JSON ({exc})") from None
+    if not isinstance(sel, dict) or not isinstance(sel.get("joints"), list) or not isinstance(sel.get("locked"), dict):
+        raise ValueError("rbd/joints_json: expected an object with a 'joints' list and a 'locked' object")
+    return sel
 
 
 def _rbd_from_recorded_path(cfg: dict[str, Any], path: str | os.PathLike, name: str, dof: int) -> Any:

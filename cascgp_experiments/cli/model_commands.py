@@ -115,11 +115,13 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
     p.add_argument("--urdf", type=Path, default=None,
                    help="the robot's URDF (sp-* models only; a sidecar JSON next to it is optional)")
     p.add_argument("--joints", default=None, metavar="NAME,...",
-                   help="the URDF joints that are the log's q1..qN, in the URDF's order from the base (default: "
-                        "all; the others, a gripper's fingers say, are locked). Continuous joints are revolute "
-                        "joints whose q is the angle")
+                   help="the URDF joints that are the log's q1..qN, in the order Pinocchio lists the URDF's "
+                        "joints (depth first from the base; an error prints it). Default: every joint not in "
+                        "--lock. The others (a gripper's fingers, say) are locked. A continuous joint's q is its "
+                        "angle (rad, any range)")
     p.add_argument("--lock", default=None, metavar="NAME=Q,...",
-                   help="positions (rad or m) at which joints not in --joints are locked (default 0)")
+                   help="positions (rad or m; 0 is the URDF's zero) at which the joints not in --joints are locked "
+                        "(default 0 each)")
     p.add_argument("--out", type=Path, required=True, help="model file to write (.npz; replaced atomically)")
     p.add_argument("--restarts", type=int, default=None,
                    help=f"optimiser starts per joint's GP (default: {GPFitConfig().n_restarts}, the library's "
@@ -176,8 +178,20 @@ def _positions(p: argparse.ArgumentParser, text: str | None) -> dict[str, float]
         if not eq or not name.strip() or not np.isfinite(q):
             p.error(f"--lock: expected NAME=Q pairs (Q a finite position in rad or m) separated by commas, "
                     f"got {item!r}")
+        if name.strip() in out:
+            p.error(f"--lock: {name.strip()!r} is given twice")
         out[name.strip()] = q
     return out
+
+
+def _as_options(msg: str) -> str:
+    """A library error about its arguments ``joints=`` / ``locked=`` in the command's terms (``--joints``,
+    ``--lock``)."""
+    for arg, opt in (("joints", "--joints"), ("locked", "--lock")):
+        if msg.startswith(f"{arg}: "):
+            msg = opt + msg[len(arg):]
+        msg = msg.replace(f"{arg}=", opt)
+    return msg
 
 
 def _fit(a: argparse.Namespace, prog: str) -> int:
@@ -189,7 +203,10 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
     _describe(prog, data, a.data)
     rbd = None
     if a.urdf is not None:
-        rbd = load_nominal(a.urdf, joints=a.joints, locked=a.lock)
+        try:
+            rbd = load_nominal(a.urdf, joints=a.joints, locked=a.lock)
+        except ValueError as exc:
+            raise _Fail(_as_options(str(exc))) from None
         if rbd.dof != data.dof:
             more = "; name the log's joints with --joints (the others are locked)" if rbd.dof > data.dof else ""
             raise _Fail(f"{a.urdf}: the URDF has {rbd.dof} joints ({', '.join(rbd.joint_names)}), the log "
