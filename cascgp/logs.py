@@ -19,7 +19,10 @@ column                 needed    meaning
 
 N is read from the header: every group present holds exactly the columns ``1..N`` (``q`` defines N), columns
 may come in any order, names are case-sensitive. Any other column is an error (a misspelt ``qd_1`` would
-otherwise be dropped silently); remove unneeded columns first. Every cell is a finite decimal number.
+otherwise be dropped silently); remove unneeded columns first. Every cell is a finite decimal number. Within a
+segment no joint position changes by more than :math:`\pi` from one row to the next: no arm moves that far in
+one sample, and a continuous joint's angle wrapped to :math:`[-\pi, \pi)` or :math:`[0, 2\pi)` would give a
+discontinuous GP input and spikes in a computed velocity (unwrap it, e.g. :func:`numpy.unwrap`).
 
 Missing derivatives
 -------------------
@@ -190,6 +193,7 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
                              f"segment; t = {float(t[r])!r} does not come after t = {float(t[r - 1])!r} "
                              f"(row {rownos[r - 1]})")
     arr = {g: (None if cols[g] is None else a[:, cols[g]]) for g in _GROUPS}
+    _check_no_wrap(path, arr["q"], seg, rownos)
     meta: dict = {"source": str(path), "format": "cascgp log CSV", "qd_source": "column", "qdd_source": "column",
                   "has_tau": arr["tau"] is not None, "derivative_filter": None}
     if arr["qd"] is None or arr["qdd"] is None:
@@ -212,6 +216,20 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
         return DynamicsData(q=q, qd=qd, qdd=qdd, tau=tau, t=t, segment=seg, meta=meta)
     except (ValueError, TypeError) as exc:  # not expected after the checks above; still name the file
         raise LogFormatError(f"{path}: {exc}") from exc
+
+
+def _check_no_wrap(path: Path, q: np.ndarray | None, seg: np.ndarray, rownos: list[int]) -> None:
+    """``LogFormatError`` at the first step of more than pi in a joint position within a segment (a wrapped angle)."""
+    if q is None or len(q) < 2:
+        return
+    step = np.abs(np.diff(q, axis=0))
+    jump = np.argwhere((step > math.pi) & (np.diff(seg) == 0)[:, None])
+    if jump.size:
+        r, j = int(jump[0, 0]) + 1, int(jump[0, 1])
+        change = float(q[r, j] - q[r - 1, j])
+        raise LogFormatError(f"{path}: row {rownos[r]}, column 'q{j + 1}': changes by {change:.4g} from row "
+                             f"{rownos[r - 1]}, more than pi in one sample; a wrapped angle of a continuous joint? "
+                             "Unwrap it (numpy.unwrap) or start a new segment there")
 
 
 def _check_uniform(path: Path, t: np.ndarray, seg: np.ndarray, smoothing: SavGol | None) -> None:

@@ -114,7 +114,8 @@ class RigidBodyModel:
             _, values = check_joint_selection(model, joints, locked)
             model = lock_joints(model, values)
         if model.nv == 0:
-            raise ValueError("model has no degrees of freedom")
+            raise ValueError(f"{'the model' if source is None else repr(source)}: no degrees of freedom (no "
+                             "revolute, continuous or prismatic joint)")
         self.locked: dict[str, float] = values
         self.pin_model = model
         self.dof: int = int(model.nv)

@@ -136,6 +136,7 @@ CASES = {
     "t goes back": (HEAD + "\n0,1,2,3,4\n0.2,1,2,3,4\n\n0.1,1,2,3,4\n", 5, "t", "does not come after t = 0.2 (row 3)"),
     "segment not integer": ("t,segment,q1,tau1\n0,0.5,1,2\n", 2, "segment", "integer"),
     "segment goes back": ("t,segment,q1,tau1\n0,1,1,2\n0.1,0,1,2\n", 3, "segment", "non-decreasing"),
+    "wrapped angle": (HEAD + "\n0,3.1,2,3,4\n0.1,-3.1,2,3,4\n", 3, "q1", "changes by -6.2 from row 2, more than pi"),
     "empty file": ("", 1, None, "empty file"),
     "blank file": ("\n\n", 1, None, "empty file"),
     "no data rows": (HEAD + "\n", 2, None, "no data rows"),
@@ -154,6 +155,21 @@ def test_errors_name_file_row_and_column(tmp_path: Path, case: str) -> None:
     assert column is None or f"column '{column}'" in msg, msg
     assert what in msg, msg
     assert isinstance(err.value, ValueError)
+
+
+def test_a_jump_across_segments_or_unwrapped_is_accepted(tmp_path: Path) -> None:
+    """The wrap check is per segment, and an unwrapped continuous angle passes it."""
+    path = tmp_path / "log.csv"
+    path.write_text("t,segment,q1,tau1\n0,0,3.1,1\n0.1,1,-3.1,1\n")
+    assert read_log(path).n_samples == 2
+    t = np.arange(0.0, 2.0, 0.01)
+    angle = np.unwrap(np.angle(np.exp(1j * 8.0 * t)))  # 16 rad in 2 s, past +pi several times
+    np.savetxt(path, np.column_stack([t, angle, np.zeros_like(t)]), delimiter=",", header="t,q1,tau1", comments="")
+    np.testing.assert_allclose(read_log(path).qd[5:-5, 0], 8.0, rtol=1e-6)
+    wrapped = np.angle(np.exp(1j * angle))
+    np.savetxt(path, np.column_stack([t, wrapped, np.zeros_like(t)]), delimiter=",", header="t,q1,tau1", comments="")
+    with pytest.raises(LogFormatError, match="a wrapped angle of a continuous joint"):
+        read_log(path)
 
 
 def test_segments_reset_time(tmp_path: Path) -> None:

@@ -182,6 +182,10 @@ def test_joint_selection_errors(tmp_path: Path) -> None:
         '<joint name="j1" type="revolute">', '<joint name="j1" type="floating">'))
     with pytest.raises(ValueError, match=r"joints \['j1'\] have more than one position"):
         RigidBodyModel.from_urdf(floating)
+    welded = write(tmp_path, "welded.urdf", '<robot name="w"><link name="a"/><link name="b"/><joint name="f" '
+                   'type="fixed"><parent link="a"/><child link="b"/></joint></robot>')
+    with pytest.raises(ValueError, match=r"welded\.urdf': no degrees of freedom \(no revolute, continuous or"):
+        RigidBodyModel.from_urdf(welded)
 
 
 def _log(urdf_text: str, n: int, seed: int) -> DynamicsData:
