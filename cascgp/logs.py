@@ -19,10 +19,11 @@ column                 needed    meaning
 
 N is read from the header: every group present holds exactly the columns ``1..N`` (``q`` defines N), columns
 may come in any order, names are case-sensitive. Any other column is an error (a misspelt ``qd_1`` would
-otherwise be dropped silently); remove unneeded columns first. Every cell is a finite decimal number. Within a
-segment no joint position changes by more than :math:`\pi` from one row to the next: no arm moves that far in
-one sample, and a continuous joint's angle wrapped to :math:`[-\pi, \pi)` or :math:`[0, 2\pi)` would give a
-discontinuous GP input and spikes in a computed velocity (unwrap it, e.g. :func:`numpy.unwrap`).
+otherwise be dropped silently); remove unneeded columns first. Every cell is a finite decimal number. In a log
+without velocity columns (whose velocities are computed from ``q``) no joint position changes by more than
+:math:`\pi` from one row to the next within a segment: no arm moves that far in one sample, and a continuous
+joint's angle wrapped to :math:`[-\pi, \pi)` or :math:`[0, 2\pi)` would give spikes in the computed velocity and
+a discontinuous GP input (unwrap it, e.g. :func:`numpy.unwrap`).
 
 Missing derivatives
 -------------------
@@ -193,7 +194,8 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
                              f"segment; t = {float(t[r])!r} does not come after t = {float(t[r - 1])!r} "
                              f"(row {rownos[r - 1]})")
     arr = {g: (None if cols[g] is None else a[:, cols[g]]) for g in _GROUPS}
-    _check_no_wrap(path, arr["q"], seg, rownos)
+    if arr["qd"] is None:  # rows with given velocities may be independent samples (a shuffled data set)
+        _check_no_wrap(path, arr["q"], seg, rownos)
     meta: dict = {"source": str(path), "format": "cascgp log CSV", "qd_source": "column", "qdd_source": "column",
                   "has_tau": arr["tau"] is not None, "derivative_filter": None}
     if arr["qd"] is None or arr["qdd"] is None:

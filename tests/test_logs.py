@@ -158,9 +158,12 @@ def test_errors_name_file_row_and_column(tmp_path: Path, case: str) -> None:
 
 
 def test_a_jump_across_segments_or_unwrapped_is_accepted(tmp_path: Path) -> None:
-    """The wrap check is per segment, and an unwrapped continuous angle passes it."""
+    """The wrap check is per segment, only for logs whose velocities are computed, and an unwrapped continuous
+    angle passes it."""
     path = tmp_path / "log.csv"
     path.write_text("t,segment,q1,tau1\n0,0,3.1,1\n0.1,1,-3.1,1\n")
+    assert read_log(path).n_samples == 2
+    path.write_text("t,q1,qd1,qdd1,tau1\n0,3.1,0,0,1\n0.1,-3.1,0,0,1\n")  # independent samples
     assert read_log(path).n_samples == 2
     t = np.arange(0.0, 2.0, 0.01)
     angle = np.unwrap(np.angle(np.exp(1j * 8.0 * t)))  # 16 rad in 2 s, past +pi several times
