@@ -194,8 +194,6 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
                              f"segment; t = {float(t[r])!r} does not come after t = {float(t[r - 1])!r} "
                              f"(row {rownos[r - 1]})")
     arr = {g: (None if cols[g] is None else a[:, cols[g]]) for g in _GROUPS}
-    if arr["qd"] is None:  # rows with given velocities may be independent samples (a shuffled data set)
-        _check_no_wrap(path, arr["q"], seg, rownos)
     meta: dict = {"source": str(path), "format": "cascgp log CSV", "qd_source": "column", "qdd_source": "column",
                   "has_tau": arr["tau"] is not None, "derivative_filter": None}
     if arr["qd"] is None or arr["qdd"] is None:
@@ -206,7 +204,8 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
             meta["derivative_filter"] += f"; central differences on segments shorter than {smoothing.window} rows"
     q, qd, qdd, tau = arr["q"], arr["qd"], arr["qdd"], arr["tau"]
     assert q is not None  # _header refuses a log without q1..qN
-    if qd is None:
+    if qd is None:  # rows with given velocities may be independent samples (a shuffled data set): not checked
+        _check_no_wrap(path, q, seg, rownos)
         qd = differentiate(t, q, seg, smoothing)
         meta["qd_source"] = "computed"
     if qdd is None:
@@ -220,10 +219,8 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
         raise LogFormatError(f"{path}: {exc}") from exc
 
 
-def _check_no_wrap(path: Path, q: np.ndarray | None, seg: np.ndarray, rownos: list[int]) -> None:
+def _check_no_wrap(path: Path, q: np.ndarray, seg: np.ndarray, rownos: list[int]) -> None:
     """``LogFormatError`` at the first step of more than pi in a joint position within a segment (a wrapped angle)."""
-    if q is None or len(q) < 2:
-        return
     step = np.abs(np.diff(q, axis=0))
     jump = np.argwhere((step > math.pi) & (np.diff(seg) == 0)[:, None])
     if jump.size:

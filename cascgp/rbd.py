@@ -81,9 +81,7 @@ class RigidBodyModel:
         dof: number of joints N (one position each: a continuous joint's is its angle).
         joint_names: names of the N joints, in URDF/Pinocchio order (the URDF's joints less the locked ones).
         locked: the URDF's joints that are not the model's, locked at a position (rad or m), ``{name: q}``;
-            empty when the model has every joint. ``joints=`` (the model's joints, in Pinocchio's order of
-            the URDF's joints; default: every joint not in ``locked=``) and ``locked=`` (positions of the
-            others; default 0) choose them when the model is built (:mod:`cascgp.rbd_joints`).
+            empty when the model has every joint.
         armature: (N,) rotor inertia per joint (kg m^2), included in the inverse dynamics.
         gravity: (3,) gravity vector in the world frame (m/s^2).
         torque_limits, velocity_limits: (N,) or ``None`` (from the sidecar).
@@ -92,6 +90,22 @@ class RigidBodyModel:
         urdf_text: the URDF document itself (``None`` when built from a ``pinocchio.Model``): model files
             embed it, so a saved semi-parametric model loads without the URDF file.
         pin_model: the underlying ``pinocchio.Model`` (do not change its shape).
+
+    Args:
+        model: a fixed-base Pinocchio model; it is copied (continuous joints converted to revolute joints in
+            their angle, :func:`cascgp.rbd_joints.angle_joints`), never changed.
+        armature: rotor inertia per joint, (N,) or a scalar; ``None`` keeps the model's.
+        gravity: (3,) world gravity; ``None`` keeps the model's.
+        torque_limits, velocity_limits: (N,) symmetric limits, or ``None`` (unknown).
+        meta: provenance (a sidecar's fields), kept as :attr:`meta`.
+        source, urdf_text: the URDF's path and document, kept as attributes.
+        joints: the model's joints, in Pinocchio's order of the URDF's joints (default: every joint not in
+            ``locked``).
+        locked: positions (rad or m; 0 is the URDF's zero) of the joints not in ``joints``; default 0 for each.
+
+    Raises:
+        ValueError: a joint with more than one position, no movable joint, a bad joint selection or a vector of
+            the wrong shape; the message names the argument.
     """
 
     def __init__(
@@ -111,7 +125,7 @@ class RigidBodyModel:
         model = angle_joints(model)  # a copy: the caller's model is never changed
         values: dict[str, float] = {}
         if joints is not None or locked:
-            _, values = check_joint_selection(model, joints, locked)
+            values = check_joint_selection(model, joints, locked)
             model = lock_joints(model, values)
         if model.nv == 0:
             raise ValueError(f"{'the model' if source is None else repr(source)}: no degrees of freedom (no "
@@ -194,7 +208,7 @@ class RigidBodyModel:
             raise ValueError(f"dof mismatch: expected {dof} joints, {what} has {self.dof} "
                              f"({', '.join(self.joint_names)}){hint}")
 
-    def _with(self, **fields: Any) -> "RigidBodyModel":
+    def _replace(self, **fields: Any) -> "RigidBodyModel":
         """A model of the same (converted, locked) Pinocchio model and URDF with other constructor ``fields``."""
         out = RigidBodyModel(self.pin_model, source=self.source, urdf_text=self.urdf_text, **fields)
         out.locked = dict(self.locked)  # self.pin_model has them locked already
@@ -334,7 +348,7 @@ def _without_sidecar(urdf_path: Path, js: Path, dof: int | None, joints: Sequenc
         f"torque limits {'from the URDF' if torque is not None else 'unknown (a joint has no positive effort)'}, "
         f"velocity limits {'from the URDF' if velocity is not None else 'unknown (a joint has no positive velocity)'}, "
         f"gravity {tuple(gravity.tolist())} m/s^2", UserWarning, stacklevel=3)
-    return rbd._with(armature=np.zeros(rbd.dof), torque_limits=torque, velocity_limits=velocity, meta=assumed)
+    return rbd._replace(armature=np.zeros(rbd.dof), torque_limits=torque, velocity_limits=velocity, meta=assumed)
 
 
 def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints: Sequence[str] | None = None,
@@ -410,7 +424,7 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints
             f"sidecar {str(js)!r}: joint_names {meta['joint_names']} do not match the URDF's {list(rbd.joint_names)}"
         )
     try:
-        return rbd._with(armature=meta["armature"], gravity=meta.get("gravity"), torque_limits=meta["torque_limits"],
+        return rbd._replace(armature=meta["armature"], gravity=meta.get("gravity"), torque_limits=meta["torque_limits"],
                          velocity_limits=meta["velocity_limits"], meta=meta)
     except ValueError as exc:
         raise ValueError(f"sidecar {str(js)!r}: {exc}") from exc

@@ -99,8 +99,8 @@ def angle_joints(model: pin.Model) -> pin.Model:
 
 
 def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
-                          locked: Mapping[str, float] | None) -> tuple[list[str], dict[str, float]]:
-    """The model's joints and the locked joints' positions, checked against ``model``'s joints.
+                          locked: Mapping[str, float] | None) -> dict[str, float]:
+    """The positions of the joints to lock, ``joints`` and ``locked`` checked against ``model``'s joints.
 
     Args:
         model: a model with one position per joint (see :func:`angle_joints`).
@@ -109,7 +109,7 @@ def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
         locked: positions (rad or m, the URDF's zero at 0) of joints not kept; default 0 for each.
 
     Returns:
-        ``(joints, locked)``: the kept joints, and every other joint's position.
+        ``{name: position}`` of every joint not in ``joints`` (empty when all are kept).
 
     Raises:
         ValueError: naming ``joints`` or ``locked`` and what was expected (a name not in the URDF, another
@@ -151,7 +151,7 @@ def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
             raise ValueError(f"locked: {name!r}: expected a finite position within the joint's limits "
                              f"[{lo:g}, {hi:g}], got {value!r}{where}")
         values[name] = x
-    return keep, values
+    return values
 
 
 def lock_joints(model: pin.Model, locked: Mapping[str, float]) -> pin.Model:

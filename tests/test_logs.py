@@ -136,7 +136,7 @@ CASES = {
     "t goes back": (HEAD + "\n0,1,2,3,4\n0.2,1,2,3,4\n\n0.1,1,2,3,4\n", 5, "t", "does not come after t = 0.2 (row 3)"),
     "segment not integer": ("t,segment,q1,tau1\n0,0.5,1,2\n", 2, "segment", "integer"),
     "segment goes back": ("t,segment,q1,tau1\n0,1,1,2\n0.1,0,1,2\n", 3, "segment", "non-decreasing"),
-    "wrapped angle": (HEAD + "\n0,3.1,2,3,4\n0.1,-3.1,2,3,4\n", 3, "q1", "changes by -6.2 from row 2, more than pi"),
+    "wrapped angle": (HEAD + "\n0,3.1,2,3,4\n\n0.1,-3.1,2,3,4\n", 4, "q1", "changes by -6.2 from row 2, more than pi"),
     "empty file": ("", 1, None, "empty file"),
     "blank file": ("\n\n", 1, None, "empty file"),
     "no data rows": (HEAD + "\n", 2, None, "no data rows"),

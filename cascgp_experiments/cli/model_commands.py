@@ -149,12 +149,12 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
     for opt in ("joints", "lock"):
         if getattr(a, opt) is not None and a.urdf is None:
             p.error(f"--{opt}: chooses joints of the URDF; it needs --urdf (an sp-* model)")
-    a.joints = _names(p, a.joints)
-    a.lock = _positions(p, a.lock)
+    a.joints = _parse_joints(p, a.joints)
+    a.lock = _parse_lock(p, a.lock)
     return _run(prog, lambda: _fit(a, prog))
 
 
-def _names(p: argparse.ArgumentParser, text: str | None) -> list[str] | None:
+def _parse_joints(p: argparse.ArgumentParser, text: str | None) -> list[str] | None:
     """``--joints``: comma-separated joint names."""
     if text is None:
         return None
@@ -164,7 +164,7 @@ def _names(p: argparse.ArgumentParser, text: str | None) -> list[str] | None:
     return names
 
 
-def _positions(p: argparse.ArgumentParser, text: str | None) -> dict[str, float] | None:
+def _parse_lock(p: argparse.ArgumentParser, text: str | None) -> dict[str, float] | None:
     """``--lock``: ``NAME=Q`` pairs separated by commas."""
     if text is None:
         return None
@@ -209,7 +209,8 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
             raise _Fail(_as_options(str(exc))) from None
         if rbd.dof != data.dof:
             more = "; name the log's joints with --joints (the others are locked)" if rbd.dof > data.dof else ""
-            raise _Fail(f"{a.urdf}: the URDF has {rbd.dof} joints ({', '.join(rbd.joint_names)}), the log "
+            what = "the rigid-body model" if rbd.locked else "the URDF"
+            raise _Fail(f"{a.urdf}: {what} has {rbd.dof} joints ({', '.join(rbd.joint_names)}), the log "
                         f"{a.data} has {data.dof}{more}")
         locked = "".join(f"; {n} locked at {q:g}" for n, q in rbd.locked.items())
         _note(prog, f"rigid-body model: {a.urdf} ({rbd.dof} joints: {', '.join(rbd.joint_names)}{locked})")
