@@ -205,7 +205,8 @@ class RigidBodyModel:
         if dof is not None and self.dof != dof:
             hint = ("; name the model's joints with joints= (the others are locked, at 0 unless locked= says)"
                     if self.dof > dof else "")
-            raise ValueError(f"dof mismatch: expected {dof} joints, {what} has {self.dof} "
+            less = f" less its locked joints ({', '.join(self.locked)})" if self.locked else ""
+            raise ValueError(f"dof mismatch: expected {dof} joints, {what}{less} has {self.dof} "
                              f"({', '.join(self.joint_names)}){hint}")
 
     def _replace(self, **fields: Any) -> "RigidBodyModel":

@@ -177,6 +177,9 @@ def test_joint_selection_errors(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"expected 3 joints, URDF .* has 5 \(j1, j2, j3, finger1, finger2\); "
                                          r"name the model's joints with joints="):
         RigidBodyModel.from_urdf(urdf, dof=3)
+    with pytest.raises(ValueError, match=r"expected 3 joints, URDF .* less its locked joints \(j3, finger1, finger2\) "
+                                         r"has 2 \(j1, j2\)"):
+        RigidBodyModel.from_urdf(urdf, dof=3, joints=["j1", "j2"])
 
     floating = write(tmp_path, "floating.urdf", arm_urdf(("revolute",) * 3).replace(
         '<joint name="j1" type="revolute">', '<joint name="j1" type="floating">'))
