@@ -1,11 +1,12 @@
-"""The fit-accuracy experiment's decision rules (scripts.bench_cascgp) and its command-line checks, on made-up
+"""The fit-accuracy experiment's decision rules (scripts.fit_accuracy) and its command-line checks, on made-up
 arms (no fit, no GPyTorch)."""
 
 from __future__ import annotations
 
 import pytest
 
-from scripts.bench_cascgp import FIT_ACCURACY_SETS, fit_accuracy_verdict, main
+from scripts.bench_cascgp import main
+from scripts.fit_accuracy import FIT_ACCURACY_SETS, fit_accuracy_verdict
 
 ARMS = ("A0", "A-gls", "A-floor", "G0", "G0-in-cascgp", "G-zero", "G-floor", "G-init", "G0-polish")
 
