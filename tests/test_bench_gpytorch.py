@@ -87,7 +87,7 @@ def test_batched_adam_follows_the_separate_runs() -> None:
 def test_cascgp_predictor_with_given_hyperparameters() -> None:
     """bench_cascgp.bank_with: cascgp's predictor with another library's hyperparameters and constant mean is the
     closed-form posterior mean."""
-    from scripts.bench_cascgp import bank_with
+    from scripts.fit_accuracy import bank_with
 
     X, y = _standardised()
     bank = GPBank(GPFitConfig(n_restarts=2)).fit([X], [y])
