@@ -37,7 +37,7 @@ import numpy as np
 
 from .data import DynamicsData
 
-__all__ = ["IAS_TO_GPML_TORQUE", "SARCOS_DOF", "SARCOS_RATE_HZ", "load_ias", "load_gpml",
+__all__ = ["IAS_TO_GPML_TORQUE", "SARCOS_DOF", "SARCOS_RATE_HZ", "check_ias", "load_ias", "load_gpml",
            "duplicate_rows", "detect_segments"]
 
 #: GPML torque = IAS torque * IAS_TO_GPML_TORQUE.
@@ -57,6 +57,43 @@ def _loadmat(path: str | os.PathLike) -> dict:
         return loadmat(path)
     except Exception as exc:  # scipy raises several types for corrupt files
         raise ValueError(f"{path}: not a readable MATLAB .mat file: {type(exc).__name__}: {exc}") from exc
+
+
+#: The IAS file's variables and their number of columns.
+_IAS_COLUMNS = {"X_train": 3 * 7, "Y_train": 7, "X_test": 3 * 7, "Y_test": 7}
+
+
+def check_ias(path: str | os.PathLike) -> None:
+    """Check that ``path`` is an IAS SARCOS file (``ias_sarcos_data.mat``) from its variables' names and shapes,
+    without reading the data: a command can refuse a wrong file before it runs anything.
+
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        ValueError: not a readable MATLAB file, or not the IAS variables and shapes (``X_train``/``X_test``:
+            T x 21, ``Y_train``/``Y_test``: T x 7, as many rows as their ``X``); a GPML file
+            (``sarcos_inv.mat``, one T x 28 matrix) is named as such, with :func:`load_gpml` as its loader.
+    """
+    from scipy.io import whosmat
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"SARCOS file not found: {path}")
+    try:
+        shapes = {name: shape for name, shape, _ in whosmat(path)}
+    except Exception as exc:  # scipy raises several types for files that are not MATLAB's
+        raise ValueError(f"{path}: not a readable MATLAB .mat file: {type(exc).__name__}: {exc}") from exc
+    missing = [k for k in _IAS_COLUMNS if k not in shapes]
+    if missing:
+        gpml = [k for k, s in shapes.items() if len(s) == 2 and s[1] == 28]
+        hint = (f"; it holds the GPML SARCOS matrix {gpml[0]!r} (T x 28), which cascgp.load_gpml reads" if gpml else "")
+        raise ValueError(f"{path}: missing variable(s) {missing} (expected the IAS SARCOS format, "
+                         f"ias_sarcos_data.mat){hint}")
+    for k, cols in _IAS_COLUMNS.items():
+        shape = shapes[k]
+        rows = shapes["X_" + k.split("_")[1]][0]
+        if len(shape) != 2 or shape[1] != cols or shape[0] != rows:
+            raise ValueError(f"{path}: {k}: expected shape ({rows}, {cols}), got {tuple(shape)} "
+                             "(the IAS SARCOS format)")
 
 
 def detect_segments(q: np.ndarray, qd: np.ndarray, jump_factor: float = 20.0) -> np.ndarray:
@@ -133,10 +170,8 @@ def load_ias(path: str | os.PathLike, *, dedup: bool = True, torque_scale: float
     GPML units).  See the module docstring for time, segments and units.
     """
     _check_common(rate_hz, torque_scale)
+    check_ias(path)
     d = _loadmat(path)
-    missing = [k for k in ("X_train", "Y_train", "X_test", "Y_test") if k not in d]
-    if missing:
-        raise ValueError(f"{path}: missing variable(s) {missing} (expected the IAS SARCOS format)")
     X_tr, Y_tr = np.asarray(d["X_train"], float), np.asarray(d["Y_train"], float)
     X_te, Y_te = np.asarray(d["X_test"], float), np.asarray(d["Y_test"], float)
     units = _units(torque_scale, "IAS")

@@ -58,6 +58,12 @@ def default_sarcos() -> Path | None:
             return cand
     return None
 
+
+def default_sarcos_source() -> str:
+    """Where :func:`default_sarcos`'s path comes from, for messages: ``$CASCGP_SARCOS`` or the checkout's copy."""
+    return f"${SARCOS_ENV}" if os.environ.get(SARCOS_ENV) else "the source checkout's SARCOS copy"
+
+
 #: Name of the parametric baseline in result files (not a cascgp model: RNEA of the nominal URDF).
 RBD = "rbd"
 #: Paper order of the rows of Table I (derivative based, then derivative free).

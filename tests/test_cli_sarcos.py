@@ -61,6 +61,15 @@ def test_fit_refuses_a_urdf_for_np_models(tmp_path: Path) -> None:
     assert r.returncode == 2 and "--urdf" in r.stderr and "non-parametric" in r.stderr
 
 
+def _tiny_ias(path: Path) -> Path:
+    """A file with the IAS variables and column counts (3 and 2 rows): what the commands check up front."""
+    from scipy.io import savemat
+
+    savemat(path, {"X_train": np.zeros((3, 21)), "Y_train": np.zeros((3, 7)), "X_test": np.zeros((2, 21)),
+                   "Y_test": np.zeros((2, 7))})
+    return path
+
+
 def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_path: Path, capsys) -> None:
     """``cascgp sarcos`` passes the study preset's SARCOS settings (``--quick``: the quick preset's), so that it
     computes the block ``cascgp study`` does; ``--restarts`` and ``--seed`` override them; it prints the table."""
@@ -77,8 +86,7 @@ def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_pat
 
     monkeypatch.setattr(cli, "run_sarcos", fake_run)
     monkeypatch.setattr(cli, "limit_threads", lambda n=1: None)  # the command's; not for the rest of the session
-    mat = tmp_path / "x.mat"
-    mat.write_bytes(b"")
+    mat = _tiny_ias(tmp_path / "x.mat")
     for args, preset in ((["--quick"], PRESETS["quick"]), ([], PRESETS["full"])):
         cli.main(["--sarcos", str(mat), "--out", str(tmp_path / "o"), "--workers", "1", *args])
         kw = seen[-1]
@@ -103,3 +111,39 @@ def test_sarcos_command_without_a_path_names_the_option_and_the_variable(monkeyp
     err = capsys.readouterr().err
     assert "--sarcos: expected the path of ias_sarcos_data.mat" in err and f"${SARCOS_ENV}" in err
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("command", ["study", "sarcos"])
+def test_a_file_that_is_not_the_ias_one_stops_the_command_before_it_runs(command: str, monkeypatch, tmp_path: Path,
+                                                                        capsys) -> None:
+    """A GPML SARCOS file or a file that is not MATLAB's, given by ``--sarcos`` or ``$CASCGP_SARCOS``: exit status 2
+    and one line naming where the path came from and what was expected, before anything is written (the study
+    used to fail with a traceback after its Jaco part)."""
+    import importlib
+
+    from scipy.io import savemat
+
+    from cascgp_experiments.common import SARCOS_ENV
+
+    cli = importlib.import_module(f"cascgp_experiments.cli.{command}")
+    gpml = tmp_path / "sarcos_inv.mat"
+    savemat(gpml, {"sarcos_inv": np.zeros((4, 28))})
+    text = tmp_path / "train.csv"
+    text.write_text("t,q1,tau1\n0,0,0\n")
+    preset = ["--smoke"] if command == "study" else ["--quick"]
+    cases = [(["--sarcos", str(gpml)], {}, ["--sarcos: ", "missing variable(s)", "'sarcos_inv' (T x 28)",
+                                            "cascgp.load_gpml"]),
+             (["--sarcos", str(text)], {}, ["--sarcos: ", "train.csv: not a readable MATLAB .mat file"]),
+             ([], {SARCOS_ENV: str(gpml)}, [f"${SARCOS_ENV}: ", "expected the IAS SARCOS format"])]
+    for args, env, expected in cases:
+        monkeypatch.delenv(SARCOS_ENV, raising=False)
+        for k, v in env.items():
+            monkeypatch.setenv(k, v)
+        with pytest.raises(SystemExit) as exc:
+            cli.main([*preset, "--out", str(tmp_path / "o"), *args])
+        assert exc.value.code == 2
+        err = capsys.readouterr().err
+        for part in expected:
+            assert part in err, (args, env, err)
+        assert "Traceback" not in err and not (tmp_path / "o").exists()
+

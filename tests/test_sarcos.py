@@ -55,9 +55,35 @@ def test_loader_errors(tmp_path, sarcos_dir):
     (tmp_path / "bad.mat").write_bytes(b"not a mat file at all" * 10)
     with pytest.raises(ValueError, match="bad.mat"):
         load_ias(tmp_path / "bad.mat")
-    with pytest.raises(ValueError, match="missing variable"):
+    with pytest.raises(ValueError, match="missing variable.*GPML SARCOS matrix 'sarcos_inv_test'"):
         load_ias(sarcos_dir / "sarcos_inv_test.mat")
     with pytest.raises(ValueError, match="28"):
         load_gpml(sarcos_dir / "ias_sarcos_data.mat")
     with pytest.raises(ValueError, match="torque_scale"):
         load_ias(sarcos_dir / "ias_sarcos_data.mat", torque_scale=0)
+
+
+def test_check_ias_reads_names_and_shapes_only(tmp_path) -> None:
+    """``check_ias`` accepts a file with the IAS variables and shapes and names the variable and the expected
+    shape otherwise; ``load_ias`` raises the same errors."""
+    from scipy.io import savemat
+
+    from cascgp.sarcos import check_ias
+
+    good = {"X_train": np.zeros((3, 21)), "Y_train": np.zeros((3, 7)), "X_test": np.zeros((2, 21)),
+            "Y_test": np.zeros((2, 7))}
+    savemat(tmp_path / "ok.mat", good)
+    check_ias(tmp_path / "ok.mat")
+    for name, value, expected in (("X_train", np.zeros((3, 20)), r"X_train: expected shape \(3, 21\), got \(3, 20\)"),
+                                  ("Y_test", np.zeros((3, 7)), r"Y_test: expected shape \(2, 7\), got \(3, 7\)")):
+        savemat(tmp_path / "bad.mat", {**good, name: value})
+        with pytest.raises(ValueError, match=expected):
+            check_ias(tmp_path / "bad.mat")
+        with pytest.raises(ValueError, match=expected):
+            load_ias(tmp_path / "bad.mat")
+    with pytest.raises(FileNotFoundError, match="missing.mat"):
+        check_ias(tmp_path / "missing.mat")
+    (tmp_path / "text.mat").write_text("t,q1\n")
+    with pytest.raises(ValueError, match="text.mat: not a readable MATLAB .mat file"):
+        check_ias(tmp_path / "text.mat")
+

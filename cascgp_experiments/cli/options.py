@@ -24,3 +24,17 @@ def settings_error(parser: argparse.ArgumentParser, exc: Exception, options: Map
             msg = option + msg[len(field):]
             break
     parser.error(msg)
+
+
+def check_sarcos_file(parser: argparse.ArgumentParser, path: str, source: str = "--sarcos") -> None:
+    """``parser.error`` unless ``path`` is the IAS SARCOS file (names and shapes of its variables, read without
+    the data): a wrong file stops the command before it runs anything, not after the hour of the Jaco part.
+    ``source`` names where the path came from (the option, or the environment variable that set its default)."""
+    from cascgp.sarcos import check_ias
+
+    try:
+        check_ias(path)
+    except FileNotFoundError:
+        parser.error(f"{source}: file not found: {path}")
+    except ValueError as exc:
+        parser.error(f"{source}: {exc}")

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from cascgp.io import write_json
-from cascgp_experiments.common import SARCOS_ENV, default_sarcos, limit_threads, median_curves
-from cascgp_experiments.cli.options import require_at_least
+from cascgp_experiments.common import SARCOS_ENV, default_sarcos, default_sarcos_source, limit_threads, median_curves
+from cascgp_experiments.cli.options import check_sarcos_file, require_at_least
 from cascgp_experiments.execution import add_execution_args, check_args
 from cascgp_experiments.study import PRESETS, Settings, run_sarcos
 
@@ -45,8 +45,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     a = ap.parse_args(argv)
     if a.sarcos is None:
         ap.error(f"--sarcos: expected the path of ias_sarcos_data.mat (or set ${SARCOS_ENV})")
-    if not Path(a.sarcos).is_file():
-        ap.error(f"--sarcos: file not found: {a.sarcos}")
+    check_sarcos_file(ap, a.sarcos, "--sarcos" if a.sarcos != ap.get_default("sarcos") else default_sarcos_source())
     require_at_least(ap, a, 1, "restarts")
     require_at_least(ap, a, 0, "seed")
     check_args(ap, a)

@@ -17,8 +17,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from cascgp_experiments.cli.options import settings_error
-from cascgp_experiments.common import SARCOS_ENV, VARIANTS, default_sarcos, limit_threads
+from cascgp_experiments.cli.options import check_sarcos_file, settings_error
+from cascgp_experiments.common import SARCOS_ENV, VARIANTS, default_sarcos, default_sarcos_source, limit_threads
 from cascgp_experiments.execution import add_execution_args, check_args
 from cascgp_experiments.study import PRESETS, run_study
 
@@ -84,8 +84,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     if not a.no_sarcos:
         found = default_sarcos()
         sarcos = a.sarcos or (str(found) if found is not None and found.exists() else None)
-        if a.sarcos and not Path(a.sarcos).exists():
-            ap.error(f"--sarcos: file not found: {a.sarcos}")
+        if sarcos is not None:
+            check_sarcos_file(ap, sarcos, "--sarcos" if a.sarcos else default_sarcos_source())
         if sarcos is None:
             print(f"no SARCOS file (--sarcos or ${SARCOS_ENV}): the SARCOS part is skipped", file=sys.stderr)
         elif not st.sarcos_grid:
