@@ -82,6 +82,14 @@ def remove_stale_temporaries(folder: str | os.PathLike[str]) -> list[Path]:
     return removed
 
 
+def _file_in_path(folder: Path) -> Path:
+    """The first part of ``folder``'s path that exists and is not a folder (``folder`` itself if none is found)."""
+    for part in reversed([folder, *folder.parents]):
+        if part.exists() and not part.is_dir():
+            return part
+    return folder
+
+
 def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], object], *, exclusive: bool = False) -> Path:
     """Create ``path`` atomically: ``write(fh)`` fills a temporary binary file in the same
     folder, which is fsync'ed and moved over ``path``. On any error the temporary file is
@@ -89,11 +97,18 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], object], 
 
     ``exclusive=True`` never replaces an existing file: the finished file is published with a
     hard link, which fails with ``FileExistsError`` when ``path`` exists (also when another
-    process created it in the meantime).
+    process created it in the meantime). A ``path`` that is a folder raises ``IsADirectoryError``,
+    a folder path through a file ``NotADirectoryError``, each naming the path.
     """
     path = Path(path)
+    if path.is_dir():
+        raise IsADirectoryError(f"{path}: is a folder; expected the path of a file")
     folder = path.parent if str(path.parent) else Path(".")
-    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except (FileExistsError, NotADirectoryError):  # a part of the folder's path is a file
+        raise NotADirectoryError(f"{path}: cannot create its folder {folder}: {_file_in_path(folder)} is a "
+                                 "file") from None
     remove_stale_temporaries(folder)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_HOST}-{os.getpid()}.", suffix=".tmp", dir=folder)
     try:

@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import asdict
 
-from cascgp_experiments.cli.options import settings_error
+from cascgp_experiments.cli.options import check_output, settings_error
 from cascgp_experiments.collect import PRESETS, CollectConfig, collect, data_path
 from cascgp_experiments.execution import add_execution_args, check_args, session
 
@@ -50,6 +50,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                          "one job per motion (same data; slower here, the env steps are cheap)")
     add_execution_args(ap)
     a = ap.parse_args(argv)
+    check_output(ap, a.out, "--out", "folder")
     check_args(ap, a)
     base = PRESETS["quick" if a.quick else "smoke" if a.smoke else "full"]
     kw = asdict(base) | {"seed": a.seed, "sensor_noise": a.sensor_noise, "qdd_source": a.qdd,

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+from pathlib import Path
 from typing import Mapping, NoReturn
 
 
@@ -38,3 +40,31 @@ def check_sarcos_file(parser: argparse.ArgumentParser, path: str, source: str = 
         parser.error(f"{source}: file not found: {path}")
     except ValueError as exc:
         parser.error(f"{source}: {exc}")
+
+
+def output_path_problem(path: str | os.PathLike, kind: str) -> str | None:
+    """What stops a command from writing its output ``path`` (``kind``: ``"file"`` or ``"folder"``), checked
+    before the command's work (a fit can take minutes): ``None`` when nothing does. Refused: a file path that is
+    a folder, a folder path that is a file, a path through a file, and a nearest existing folder this process
+    cannot write to."""
+    path = Path(path)
+    if kind == "file" and path.is_dir():
+        return f"{path} is a folder; expected the path of a file"
+    if kind == "folder" and path.exists() and not path.is_dir():
+        return f"{path} is a file; expected a folder (created if missing)"
+    if kind == "folder" and path.is_dir():
+        return None if os.access(path, os.W_OK | os.X_OK) else f"{path} is not writable"
+    nearest = next(p for p in path.parents if p.exists())  # the file's folder, or a missing folder's first existing one
+    if not nearest.is_dir():
+        return f"{nearest} is a file, so {path} cannot be created"
+    if not os.access(nearest, os.W_OK | os.X_OK):
+        return f"{nearest} is not writable, so {path} cannot be created"
+    return None
+
+
+def check_output(parser: argparse.ArgumentParser, path: str | os.PathLike | None, option: str, kind: str) -> None:
+    """``parser.error`` (exit status 2) naming ``option`` when :func:`output_path_problem` finds one."""
+    problem = None if path is None else output_path_problem(path, kind)
+    if problem:
+        parser.error(f"{option}: {problem}")
+

@@ -20,7 +20,7 @@ import numpy as np
 
 from cascgp.io import write_json
 from cascgp_experiments.common import SARCOS_ENV, default_sarcos, default_sarcos_source, limit_threads, median_curves
-from cascgp_experiments.cli.options import check_sarcos_file, require_at_least
+from cascgp_experiments.cli.options import check_output, check_sarcos_file, require_at_least
 from cascgp_experiments.execution import add_execution_args, check_args
 from cascgp_experiments.study import PRESETS, Settings, run_sarcos
 
@@ -48,6 +48,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     check_sarcos_file(ap, a.sarcos, "--sarcos" if a.sarcos != ap.get_default("sarcos") else default_sarcos_source())
     require_at_least(ap, a, 1, "restarts")
     require_at_least(ap, a, 0, "seed")
+    check_output(ap, a.out, "--out", "folder")
     check_args(ap, a)
     limit_threads(1)
     preset = PRESETS["quick" if a.quick else "full"]

@@ -17,7 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from cascgp_experiments.cli.options import check_sarcos_file, settings_error
+from cascgp_experiments.cli.options import check_output, check_sarcos_file, settings_error
 from cascgp_experiments.common import SARCOS_ENV, VARIANTS, default_sarcos, default_sarcos_source, limit_threads
 from cascgp_experiments.execution import add_execution_args, check_args
 from cascgp_experiments.study import PRESETS, run_study
@@ -91,6 +91,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
         elif not st.sarcos_grid:
             print(f"--max-seconds {a.max_seconds:g} is below every SARCOS grid point: the SARCOS part is skipped",
                   file=sys.stderr)
+    check_output(ap, a.out, "--out", "folder")
     check_args(ap, a)
     limit_threads(1)
     res = run_study(a.out, st, models=models, workers=a.workers, ray_address=a.ray, sarcos=sarcos,

@@ -1,0 +1,81 @@
+"""Every command checks where it will write before it runs: a file output that is a folder, a folder output that is
+a file, a path through a file are refused with exit status 2 and one line naming the option, before the command
+reads its inputs or fits anything (a fit can take minutes). The library's atomic writes name the path too."""
+
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+
+import pytest
+
+from cascgp.io import atomic_write_text
+
+
+@pytest.fixture()
+def places(tmp_path: Path) -> dict[str, Path]:
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "file.txt").write_text("x")
+    return {"folder": tmp_path / "folder", "file": tmp_path / "file.txt", "missing": tmp_path / "missing.csv"}
+
+
+def _refused(module: str, argv: list[str], capsys) -> str:
+    cli = importlib.import_module(f"cascgp_experiments.cli.{module}")
+    main = getattr(cli, {"model_commands": argv.pop(0)}.get(module, "main"))
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert "Traceback" not in err and ": error: " in err.splitlines()[-1]  # argparse's usage, then one error line
+    return err.splitlines()[-1]
+
+
+def test_file_outputs_are_checked_before_the_inputs_are_read(places: dict[str, Path], capsys) -> None:
+    """The log and the model named here do not exist: the error is about the output, so it came first."""
+    folder, file, missing = places["folder"], places["file"], places["missing"]
+    fit = ["fit_main", "--data", str(missing), "--model", "np-standard"]
+    cases = [
+        (fit + ["--out", str(folder)], f"--out: {folder} is a folder; expected the path of a file"),
+        (fit + ["--out", str(file / "m.npz")], f"--out: {file} is a file, so {file / 'm.npz'} cannot be created"),
+        (fit + ["--out", str(folder / "m.csv")], "--out: expected a model file name ending in .npz"),
+        (["predict_main", "--model", str(missing), "--data", str(missing), "--out", str(folder)],
+         f"--out: {folder} is a folder"),
+        (["evaluate_main", "--model", str(missing), "--data", str(missing), "--json", str(file / "a" / "s.json")],
+         f"--json: {file} is a file, so {file / 'a' / 's.json'} cannot be created"),
+    ]
+    for argv, expected in cases:
+        assert expected in _refused("model_commands", list(argv), capsys), argv
+    assert sorted(p.name for p in folder.parent.iterdir()) == ["file.txt", "folder"]  # nothing written
+
+
+@pytest.mark.parametrize("module,extra", [("transfer", ["--quick"]), ("study", ["--smoke", "--no-sarcos"]),
+                                          ("sarcos", ["--quick", "--sarcos", "MISSING"]), ("collect", ["--smoke"])])
+def test_folder_outputs_are_checked_before_anything_runs(module: str, extra: list[str], places: dict[str, Path],
+                                                         capsys, monkeypatch) -> None:
+    file = places["file"]
+    if module == "sarcos":  # its file check comes first; give it a valid one
+        from scipy.io import savemat
+
+        import numpy as np
+
+        mat = places["folder"] / "ias.mat"
+        savemat(mat, {"X_train": np.zeros((3, 21)), "Y_train": np.zeros((3, 7)), "X_test": np.zeros((2, 21)),
+                      "Y_test": np.zeros((2, 7))})
+        extra = ["--quick", "--sarcos", str(mat)]
+    err = _refused(module, [*extra, "--out", str(file)], capsys)
+    assert f"--out: {file} is a file; expected a folder (created if missing)" in err
+    err = _refused(module, [*extra, "--out", str(file / "sub")], capsys)
+    assert f"--out: {file} is a file, so {file / 'sub'} cannot be created" in err
+    if module == "transfer":
+        err = _refused(module, [*extra, "--out", str(places["folder"] / "o"), "--video", str(file)], capsys)
+        assert f"--video: {file} is a file; expected a folder (created if missing)" in err
+    assert file.read_text() == "x"
+
+
+def test_atomic_write_names_a_folder_or_a_file_in_the_way(places: dict[str, Path]) -> None:
+    folder, file = places["folder"], places["file"]
+    with pytest.raises(IsADirectoryError, match=f"{folder}: is a folder; expected the path of a file"):
+        atomic_write_text(folder, "y")
+    with pytest.raises(NotADirectoryError, match=f"cannot create its folder .*: {file} is a file"):
+        atomic_write_text(file / "a" / "b.txt", "y")
+    assert list(folder.iterdir()) == [] and file.read_text() == "x"  # no temporary left, nothing replaced
