@@ -44,6 +44,41 @@ def install_hint(extra: str) -> str:
     return f"pip install '{DISTRIBUTION}[{extra}]' (in a source checkout: pip install -e '.[{extra}]')"
 
 
+def package_versions() -> dict[str, str]:
+    """Python's and the installed versions of the packages a result depends on (for a result's provenance); an
+    optional one that is not installed (``numba``: the ``fast`` extra's compiled loops) is left out."""
+    import importlib.metadata as md
+    import platform
+
+    out = {"python": platform.python_version()}
+    for p in ("cascgp-jaco", "numpy", "scipy", "torch", "mujoco", "dm-control", "gymnasium", "pin", "numba"):
+        try:
+            out[p] = md.version(p)
+        except md.PackageNotFoundError:
+            pass
+    return out
+
+
+def machine_info() -> dict[str, Any]:
+    """The machine a result was computed on (for its provenance): CPU count, platform and processor."""
+    import platform
+
+    return {"cpus": os.cpu_count(), "platform": platform.platform(), "processor": _cpu_model()}
+
+
+def _cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            for line in f:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    import platform
+
+    return platform.processor()
+
+
 def default_sarcos() -> Path | None:
     """The SARCOS file to use when the user names none: ``$CASCGP_SARCOS`` if set, else, in a source checkout that
     has the project's ``shared/`` folder beside it, ``../shared/data/sarcos/ias_sarcos_data.mat``; ``None`` when

@@ -46,8 +46,6 @@ line is ``python -m scripts.data_efficiency``.
 from __future__ import annotations
 
 import math
-import os
-import platform
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -55,7 +53,8 @@ from typing import Any
 
 from cascgp.checks import check_count, check_positive
 from cascgp_experiments.common import (FULL_GRID, NP_DB, PAPER_TABLE, QUICK_GRID, RBD, SMOKE_GRID,
-                                       VARIANTS, label, make_table, median_curves, read_json, write_json)
+                                       VARIANTS, label, machine_info, make_table, median_curves,
+                                       package_versions, read_json, write_json)
 from cascgp_experiments.curves import CurveSpec, run_curves
 from cascgp_experiments.execution import check_workers, session
 from cascgp_experiments.pooled_stats import JACO_FAMILIES, SARCOS_FAMILIES, pooled_block
@@ -128,18 +127,6 @@ PRESETS: dict[str, Settings] = {
 }
 
 
-def _versions() -> dict[str, str]:
-    import importlib.metadata as md
-
-    out = {"python": platform.python_version()}
-    for p in ("numpy", "scipy", "torch", "mujoco", "gymnasium", "pin"):
-        try:
-            out[p] = md.version(p)
-        except md.PackageNotFoundError:
-            pass
-    return out
-
-
 def cached_iteration_counts(out: Path, train, settings: Settings) -> dict[str, Any]:
     """Iteration counts (step 3) on the first training subset at 10 Hz, cached in
     ``<out>/cache/iterations.json`` (keyed by the settings that matter)."""
@@ -190,8 +177,8 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
     timings: dict[str, float] = {}
     results: dict[str, Any] = {"meta": {
         "command": command, "settings": asdict(settings), "models": models, "workers": workers, "ray": ray_address,
-        "versions": _versions(), "started": time.strftime("%Y-%m-%d %H:%M:%S"),
-        "machine": {"cpus": os.cpu_count(), "platform": platform.platform()}}}
+        "versions": package_versions(), "started": time.strftime("%Y-%m-%d %H:%M:%S"),
+        "machine": machine_info()}}
 
     # 1. data
     ccfg = replace(col.PRESETS[settings.collection], seed=settings.seed, sensor_pipeline=settings.sensor_pipeline)

@@ -22,9 +22,11 @@ from __future__ import annotations
 
 import os
 import shutil
+import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
@@ -38,7 +40,7 @@ from cascgp.io import atomic_write_text, read_json, write_json
 from cascgp.learning import (PLAIN_CONTROLLERS, Attempt, AttemptContext, ControllerRun, Feedback, ModelFactory,
                              RetrainConfig, RunHooks, attempt_plan, check_controller, run_controller)
 from cascgp.rbd import load_nominal
-from cascgp_experiments.common import save_figure
+from cascgp_experiments.common import DISTRIBUTION, machine_info, package_versions, save_figure
 from cascgp_experiments.run_hooks import PairedEpisodes, seed_offset_factory
 from jaco_env import nominal_urdf
 
@@ -161,14 +163,48 @@ def video_attempts(plan: list[Attempt]) -> tuple[int, ...]:
 
 
 def controller_job(config: dict[str, Any], name: str, buffer_dir: str | None,
-                   video: dict[str, Any] | None = None, paired: list[str] | None = None) -> list[dict[str, Any]]:
+                   video: dict[str, Any] | None = None, paired: list[str] | None = None,
+                   compiled: bool = False) -> list[dict[str, Any]]:
     """One job of :func:`run_transfer`: every attempt of one controller, on its own env (the attempts of a
     learning controller are sequential: its data accumulate). ``buffer_dir`` belongs to this job: it is
     emptied first, so a retried or resumed job starts again from no data. ``video``: a
     :class:`VideoOptions` as a dict; the chosen attempts of this controller are written to
     ``<folder>/<controller>/<attempt>.mp4`` (rendering does not change the simulation). ``paired``: controllers
     evaluated on this controller's model after every attempt (:class:`~cascgp_experiments.run_hooks.PairedEpisodes`).
+    ``compiled``: the control tick and online sample run compiled (the ``fast`` extra), as the run that planned the
+    job found; they agree with the NumPy path to round-off only, and a learning loop carries that forward, so the
+    job runs the path it was keyed with (a worker without Numba refuses ``compiled=True``).
     Returns the attempt records."""
+    with kernel_path(compiled):
+        return _controller_attempts(config, name, buffer_dir, video, paired)
+
+
+@contextmanager
+def kernel_path(compiled: bool) -> Iterator[None]:
+    """Run the block on the compiled loops (``compiled``; ``RuntimeError`` where Numba is missing) or on the NumPy
+    path (``CASCGP_JIT=0`` for the block, restored afterwards)."""
+    from cascgp.models.fastkernel import jit_enabled
+
+    if compiled:
+        if not jit_enabled():
+            raise RuntimeError("this job was planned with the compiled control tick (the fast extra, Numba), which "
+                               f"this worker lacks: install {DISTRIBUTION}[fast] on every worker, or run the "
+                               "command with CASCGP_JIT=0")
+        yield
+        return
+    old = os.environ.get("CASCGP_JIT")
+    os.environ["CASCGP_JIT"] = "0"
+    try:
+        yield
+    finally:
+        if old is None:
+            del os.environ["CASCGP_JIT"]
+        else:
+            os.environ["CASCGP_JIT"] = old
+
+
+def _controller_attempts(config: dict[str, Any], name: str, buffer_dir: str | None, video: dict[str, Any] | None,
+                         paired: list[str] | None) -> list[dict[str, Any]]:
     cfg = TransferConfig.from_dict(config)
     if buffer_dir is not None:
         shutil.rmtree(buffer_dir, ignore_errors=True)
@@ -289,6 +325,7 @@ def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bo
     controllers that had not finished. ``stats`` (a dict), if given, receives the job statistics
     (:meth:`cascgp_experiments.execution.JobResults.stats`). ``video``: record the chosen attempts
     (:func:`controller_job`) and compose the side-by-side clips (:func:`compose_videos`)."""
+    from cascgp.models.fastkernel import jit_enabled
     from cascgp_experiments.execution import run_jobs
 
     if out is not None:
@@ -298,6 +335,9 @@ def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bo
     jobs = [{"config": config, "name": name,
              "buffer_dir": None if out is None else str(Path(out).resolve() / "buffers" / name)}
             for name in cfg.controllers]
+    if jit_enabled():  # only then, as video: the job cache keys of runs on the NumPy path stay the same
+        for job in jobs:
+            job["compiled"] = True
     if video is not None:  # only then: the job cache keys of runs without video stay the same
         for job in jobs:
             job["video"] = {**asdict(video), "controllers": list(video.controllers), "attempts": list(video.attempts)}
@@ -386,10 +426,14 @@ def write_outputs(runs: list[ControllerRun], cfg: TransferConfig, out: Path, wal
                   jobs: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write ``results.json``, ``summary.md`` and ``transfer.png`` into ``out``; returns the results dict.
     ``jobs``: the job statistics of the run (workers, backend, seconds per controller), stored as ``"jobs"``."""
+    from cascgp.models.fastkernel import jit_enabled
+
     results = {
         "config": cfg.to_dict(),
         "wall_seconds": wall_s,
         "controllers": {run.name: run.attempts for run in runs},
+        "provenance": {"versions": package_versions(), "compiled_kernels": jit_enabled(), "machine": machine_info(),
+                       "written_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
     }
     if jobs is not None:
         results["jobs"] = jobs

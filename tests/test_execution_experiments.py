@@ -139,7 +139,12 @@ def tiny_transfer_serial(tmp_path_factory) -> Path:
 def test_tiny_transfer_two_workers_identical(tiny_transfer_serial: Path, tmp_path: Path) -> None:
     out = tmp_path / "w2"
     run = _cli("scripts.task_transfer", "--out", str(out), *TINY_TRANSFER, "--workers", "2")
-    assert read_json(out / "results.json")["jobs"]["backend"] == "processes"
+    res = read_json(out / "results.json")
+    assert res["jobs"]["backend"] == "processes"
+    from cascgp.models.fastkernel import jit_enabled
+
+    prov = res["provenance"]  # which kernel path ran (the fast extra's compiled loops or NumPy), versions, machine
+    assert prov["compiled_kernels"] == jit_enabled() and "cascgp-jaco" in prov["versions"] and prov["machine"]["cpus"]
     assert _transfer_numbers(out) == _transfer_numbers(tiny_transfer_serial)
     assert (out / "summary.md").read_text() == (tiny_transfer_serial / "summary.md").read_text()
     assert (out / "summary.md").read_text() in run.stdout
