@@ -33,7 +33,9 @@ Within each segment, :math:`\dot q` is the derivative of :math:`q` and :math:`\d
 fitted by least squares to 7 samples, centred (no lag), assuming the segment's median sample period; segments
 shorter than the window, and ``smoothing=None``, use central differences (:func:`numpy.gradient` on the times).
 The filter used is recorded in ``data.meta["derivative_filter"]`` and each group's origin in
-``data.meta["qd_source"]`` / ``["qdd_source"]`` (``"column"`` or ``"computed"``).
+``data.meta["qd_source"]`` / ``["qdd_source"]`` (``"column"`` or ``"computed"``). A median sample period above
+:data:`SLOWEST_PERIOD_S` (0.5 s) gets a warning: ``t`` in milliseconds would make the computed velocities 1000
+times too small.
 
 Errors are :class:`LogFormatError` (a ``ValueError``) naming the file, the row and the column. Predictions are
 written by :func:`write_predictions` (columns ``t``, ``tau1..tauN`` predicted means, ``var1..varN`` their
@@ -198,6 +200,7 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
                   "has_tau": arr["tau"] is not None, "derivative_filter": None}
     if arr["qd"] is None or arr["qdd"] is None:
         _check_uniform(path, t, seg, smoothing)
+        _check_seconds(path, t, seg)
         meta["derivative_filter"] = filter_name(smoothing)
         if smoothing is not None and np.min(np.diff(np.r_[0, np.flatnonzero(np.diff(seg)) + 1, len(t)])) \
                 < smoothing.window:
@@ -239,6 +242,21 @@ def _check_uniform(path: Path, t: np.ndarray, seg: np.ndarray, smoothing: SavGol
     if d.size and np.max(np.abs(d - np.median(d))) > 0.05 * np.median(d):
         warnings.warn(f"{path}: sample periods vary by more than 5 % of their median ({np.median(d):.4g} s); the "
                       f"{filter_name(smoothing)} derivative assumes uniform sampling", stacklevel=3)
+
+
+#: A median sample period above this (s) is taken for a time column in other units than seconds: no arm's dynamics
+#: are learned from samples 0.5 s apart, while milliseconds at 1 kHz or more read as periods of 1 s or more.
+SLOWEST_PERIOD_S = 0.5
+
+
+def _check_seconds(path: Path, t: np.ndarray, seg: np.ndarray) -> None:
+    """Warn when the median sample period is above :data:`SLOWEST_PERIOD_S` (``t`` in milliseconds, say): the
+    computed velocities and accelerations would be off by the unit's factor and its square."""
+    d = np.diff(t)[np.diff(seg) == 0]
+    if d.size and np.median(d) > SLOWEST_PERIOD_S:
+        warnings.warn(f"{path}: the median sample period is {np.median(d):.4g} s ({1 / np.median(d):.3g} Hz); is "
+                      "column 't' in seconds? Velocities and accelerations are computed from it (t in "
+                      "milliseconds would make them 1000x and 10^6x too small)", stacklevel=3)
 
 
 def read_log(path: str | os.PathLike, *, smoothing: SavGol | int | None = DEFAULT_SMOOTHING,

@@ -116,6 +116,27 @@ def test_nonuniform_sampling_is_warned_about(tmp_path: Path) -> None:
         read_log(path)
 
 
+def test_a_time_column_in_milliseconds_is_warned_about_where_derivatives_are_computed(tmp_path: Path) -> None:
+    """A 100 Hz log with t in ms (median period 10 "s") gets a warning naming the period; the same log in seconds,
+    and the ms log with velocity columns (nothing computed from t), do not."""
+    import warnings
+
+    t_s = np.arange(50) * 0.01
+    rows = [(float(x), float(np.sin(x)), float(np.cos(x)), 0.5) for x in t_s]
+    ms, sec, ms_qd = tmp_path / "ms.csv", tmp_path / "s.csv", tmp_path / "ms_qd.csv"
+    ms.write_text("t,q1,tau1\n" + "".join(f"{1000 * x!r},{q!r},{tau!r}\n" for x, q, _, tau in rows))
+    sec.write_text("t,q1,tau1\n" + "".join(f"{x!r},{q!r},{tau!r}\n" for x, q, _, tau in rows))
+    ms_qd.write_text("t,q1,qd1,qdd1,tau1\n" + "".join(f"{1000 * x!r},{q!r},{qd!r},0,{tau!r}\n"
+                                                       for x, q, qd, tau in rows))
+    with pytest.warns(UserWarning, match=r"ms.csv: the median sample period is 10 s \(0.1 Hz\); is column 't' in "
+                                         "seconds"):
+        read_log(ms)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_log(sec)
+        read_log(ms_qd)
+
+
 # --------------------------------------------------------------------------- errors
 HEAD = "t,q1,q2,tau1,tau2"
 CASES = {

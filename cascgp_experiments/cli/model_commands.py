@@ -76,7 +76,9 @@ def _read(path: Path, require_tau: bool = True) -> Any:
 
 def _describe(prog: str, data: Any, path: Path) -> None:
     m = data.meta
-    _note(prog, f"read {data.n_samples} rows, {data.dof} joints, {len(data.segments)} segment(s) from {path}")
+    steps = np.diff(data.t)[np.diff(data.segment) == 0]
+    period = f", median sample period {np.median(steps):.4g} s" if steps.size else ""
+    _note(prog, f"read {data.n_samples} rows, {data.dof} joints, {len(data.segments)} segment(s){period} from {path}")
     computed = [g for g in ("qd", "qdd") if m.get(f"{g}_source") == "computed"]
     if computed:
         _note(prog, f"computed {' and '.join(computed)} (no such columns) with {m.get('derivative_filter')}")
