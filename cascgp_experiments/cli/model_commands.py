@@ -78,7 +78,7 @@ def _describe(prog: str, data: Any, path: Path) -> None:
     m = data.meta
     steps = np.diff(data.t)[np.diff(data.segment) == 0]
     period = f", median sample period {np.median(steps):.4g} s" if steps.size else ""
-    _note(prog, f"read {data.n_samples} rows, {data.dof} joints, {len(data.segments)} segment(s){period} from {path}")
+    _note(prog, f"read {data.n_samples} rows, {data.dof} joint(s), {len(data.segments)} segment(s){period} from {path}")
     computed = [g for g in ("qd", "qdd") if m.get(f"{g}_source") == "computed"]
     if computed:
         _note(prog, f"computed {' and '.join(computed)} (no such columns) with {m.get('derivative_filter')}")
