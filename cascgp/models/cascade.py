@@ -464,7 +464,8 @@ def make_model(name: str, dof: int, rbd: Any = None, *, gp_config: Any = None, d
                train_on_predicted: bool = False, noise_var_floor: Any = None) -> CascadedGPModel:
     r"""Build an unfitted model.  ``name`` in :data:`MODEL_NAMES`; ``rbd`` (required for ``sp-*``):
     an object with ``dof`` and ``inverse_dynamics(q, qd, qdd)`` (e.g.
-    :class:`cascgp.rbd.RigidBodyModel`) whose DOF equals ``dof``.  See :class:`CascadedGPModel`.
+    :class:`cascgp.rbd.RigidBodyModel`) whose DOF equals ``dof``; ``np-*`` models use none and ignore it, so that
+    one call builds any of the twelve (``model.rbd`` is then ``None``).  See :class:`CascadedGPModel`.
 
     ``noise_var_floor`` (opt-in, default ``None``: no floor, the fit is exactly the one without it): a lower bound
     of each joint's fitted noise variance in N² m² (torque units squared), one number for every joint or one per
