@@ -180,7 +180,7 @@ class DynamicsData:
                 r = _first_bad_row(bad) + 1
                 raise ValueError(
                     f"DynamicsData.t: time must be strictly increasing within a segment; row {r} "
-                    f"(t = {t[r]!r}) does not come after row {r - 1} (t = {t[r - 1]!r}) "
+                    f"(t = {float(t[r])!r}) does not come after row {r - 1} (t = {float(t[r - 1])!r}) "
                     f"in segment {seg[r]}")
         if self.meta is not None and not isinstance(self.meta, dict):
             raise TypeError(f"DynamicsData.meta: expected a dict, got {type(self.meta).__name__}")

@@ -97,9 +97,12 @@ def _header(path: Path, names: list[str], row: int, require_tau: bool
         elif name == "segment":
             seg_col = c
         elif name != "t":
+            sep = next((s for s in (";", "\t", "|") if s in name), None)
+            hint = (f"; the columns are separated by {sep!r}, and a log's by commas" if sep is not None and
+                    len(names) == 1 else "")
             raise LogFormatError(
                 f"{where}, column {name!r} (column {c + 1}): unknown column; expected t, q1..qN, tau1..tauN and "
-                "optionally qd1..qdN, qdd1..qddN, segment (see cascgp.logs)")
+                f"optionally qd1..qdN, qdd1..qddN, segment (see cascgp.logs){hint}")
     if "t" not in seen:
         raise LogFormatError(f"{where}, column 't': missing required column (time in s)")
     if not groups["q"]:
@@ -164,7 +167,10 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise LogFormatError(f"{path}: not a UTF-8 text file ({exc}); expected a CSV log") from None
+        hint = ("; the SARCOS .mat files become logs with train, test = cascgp.load_ias(path) (or "
+                "cascgp.load_gpml) and train.save('train.npz')" if path.suffix.lower() == ".mat" else "")
+        raise LogFormatError(f"{path}: not a UTF-8 text file ({exc}); expected a CSV log or a .npz file of "
+                             f"DynamicsData.save{hint}") from None
     reader = csv.reader(io.StringIO(text), skipinitialspace=True)
     header = next(reader, None)
     while header is not None and not any(c.strip() for c in header):  # leading blank lines

@@ -208,8 +208,17 @@ def test_other_failures(tmp_path: Path, data: DynamicsData) -> None:
     with pytest.raises(LogFormatError, match="not a file"):
         read_log(tmp_path)
     (tmp_path / "bin.csv").write_bytes(b"\xff\xfe\x00garbage")
-    with pytest.raises(LogFormatError, match=r"bin\.csv: not a UTF-8 text file"):
+    with pytest.raises(LogFormatError, match=r"bin\.csv: not a UTF-8 text file") as exc:
         read_log(tmp_path / "bin.csv")
+    assert "load_ias" not in str(exc.value)
+    (tmp_path / "sarcos.mat").write_bytes(b"MATLAB 5.0 MAT-file\xff\xfe\x00")
+    with pytest.raises(LogFormatError, match=r"sarcos\.mat: not a UTF-8 text file.*cascgp\.load_ias\(path\)"):
+        read_log(tmp_path / "sarcos.mat")
+    for sep in (";", "\t"):
+        (tmp_path / "semi.csv").write_text(sep.join(["t", "q1", "tau1"]) + "\n" + sep.join("012") + "\n")
+        with pytest.raises(LogFormatError, match=f"unknown column.*separated by {re.escape(repr(sep))}, and a "
+                                                 "log's by commas"):
+            read_log(tmp_path / "semi.csv")
     with pytest.raises(TypeError, match="smoothing"):
         read_log(tmp_path / "none.csv", smoothing="savgol")
     with pytest.raises(TypeError, match="data"):
