@@ -317,6 +317,19 @@ def test_construction_errors(tmp, exact_urdf):
         RigidBodyModel.from_urdf(garbage)
 
 
+def test_the_parsers_reason_is_in_the_error_not_on_stderr(tmp, exact_urdf, capfd):
+    """urdfdom prints why it refuses a file to the process's stderr (a raw C++ line); the error message carries it
+    (the line of the XML error) and nothing reaches stderr. A URDF that parses prints nothing extra."""
+    bad = tmp / "bad.urdf"
+    bad.write_text("<robot name='x'><link name='a'/>\n<oops\n")
+    for build in (lambda: RigidBodyModel.from_urdf(bad), lambda: RigidBodyModel.from_urdf_text(bad.read_text())):
+        with pytest.raises(ValueError, match=r"cannot parse .*\(urdfdom: .*XML_ERROR.*Line number=2"):
+            build()
+    assert capfd.readouterr().err == ""
+    assert RigidBodyModel.from_urdf(exact_urdf).dof == RigidBodyModel.from_urdf_text(exact_urdf.read_text()).dof == 6
+    assert capfd.readouterr().err == ""
+
+
 def test_generator_errors(tmp):
     for error in (-0.1, 1.0, float("nan")):
         with pytest.raises(ValueError, match="error must be a finite relative error"):
