@@ -37,7 +37,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                     help="q̈ from the Savitzky-Golay filter (default) or the simulator's true q̈ (an ablation)")
     ap.add_argument("--sensor-pipeline", default="jaco2",
                     help="the env's sensing pipeline: jaco2 (default: the real Jaco 2's; "
-                         "docs/sensing-sources.md), ideal or ideal+FACTOR[+FACTOR...] with factors skew, velocity, "
+                         "sources: the documentation's Sensing sources page), ideal or ideal+FACTOR[+FACTOR...] with factors skew, velocity, "
                          "torque")
     ap.add_argument("--qdd-filter", default=None, choices=("centred", "causal"),
                     help="the Savitzky-Golay q̈ filter (default: causal under jaco2, else centred)")

@@ -92,7 +92,8 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
     p.add_argument("--video", type=Path, default=None, metavar="DIR",
                    help="write MP4 clips into the folder DIR (needs the video extra: pip install "
                         "'cascgp-jaco[video]'): the first and last attempt of every task and the revisit, RBD and the "
-                        "learned controller side by side, with RMSE and marbles on the frame")
+                        "learned controller side by side, with RMSE and marbles on the frame. The clips are recorded "
+                        "during the attempts: adding or changing --video on a rerun runs the controllers again")
     p.add_argument("--video-controller", type=str, default=None,
                    help="the learned controller shown next to RBD (default: the last controller that learns)")
     add_execution_args(p)
