@@ -36,9 +36,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     ap.add_argument("--qdd", default="savgol", choices=("savgol", "true"),
                     help="q̈ from the Savitzky-Golay filter (default) or the simulator's true q̈ (an ablation)")
     ap.add_argument("--sensor-pipeline", default="jaco2",
-                    help="the env's sensing pipeline: jaco2 (default: the real Jaco 2's; "
-                         "sources: the documentation's Sensing sources page), ideal or ideal+FACTOR[+FACTOR...] with factors skew, velocity, "
-                         "torque")
+                    help="the env's sensing pipeline: jaco2 (default: the real Jaco 2's; sources: the "
+                         "documentation's Sensing sources page), ideal or ideal+FACTOR[+FACTOR...] with factors "
+                         "skew, velocity, torque")
     ap.add_argument("--qdd-filter", default=None, choices=("centred", "causal"),
                     help="the Savitzky-Golay q̈ filter (default: causal under jaco2, else centred)")
     ap.add_argument("--link-inertials", default=None, choices=LINK_INERTIALS,
