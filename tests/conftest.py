@@ -156,3 +156,13 @@ def sarcos_dir() -> Path:
     if not (SARCOS_DIR / "ias_sarcos_data.mat").exists():
         pytest.skip(f"SARCOS data not found at {SARCOS_DIR}")
     return SARCOS_DIR
+
+
+def write_tiny_ias(path: Path) -> Path:
+    """A file with the IAS SARCOS variables and column counts (3 training and 2 test rows of zeros): what the
+    commands check before they run (``cascgp.sarcos.check_ias``), for tests that replace the run itself."""
+    from scipy.io import savemat
+
+    savemat(path, {"X_train": np.zeros((3, 21)), "Y_train": np.zeros((3, 7)), "X_test": np.zeros((2, 21)),
+                   "Y_test": np.zeros((2, 7))})
+    return path

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tests.conftest import write_tiny_ias
 
 from cascgp.checks import check_count, check_positive
 from cascgp.learning import RetrainConfig
@@ -166,7 +167,7 @@ def test_study_max_seconds_below_the_sarcos_grid_skips_sarcos(tmp_path: Path, mo
 
     monkeypatch.setattr(cli, "run_study", fake_run_study)
     monkeypatch.setattr(cli, "limit_threads", lambda n=1: None)
-    (tmp_path / "x.mat").write_bytes(b"")
+    write_tiny_ias(tmp_path / "x.mat")
     cli.main(["--out", str(tmp_path / "o"), "--grid", "0.5", "--max-seconds", "0.5", "--sarcos",
               str(tmp_path / "x.mat"), "--workers", "1"])
     assert seen["settings"].grid == (0.5,) and seen["settings"].sarcos_grid == ()
@@ -210,7 +211,7 @@ def test_commands_refuse_bad_options_before_any_work(command, argv, message, tmp
     from cascgp_experiments.cli import main
 
     monkeypatch.chdir(tmp_path)
-    (tmp_path / "x.mat").write_bytes(b"")
+    write_tiny_ias(tmp_path / "x.mat")
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as exc:
         main([command, "--out", str(out), *argv])

@@ -8,6 +8,7 @@ import importlib
 from pathlib import Path
 
 import pytest
+from tests.conftest import write_tiny_ias
 
 from cascgp.io import atomic_write_text
 
@@ -54,14 +55,7 @@ def test_folder_outputs_are_checked_before_anything_runs(module: str, extra: lis
                                                          capsys, monkeypatch) -> None:
     file = places["file"]
     if module == "sarcos":  # its file check comes first; give it a valid one
-        from scipy.io import savemat
-
-        import numpy as np
-
-        mat = places["folder"] / "ias.mat"
-        savemat(mat, {"X_train": np.zeros((3, 21)), "Y_train": np.zeros((3, 7)), "X_test": np.zeros((2, 21)),
-                      "Y_test": np.zeros((2, 7))})
-        extra = ["--quick", "--sarcos", str(mat)]
+        extra = ["--quick", "--sarcos", str(write_tiny_ias(places["folder"] / "ias.mat"))]
     err = _refused(module, [*extra, "--out", str(file)], capsys)
     assert f"--out: {file} is a file; expected a folder (created if missing)" in err
     err = _refused(module, [*extra, "--out", str(file / "sub")], capsys)

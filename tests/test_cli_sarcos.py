@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tests.conftest import write_tiny_ias
 
 from cascgp.logs import read_log, write_log
 from cascgp.metrics import nrmse
@@ -61,15 +62,6 @@ def test_fit_refuses_a_urdf_for_np_models(tmp_path: Path) -> None:
     assert r.returncode == 2 and "--urdf" in r.stderr and "non-parametric" in r.stderr
 
 
-def _tiny_ias(path: Path) -> Path:
-    """A file with the IAS variables and column counts (3 and 2 rows): what the commands check up front."""
-    from scipy.io import savemat
-
-    savemat(path, {"X_train": np.zeros((3, 21)), "Y_train": np.zeros((3, 7)), "X_test": np.zeros((2, 21)),
-                   "Y_test": np.zeros((2, 7))})
-    return path
-
-
 def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_path: Path, capsys) -> None:
     """``cascgp sarcos`` passes the study preset's SARCOS settings (``--quick``: the quick preset's), so that it
     computes the block ``cascgp study`` does; ``--restarts`` and ``--seed`` override them; it prints the table."""
@@ -86,7 +78,7 @@ def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_pat
 
     monkeypatch.setattr(cli, "run_sarcos", fake_run)
     monkeypatch.setattr(cli, "limit_threads", lambda n=1: None)  # the command's; not for the rest of the session
-    mat = _tiny_ias(tmp_path / "x.mat")
+    mat = write_tiny_ias(tmp_path / "x.mat")
     for args, preset in ((["--quick"], PRESETS["quick"]), ([], PRESETS["full"])):
         cli.main(["--sarcos", str(mat), "--out", str(tmp_path / "o"), "--workers", "1", *args])
         kw = seen[-1]
