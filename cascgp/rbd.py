@@ -34,13 +34,10 @@ Not thread-safe: a model owns one ``pinocchio.Data`` workspace.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
-import sys
-import tempfile
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +46,7 @@ import pinocchio as pin
 
 from cascgp.data import F64, all_finite
 from cascgp.rbd_joints import angle_joints, check_joint_selection, lock_joints
+from cascgp.urdf_parser_output import parser_output, parser_reason
 
 __all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
            "SUPPORTED_SIDECAR_VERSIONS", "SIDECAR_REQUIRED_FIELDS"]
@@ -75,43 +73,6 @@ def _as_vector(name: str, value: Any, n: int) -> np.ndarray:
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {arr}")
     return arr
-
-
-@contextlib.contextmanager
-def _parser_output() -> Iterator[list[str]]:
-    """Capture what the C++ URDF parser (urdfdom, inside Pinocchio) prints to the process's stderr while the block
-    runs; the yielded list receives it. Its reason for refusing a file (e.g. ``XML_ERROR_PARSING_ELEMENT ... Line
-    number=2``) is printed there, not put in the exception, so the error message takes it from here (rather than
-    a raw C++ line before it). Output of a parse that succeeds is passed on to stderr unchanged."""
-    said: list[str] = []
-    try:
-        sys.stderr.flush()
-        saved = os.dup(2)
-    except (OSError, ValueError):  # no stderr to capture: run as is
-        yield said
-        return
-    with tempfile.TemporaryFile() as tmp:
-        os.dup2(tmp.fileno(), 2)
-        failed = True
-        try:
-            yield said
-            failed = False
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-            tmp.seek(0)
-            text = tmp.read().decode("utf-8", "replace")
-            said.append(text)
-            if text and not failed:
-                sys.stderr.write(text)
-
-
-def _reason(said: list[str]) -> str:
-    """The parser's own words (from :func:`_parser_output`) for an error message, without its source location."""
-    text = " ".join(line.strip() for line in "".join(said).splitlines()
-                    if line.strip() and not line.strip().startswith("at line "))
-    text = " ".join(text.split()).removeprefix("Error:").strip()
-    return f" (urdfdom: {text})" if text else ""
 
 
 class RigidBodyModel:
@@ -214,12 +175,13 @@ class RigidBodyModel:
         path = Path(path)
         if not path.is_file():
             raise FileNotFoundError(f"URDF file not found: {str(path)!r}")
+        said: list[str] = []  # what the parser printed (none if reading the file fails first)
         try:
             text = path.read_text(encoding="utf-8")
-            with _parser_output() as said:
+            with parser_output() as said:
                 model = pin.buildModelFromUrdf(str(path))
         except Exception as exc:  # Pinocchio raises a bare ValueError/RuntimeError with a terse message
-            raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}{_reason(said)}") from exc
+            raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}{parser_reason(said)}") from exc
         rbd = cls(model, armature=armature, gravity=gravity, source=str(path), urdf_text=text, joints=joints,
                   locked=locked)
         rbd._check_dof(dof, f"URDF {str(path)!r}")
@@ -233,11 +195,12 @@ class RigidBodyModel:
         than ``dof``."""
         if not isinstance(text, str) or not text.strip():
             raise ValueError("urdf_text: expected a non-empty URDF document")
+        said: list[str] = []
         try:
-            with _parser_output() as said:
+            with parser_output() as said:
                 model = pin.buildModelFromXML(text)
         except Exception as exc:
-            raise ValueError(f"urdf_text: cannot parse the URDF document: {exc}{_reason(said)}") from exc
+            raise ValueError(f"urdf_text: cannot parse the URDF document: {exc}{parser_reason(said)}") from exc
         rbd = cls(model, urdf_text=text, **kwargs)
         rbd._check_dof(dof, "urdf_text: the URDF")
         return rbd

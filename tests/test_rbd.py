@@ -328,6 +328,41 @@ def test_the_parsers_reason_is_in_the_error_not_on_stderr(tmp, exact_urdf, capfd
     assert capfd.readouterr().err == ""
     assert RigidBodyModel.from_urdf(exact_urdf).dof == RigidBodyModel.from_urdf_text(exact_urdf.read_text()).dof == 6
     assert capfd.readouterr().err == ""
+    latin = tmp / "latin1.urdf"
+    latin.write_bytes(b"<robot name='\xe9'/>")  # not UTF-8: an error naming the file, before any parse
+    with pytest.raises(ValueError, match="cannot parse URDF .*latin1.urdf"):
+        RigidBodyModel.from_urdf(latin)
+
+
+def test_parses_in_threads_take_turns_and_leave_stderr_as_it_was(tmp, exact_urdf, monkeypatch):
+    """fd 2 is the process's: parses in several threads, failing and succeeding, leave it where it pointed; where
+    no temporary file can be made the parse runs uncaptured (same model, same error type)."""
+    import os
+    import tempfile
+    from concurrent.futures import ThreadPoolExecutor
+
+    bad = tmp / "bad_threads.urdf"
+    bad.write_text("<robot name='x'><link name='a'/>\n<oops\n")
+    before = os.fstat(2)
+
+    def parse(i: int) -> str:
+        try:
+            return str(RigidBodyModel.from_urdf(exact_urdf if i % 2 else bad).dof)
+        except ValueError as exc:
+            return "urdfdom" if "urdfdom:" in str(exc) else str(exc)
+
+    with ThreadPoolExecutor(4) as pool:
+        assert sorted(set(pool.map(parse, range(16)))) == ["6", "urdfdom"]
+    after = os.fstat(2)
+    assert (after.st_dev, after.st_ino) == (before.st_dev, before.st_ino)
+
+    def no_tmp(*args, **kwargs):
+        raise OSError("no temporary folder")
+
+    monkeypatch.setattr(tempfile, "TemporaryFile", no_tmp)
+    assert RigidBodyModel.from_urdf(exact_urdf).dof == 6
+    with pytest.raises(ValueError, match="cannot parse URDF"):
+        RigidBodyModel.from_urdf(bad)
 
 
 def test_generator_errors(tmp):
