@@ -20,10 +20,10 @@ processes or a Ray cluster, cached per controller so that a killed run resumes. 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import time
-from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Iterator
@@ -164,22 +164,23 @@ def video_attempts(plan: list[Attempt]) -> tuple[int, ...]:
 
 def controller_job(config: dict[str, Any], name: str, buffer_dir: str | None,
                    video: dict[str, Any] | None = None, paired: list[str] | None = None,
-                   compiled: bool = False) -> list[dict[str, Any]]:
+                   compiled: bool | None = None) -> list[dict[str, Any]]:
     """One job of :func:`run_transfer`: every attempt of one controller, on its own env (the attempts of a
     learning controller are sequential: its data accumulate). ``buffer_dir`` belongs to this job: it is
     emptied first, so a retried or resumed job starts again from no data. ``video``: a
     :class:`VideoOptions` as a dict; the chosen attempts of this controller are written to
     ``<folder>/<controller>/<attempt>.mp4`` (rendering does not change the simulation). ``paired``: controllers
     evaluated on this controller's model after every attempt (:class:`~cascgp_experiments.run_hooks.PairedEpisodes`).
-    ``compiled``: the control tick and online sample run compiled (the ``fast`` extra), as the run that planned the
-    job found; they agree with the NumPy path to round-off only, and a learning loop carries that forward, so the
-    job runs the path it was keyed with (a worker without Numba refuses ``compiled=True``).
+    ``compiled``: whether the control tick and online sample run compiled (the ``fast`` extra), as the run that
+    planned the job found (:func:`run_transfer` always says); they agree with the NumPy path to round-off only, and
+    a learning loop carries that forward, so the job runs the path it was keyed with (a worker that cannot run the
+    compiled loops refuses ``True``). ``None`` leaves the process's setting alone.
     Returns the attempt records."""
-    with kernel_path(compiled):
+    with contextlib.nullcontext() if compiled is None else kernel_path(compiled):
         return _controller_attempts(config, name, buffer_dir, video, paired)
 
 
-@contextmanager
+@contextlib.contextmanager
 def kernel_path(compiled: bool) -> Iterator[None]:
     """Run the block on the compiled loops (``compiled``; ``RuntimeError`` where Numba is missing) or on the NumPy
     path (``CASCGP_JIT=0`` for the block, restored afterwards)."""
@@ -188,8 +189,8 @@ def kernel_path(compiled: bool) -> Iterator[None]:
     if compiled:
         if not jit_enabled():
             raise RuntimeError("this job was planned with the compiled control tick (the fast extra, Numba), which "
-                               f"this worker lacks: install {DISTRIBUTION}[fast] on every worker, or run the "
-                               "command with CASCGP_JIT=0")
+                               "this worker cannot run (Numba missing, or CASCGP_JIT=0 set here): install "
+                               f"{DISTRIBUTION}[fast] on every worker, or run the whole command with CASCGP_JIT=0")
         yield
         return
     old = os.environ.get("CASCGP_JIT")
@@ -292,23 +293,32 @@ def claim_output(cfg: TransferConfig, out: Path, overwrite: bool = False) -> str
     An earlier run's buffers are deleted with ``overwrite``; a run of the same settings that was
     stopped is resumed (the controllers it finished come from the job cache); anything else in
     ``out/buffers`` is an error (``ValueError``), so that no data are mixed or lost."""
+    from cascgp.models.fastkernel import jit_enabled
+
     out = Path(out)
     buffers, cache = out / "buffers", transfer_cache(out)
     settings = cache / "settings.json"
+    want = {**cfg.to_dict(), "compiled_kernels": jit_enabled()}  # the kernel path changes a learner's attempts
+    have = read_json(settings) if settings.exists() else None
     if overwrite:
         had = buffers.exists() or cache.exists()
         shutil.rmtree(buffers, ignore_errors=True)
         shutil.rmtree(cache, ignore_errors=True)
         state = "overwrite" if had else "new"
-    elif settings.exists() and read_json(settings) == cfg.to_dict():
+    elif have == want:
         state = "resume"
     elif buffers.exists() and any(buffers.iterdir()):
-        raise ValueError(f"{buffers} holds data from an earlier run with other settings; choose a new --out folder "
-                         "or pass --overwrite")
+        path = ""
+        if isinstance(have, dict) and {k: v for k, v in have.items() if k != "compiled_kernels"} == cfg.to_dict():
+            ran = "with" if have.get("compiled_kernels") else "without"
+            path = (f" (it ran {ran} the fast extra's compiled loops, this run "
+                    f"{'with' if want['compiled_kernels'] else 'without'}; CASCGP_JIT=0 turns them off)")
+        raise ValueError(f"{buffers} holds data from an earlier run with other settings{path}; choose a new --out "
+                         "folder or pass --overwrite")
     else:
         shutil.rmtree(cache, ignore_errors=True)
         state = "new"
-    write_json(settings, cfg.to_dict())
+    write_json(settings, want)
     return state
 
 
@@ -335,9 +345,9 @@ def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bo
     jobs = [{"config": config, "name": name,
              "buffer_dir": None if out is None else str(Path(out).resolve() / "buffers" / name)}
             for name in cfg.controllers]
-    if jit_enabled():  # only then, as video: the job cache keys of runs on the NumPy path stay the same
-        for job in jobs:
-            job["compiled"] = True
+    compiled = jit_enabled()
+    for job in jobs:  # the kernel path is part of the job's key, and the job runs on it
+        job["compiled"] = compiled
     if video is not None:  # only then: the job cache keys of runs without video stay the same
         for job in jobs:
             job["video"] = {**asdict(video), "controllers": list(video.controllers), "attempts": list(video.attempts)}
@@ -350,7 +360,7 @@ def run_transfer(cfg: TransferConfig, out: Path | None = None, show_progress: bo
     if video is not None:
         compose_videos(video, plan)
     if stats is not None:
-        stats.update(res.stats(), labels=list(cfg.controllers))
+        stats.update(res.stats(), labels=list(cfg.controllers), compiled_kernels=compiled)
     return runs
 
 
@@ -428,11 +438,12 @@ def write_outputs(runs: list[ControllerRun], cfg: TransferConfig, out: Path, wal
     ``jobs``: the job statistics of the run (workers, backend, seconds per controller), stored as ``"jobs"``."""
     from cascgp.models.fastkernel import jit_enabled
 
+    compiled = (jobs or {}).get("compiled_kernels", jit_enabled())  # the path the jobs were planned and run on
     results = {
         "config": cfg.to_dict(),
         "wall_seconds": wall_s,
         "controllers": {run.name: run.attempts for run in runs},
-        "provenance": {"versions": package_versions(), "compiled_kernels": jit_enabled(), "machine": machine_info(),
+        "provenance": {"versions": package_versions(), "compiled_kernels": compiled, "machine": machine_info(),
                        "written_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
     }
     if jobs is not None:

@@ -35,7 +35,7 @@ def test_a_job_keyed_compiled_refuses_a_worker_without_the_compiled_path(monkeyp
 
 
 @pytest.mark.parametrize("jit", ["0", "1"])
-def test_the_job_key_says_compiled_only_when_the_compiled_path_runs(jit: str, monkeypatch) -> None:
+def test_every_job_is_keyed_with_the_kernel_path_it_runs_on(jit: str, monkeypatch) -> None:
     monkeypatch.setenv("CASCGP_JIT", jit)
     if jit == "1" and not jit_enabled():
         pytest.skip("Numba is not installed (the fast extra)")
@@ -52,5 +52,39 @@ def test_the_job_key_says_compiled_only_when_the_compiled_path_runs(jit: str, mo
     cfg = TransferConfig(controllers=("rbd", "sp-inward"), tasks=("front",), attempts=1, revisit=False)
     with pytest.raises(Planned):
         run_transfer(cfg, None, workers=1, show_progress=False)
-    assert [job.get("compiled") for job in seen] == [True, True] if jit == "1" else [None, None]
-    assert all("compiled" not in job for job in seen) == (jit == "0")  # NumPy-path keys as before
+    assert [job["compiled"] for job in seen] == ([True, True] if jit == "1" else [False, False])
+
+
+@pytest.mark.parametrize("compiled", [False, None])
+def test_a_job_runs_its_attempts_on_its_kernel_path(compiled: bool | None, monkeypatch) -> None:
+    """``compiled=False``: the attempts run with the compiled loops off, whatever the worker has; ``None`` (callers
+    that do not say, e.g. the studies) leaves the process's setting as it is."""
+    import cascgp_experiments.transfer as transfer
+
+    monkeypatch.setenv("CASCGP_JIT", "1")
+    inside: list = []
+    monkeypatch.setattr(transfer, "_controller_attempts",
+                        lambda *args: inside.append(os.environ.get("CASCGP_JIT")) or [{"ok": True}])
+    cfg = TransferConfig(controllers=("rbd",), tasks=("front",), attempts=1, revisit=False)
+    assert transfer.controller_job(cfg.to_dict(), "rbd", None, compiled=compiled) == [{"ok": True}]
+    assert inside == (["0"] if compiled is False else ["1"]) and os.environ["CASCGP_JIT"] == "1"
+
+
+def test_a_resume_on_the_other_kernel_path_is_refused_naming_it(tmp_path, monkeypatch) -> None:
+    from cascgp_experiments.transfer import claim_output
+
+    cfg = TransferConfig(controllers=("rbd",), tasks=("front",), attempts=1, revisit=False)
+    monkeypatch.setenv("CASCGP_JIT", "0")
+    assert claim_output(cfg, tmp_path) == "new"
+    (tmp_path / "buffers" / "rbd").mkdir(parents=True)
+    (tmp_path / "buffers" / "rbd" / "episode.npz").write_bytes(b"x")
+    assert claim_output(cfg, tmp_path) == "resume"
+    settings = tmp_path / "cache" / "transfer" / "settings.json"
+    import json
+
+    flipped = {**json.loads(settings.read_text()), "compiled_kernels": True}  # as if run with the fast extra
+    settings.write_text(json.dumps(flipped))
+    with pytest.raises(ValueError, match=r"other settings \(it ran with the fast extra's compiled loops, this run "
+                                         r"without; CASCGP_JIT=0 turns them off\)"):
+        claim_output(cfg, tmp_path)
+    assert json.loads(settings.read_text()) == flipped  # refused: nothing changed
