@@ -167,8 +167,9 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
     try:
         text = path.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError as exc:
-        hint = ("; the SARCOS .mat files become logs with train, test = cascgp.load_ias(path) (or "
-                "cascgp.load_gpml) and train.save('train.npz')" if path.suffix.lower() == ".mat" else "")
+        hint = ("; the SARCOS .mat files become logs with train, test = cascgp.load_ias(path) (the IAS file) or "
+                "data = cascgp.load_gpml(path) (a GPML file), then .save('x.npz')" if path.suffix.lower() == ".mat"
+                else "")
         raise LogFormatError(f"{path}: not a UTF-8 text file ({exc}); expected a CSV log or a .npz file of "
                              f"DynamicsData.save{hint}") from None
     reader = csv.reader(io.StringIO(text), skipinitialspace=True)

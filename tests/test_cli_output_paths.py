@@ -22,7 +22,7 @@ def places(tmp_path: Path) -> dict[str, Path]:
 
 def _refused(module: str, argv: list[str], capsys) -> str:
     cli = importlib.import_module(f"cascgp_experiments.cli.{module}")
-    main = getattr(cli, {"model_commands": argv.pop(0)}.get(module, "main"))
+    main = getattr(cli, argv.pop(0) if module == "model_commands" else "main")
     with pytest.raises(SystemExit) as exc:
         main(argv)
     assert exc.value.code == 2
@@ -50,7 +50,7 @@ def test_file_outputs_are_checked_before_the_inputs_are_read(places: dict[str, P
 
 
 @pytest.mark.parametrize("module,extra", [("transfer", ["--quick"]), ("study", ["--smoke", "--no-sarcos"]),
-                                          ("sarcos", ["--quick", "--sarcos", "MISSING"]), ("collect", ["--smoke"])])
+                                          ("sarcos", ["--quick"]), ("collect", ["--smoke"])])
 def test_folder_outputs_are_checked_before_anything_runs(module: str, extra: list[str], places: dict[str, Path],
                                                          capsys, monkeypatch) -> None:
     file = places["file"]
@@ -64,6 +64,22 @@ def test_folder_outputs_are_checked_before_anything_runs(module: str, extra: lis
         err = _refused(module, [*extra, "--out", str(places["folder"] / "o"), "--video", str(file)], capsys)
         assert f"--video: {file} is a file; expected a folder (created if missing)" in err
     assert file.read_text() == "x"
+
+
+def test_a_dangling_link_or_a_path_that_cannot_be_looked_at_is_a_message(places: dict[str, Path],
+                                                                         monkeypatch) -> None:
+    from cascgp_experiments.cli.options import output_path_problem
+
+    link = places["folder"] / "out"
+    link.symlink_to(places["folder"] / "gone")
+    gone = places["folder"] / "gone"
+    assert output_path_problem(link, "folder") == f"{link} is a link to {gone}, which does not exist"
+
+    def denied(self: Path) -> bool:
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(Path, "is_symlink", denied)  # as Path.exists does under a folder without search permission
+    assert output_path_problem(places["folder"] / "x.npz", "file") == f"{places['folder'] / 'x.npz'}: Permission denied"
 
 
 def test_atomic_write_names_a_folder_or_a_file_in_the_way(places: dict[str, Path]) -> None:

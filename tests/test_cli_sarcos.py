@@ -126,7 +126,8 @@ def test_a_file_that_is_not_the_ias_one_stops_the_command_before_it_runs(command
     cases = [(["--sarcos", str(gpml)], {}, ["--sarcos: ", "missing variable(s)", "'sarcos_inv' (T x 28)",
                                             "cascgp.load_gpml"]),
              (["--sarcos", str(text)], {}, ["--sarcos: ", "train.csv: not a readable MATLAB .mat file"]),
-             ([], {SARCOS_ENV: str(gpml)}, [f"${SARCOS_ENV}: ", "expected the IAS SARCOS format"])]
+             ([], {SARCOS_ENV: str(gpml)}, [f"${SARCOS_ENV}: ", "expected the IAS SARCOS format"]),
+             ([], {SARCOS_ENV: str(tmp_path / "nowhere.mat")}, [f"${SARCOS_ENV}: file not found: "])]
     for args, env, expected in cases:
         monkeypatch.delenv(SARCOS_ENV, raising=False)
         for k, v in env.items():

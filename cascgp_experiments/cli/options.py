@@ -45,20 +45,25 @@ def check_sarcos_file(parser: argparse.ArgumentParser, path: str, source: str = 
 def output_path_problem(path: str | os.PathLike, kind: str) -> str | None:
     """What stops a command from writing its output ``path`` (``kind``: ``"file"`` or ``"folder"``), checked
     before the command's work (a fit can take minutes): ``None`` when nothing does. Refused: a file path that is
-    a folder, a folder path that is a file, a path through a file, and a nearest existing folder this process
-    cannot write to."""
+    a folder, a folder path that is a file, a dangling link, a path through a file, a nearest existing folder this
+    process cannot write to, and a path it cannot even look at."""
     path = Path(path)
-    if kind == "file" and path.is_dir():
-        return f"{path} is a folder; expected the path of a file"
-    if kind == "folder" and path.exists() and not path.is_dir():
-        return f"{path} is a file; expected a folder (created if missing)"
-    if kind == "folder" and path.is_dir():
-        return None if os.access(path, os.W_OK | os.X_OK) else f"{path} is not writable"
-    nearest = next(p for p in path.parents if p.exists())  # the file's folder, or a missing folder's first existing one
-    if not nearest.is_dir():
-        return f"{nearest} is a file, so {path} cannot be created"
-    if not os.access(nearest, os.W_OK | os.X_OK):
-        return f"{nearest} is not writable, so {path} cannot be created"
+    try:
+        if path.is_symlink() and not path.exists():
+            return f"{path} is a link to {os.readlink(path)}, which does not exist"
+        if kind == "file" and path.is_dir():
+            return f"{path} is a folder; expected the path of a file"
+        if kind == "folder" and path.exists() and not path.is_dir():
+            return f"{path} is a file; expected a folder (created if missing)"
+        if kind == "folder" and path.is_dir():
+            return None if os.access(path, os.W_OK | os.X_OK) else f"{path} is not writable"
+        nearest = next(p for p in path.parents if p.exists())  # the file's folder, or a missing one's first existing
+        if not nearest.is_dir():
+            return f"{nearest} is a file, so {path} cannot be created"
+        if not os.access(nearest, os.W_OK | os.X_OK):
+            return f"{nearest} is not writable, so {path} cannot be created"
+    except OSError as exc:  # e.g. a folder on the way that this process may not search
+        return f"{path}: {exc.strerror or exc}"
     return None
 
 

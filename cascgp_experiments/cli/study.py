@@ -83,8 +83,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     sarcos = None
     if not a.no_sarcos:
         found = default_sarcos()
-        sarcos = a.sarcos or (str(found) if found is not None and found.exists() else None)
-        if sarcos is not None:
+        sarcos = a.sarcos or (None if found is None else str(found))  # $CASCGP_SARCOS is checked like --sarcos
+        if sarcos is not None and st.sarcos_grid:
             check_sarcos_file(ap, sarcos, "--sarcos" if a.sarcos else default_sarcos_source())
         if sarcos is None:
             print(f"no SARCOS file (--sarcos or ${SARCOS_ENV}): the SARCOS part is skipped", file=sys.stderr)
