@@ -28,6 +28,7 @@ import re
 from pathlib import Path
 
 from cascgp.data import DynamicsData
+from cascgp.io import file_in_path
 
 _EPISODE_FILE = re.compile(r"^episode_(\d{5,})\.npz$")
 
@@ -54,7 +55,11 @@ class DataBuffer:
         self.folder = None if folder is None else Path(folder)
         self._episodes: list[DynamicsData] = []
         if self.folder is not None:
-            self.folder.mkdir(parents=True, exist_ok=True)
+            try:
+                self.folder.mkdir(parents=True, exist_ok=True)
+            except (FileExistsError, NotADirectoryError):  # the folder, or a part of its path, is a file
+                raise NotADirectoryError(f"folder: cannot keep the buffer's episodes in {self.folder}: "
+                                         f"{file_in_path(self.folder)} is a file") from None
             found = [(int(m.group(1)), p) for p in self.folder.iterdir() if (m := _EPISODE_FILE.match(p.name))]
             self._episodes = [DynamicsData.load(p) for _, p in sorted(found, key=lambda e: e[0])]
 

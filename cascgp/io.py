@@ -82,8 +82,9 @@ def remove_stale_temporaries(folder: str | os.PathLike[str]) -> list[Path]:
     return removed
 
 
-def _file_in_path(folder: Path) -> Path:
-    """The first part of ``folder``'s path that exists and is not a folder (``folder`` itself if none is found)."""
+def file_in_path(folder: Path) -> Path:
+    """The first part of ``folder``'s path that exists and is not a folder (``folder`` itself if none is found):
+    what to name when a folder cannot be created."""
     for part in reversed([folder, *folder.parents]):
         if part.exists() and not part.is_dir():
             return part
@@ -107,7 +108,7 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], object], 
     try:
         folder.mkdir(parents=True, exist_ok=True)
     except (FileExistsError, NotADirectoryError):  # a part of the folder's path is a file
-        raise NotADirectoryError(f"{path}: cannot create its folder {folder}: {_file_in_path(folder)} is a "
+        raise NotADirectoryError(f"{path}: cannot create its folder {folder}: {file_in_path(folder)} is a "
                                  "file") from None
     remove_stale_temporaries(folder)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_HOST}-{os.getpid()}.", suffix=".tmp", dir=folder)

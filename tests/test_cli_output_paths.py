@@ -89,3 +89,15 @@ def test_atomic_write_names_a_folder_or_a_file_in_the_way(places: dict[str, Path
     with pytest.raises(NotADirectoryError, match=f"cannot create its folder .*: {file} is a file"):
         atomic_write_text(file / "a" / "b.txt", "y")
     assert list(folder.iterdir()) == [] and file.read_text() == "x"  # no temporary left, nothing replaced
+
+
+def test_a_data_buffer_on_a_file_names_it(places: dict[str, Path]) -> None:
+    from cascgp import DataBuffer
+
+    file = places["file"]
+    for folder in (file, file / "episodes"):
+        with pytest.raises(NotADirectoryError, match=f"folder: cannot keep the buffer's episodes in {folder}: {file} "
+                                                     "is a file"):
+            DataBuffer(folder)
+    assert file.read_text() == "x"
+
