@@ -224,3 +224,19 @@ def test_ray_cluster_refusing_the_command_is_a_one_line_error(ray_head, tmp_path
         assert text in run.stderr, run.stderr[-3000:]
     assert "Traceback" not in run.stderr
     assert not (tmp_path / "data").exists()
+
+
+def test_an_address_of_this_machine_where_nothing_listens_is_refused_at_once() -> None:
+    """``ray.init`` waits without end for a cluster at a port of this machine where none runs; the connection is
+    tried first, and a refused one is a ConnectionError naming the port. Other addresses go to Ray unchanged."""
+    from cascgp_experiments.ray_backend import _check_something_listens
+
+    port = _free_port()  # bound and closed again: nothing listens there
+    with pytest.raises(ConnectionError, match=f"nothing listens on port {port} of this machine"):
+        _check_something_listens(f"127.0.0.1:{port}")
+    with socket.socket() as server:  # something listens: passed on to Ray
+        server.bind(("127.0.0.1", 0))
+        server.listen()
+        _check_something_listens(f"127.0.0.1:{server.getsockname()[1]}")
+    for address in ("auto", "ray://127.0.0.1:1", "198.51.100.7:6379", "127.0.0.1"):
+        _check_something_listens(address)  # not tried here
