@@ -205,6 +205,14 @@ def test_ray_option_without_ray_is_a_clear_error(tmp_path: Path) -> None:
 
 
 # --------------------------------------------------------------------------- the --quick runs (slow)
+def _backend_args(backend: str) -> list[str]:
+    """The command-line options of a ``--quick`` rerun on ``backend`` (``workers2`` or ``ray``: skipped without Ray)."""
+    if backend == "ray":
+        needs_ray()
+        return ["--ray", "local", "--workers", "2"]
+    return ["--workers", "2"]
+
+
 @pytest.fixture(scope="module")
 def quick_study_serial(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("quick_study") / "w1"
@@ -215,9 +223,7 @@ def quick_study_serial(tmp_path_factory) -> Path:
 @pytest.mark.slow
 @pytest.mark.parametrize("backend", ["workers2", "ray"])
 def test_quick_study_identical_across_backends(quick_study_serial: Path, tmp_path: Path, backend: str) -> None:
-    extra = ["--workers", "2"] if backend == "workers2" else ["--ray", "local", "--workers", "2"]
-    if backend == "ray":
-        needs_ray()
+    extra = _backend_args(backend)
     out = tmp_path / backend
     _cli("scripts.data_efficiency", "--out", str(out), "--quick", *extra)
     _assert_same_data(quick_study_serial, out)
@@ -255,9 +261,7 @@ def quick_transfer_serial(tmp_path_factory) -> Path:
 @pytest.mark.slow
 @pytest.mark.parametrize("backend", ["workers2", "ray"])
 def test_quick_transfer_identical_across_backends(quick_transfer_serial: Path, tmp_path: Path, backend: str) -> None:
-    extra = ["--workers", "2"] if backend == "workers2" else ["--ray", "local", "--workers", "2"]
-    if backend == "ray":
-        needs_ray()
+    extra = _backend_args(backend)
     out = tmp_path / backend
     _cli("scripts.task_transfer", "--quick", "--overwrite", "--out", str(out), *extra)
     assert _transfer_numbers(out) == _transfer_numbers(quick_transfer_serial)
