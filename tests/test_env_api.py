@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pickle
+import warnings
 
 import gymnasium as gym
 import mujoco
@@ -161,20 +162,28 @@ def test_bad_action_leaves_state_untouched(pour_env, action, exc, match):
     pour_env.reset(seed=0, options={"task": "front"})
     u = pour_env.unwrapped
     qpos, qvel, t = u.data.qpos.copy(), u.data.qvel.copy(), u.data.time
-    with pytest.raises(exc, match=match):
+    with pytest.raises(exc, match=match), warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)  # the error alone, no NumPy warning before it
         pour_env.step(action)
     assert np.array_equal(qpos, u.data.qpos) and np.array_equal(qvel, u.data.qvel) and t == u.data.time
 
 
-def test_out_of_range_action_is_clipped():
+@pytest.mark.parametrize("big", [1e3, 1e200, np.finfo(np.float64).max])
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_out_of_range_action_is_clipped(big, dtype):
     env = gym.make("JacoPour-v0", n_marbles=20, sensor_noise=None)
     env.reset(seed=0, options={"task": "front"})
-    obs, *_ = env.step(np.full(6, 1e3))
+    action = np.full(6, min(big, float(np.finfo(dtype).max)), dtype=dtype)
+    action[1] *= -1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a huge finite action is clipped without an overflow warning
+        env.step(action)
     u = env.unwrapped
-    assert np.allclose(u.data.ctrl[:6], robot.TORQUE_LIMITS)
+    sign = np.array([1, -1, 1, 1, 1, 1])
+    assert np.allclose(u.data.ctrl[:6], sign * robot.TORQUE_LIMITS)
     # The torque loop delivers the clipped command after its first-order lag (from 0 at reset).
     lag = 1.0 - np.exp(-u.control_dt / robot.TORQUE_LOOP_TAU)
-    assert np.allclose(u.data.actuator_force[:6], robot.TORQUE_LIMITS * lag)
+    assert np.allclose(u.data.actuator_force[:6], sign * robot.TORQUE_LIMITS * lag)
     env.close()
 
 

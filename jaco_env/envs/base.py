@@ -297,6 +297,10 @@ class JacoMujocoEnv(MujocoEnv):
         self._qacc_arm = live_view(d.qacc, self.arm_dof_adr)
         self._act_low = self.action_space.low.astype(np.float64)
         self._act_high = self.action_space.high.astype(np.float64)
+        # finiteness probes by dtype: a.dot(p) is finite exactly when every entry of a is, and the probe's
+        # scale keeps each product of a finite entry below 4e8: a clipped action brings no NumPy warning
+        # (a.dot(a) overflowed for entries above 1e154); only +inf beside -inf, refused anyway, warns
+        self._finite_probe = {"d": np.full(_N, 1e-300), "f": np.full(_N, 1e-30, np.float32)}
         slots = [slice(0, _N)] + ([slice(_N, 2 * _N)] if control_mode == "velocity" else [])
         self._period = ControlPeriod(m, d, self.frame_skip, slots, self._tau_sensor, self.arm_dof_adr)
         self._pending: np.ndarray | None = None  # this step's pipeline measurement, time not yet set
@@ -346,9 +350,9 @@ class JacoMujocoEnv(MujocoEnv):
         """The action as float64, clipped to the bounds; TypeError (not real numbers: str, bool, complex,
         ...) or ValueError (shape, NaN/inf) naming ``action`` otherwise, before anything changes."""
         # np.clip(a, low, high) for finite a, without np.clip's Python wrapper; the usual action (a float32 or
-        # float64 array of the right shape, a.a finite) skips real_array, whose result it would be
+        # float64 array of the right shape, every entry finite) skips real_array, whose result it would be
         if (type(action) is np.ndarray and action.shape == (_N,) and action.dtype.char in "fd"
-                and math.isfinite(action.dot(action))):
+                and math.isfinite(action.dot(self._finite_probe[action.dtype.char]))):
             a = np.maximum(action, self._act_low)  # float64 (float32 entries are converted exactly)
         else:
             a = np.maximum(real_array(action, (_N,), "action"), self._act_low)
