@@ -43,7 +43,8 @@ def compare_results(a: dict[str, Any], b: dict[str, Any]) -> dict[str, Any]:
         for m in A["models"]:
             x, y = np.asarray(A["models"][m]["nrmse_all"], float), np.asarray(B["models"][m]["nrmse_all"], float)
             if x.shape != y.shape:
-                raise ValueError(f"{blk} {m}: nrmse_all shapes differ: {x.shape} / {y.shape}")
+                raise ValueError(f"{blk} {m}: the runs have different subsets, grids or joints: scores of shape "
+                                 f"{x.shape} / {y.shape} (subsets, grid points, joints)")
             diffs.append(float(np.abs(y - x).max()))
             rels.append((np.abs(y - x) / np.abs(x)).ravel())
         rel = np.concatenate(rels)

@@ -326,6 +326,8 @@ def main(argv: list[str] | None = None) -> int:
     from scripts.bench_scaling import scaling, scaling_one  # these import this module
     from scripts.fit_accuracy import FIT_ACCURACY_ARMS, run_fit_accuracy
 
+    from cascgp_experiments.cli.options import check_input, check_output, check_sarcos_file
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", required=True, help="output directory (bench_cascgp.json is written there)")
     ap.add_argument("--n", type=int, default=500)
@@ -365,6 +367,11 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.scaling_one is not None:
         return scaling_one(args)
+    check_output(ap, args.out, "--out", "folder")
+    if args.sarcos:
+        check_sarcos_file(ap, args.sarcos)
+    if args.jaco and args.jaco != "quick":
+        check_input(ap, args.jaco, "--jaco", "folder", contains=("jaco_train.npz", "jaco_test.npz"))
     if args.scaling is not None:
         return scaling(args)
     if args.fit_accuracy:

@@ -36,6 +36,8 @@ import sys
 import time
 from pathlib import Path
 
+from cascgp_experiments.cli.options import check_output
+
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
@@ -253,6 +255,7 @@ def main(argv: list[str] | None = None) -> None:
     args = p.parse_args(argv)
     if args.steps < 1 or args.rounds < 1:
         p.error("--steps and --rounds must be >= 1")
+    check_output(p, args.out, "--out", "folder")
     rows = [bench(e, args.steps, args.rounds, args.sensor_pipeline) for e in args.env]
     print(f"{'env':16s} {'env steps/s':>12s} {'raw steps/s':>12s} {'cost':>6s} {'cost per round':>24s} "
           f"{'cpu cost':>8s} {'bare Gym cost':>13s} {'raw Newton':>11s} {'raw CG':>8s} "

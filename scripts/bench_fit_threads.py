@@ -38,6 +38,8 @@ import sys
 import time
 from pathlib import Path
 
+from cascgp_experiments.cli.options import check_output, check_sarcos_file
+
 CASES = ("user-default", "user-previous", "bench-1thread")
 
 _CHILD = r"""
@@ -97,6 +99,9 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.background_load < 0:
         ap.error(f"--background-load: expected an integer >= 0, got {args.background_load}")
+    check_output(ap, args.out, "--out", "folder")
+    if args.sarcos:
+        check_sarcos_file(ap, args.sarcos)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     runs: dict[str, list[dict]] = {c: [] for c in CASES}

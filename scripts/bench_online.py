@@ -36,6 +36,7 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 
+from cascgp_experiments.cli.options import check_input, check_output  # noqa: E402
 from scripts.provenance import git_commit  # noqa: E402
 
 
@@ -174,6 +175,8 @@ def main(argv: list[str] | None = None) -> None:
                     help="ticks of the innovation- and variance-gated controllers timed again one every 25 ms (the "
                          "40 Hz control period), asleep and busy-waiting between them (0: skip)")
     a = ap.parse_args(argv)
+    check_output(ap, a.out, "--out", "folder")
+    check_input(ap, a.data, "--data", "folder", contains=("jaco_train.npz", "jaco_test.npz"))
     import torch
 
     torch.set_num_threads(1)

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from cascgp_experiments.cli.options import check_output
 from cascgp_experiments.parallel_bench import CASES, run
 
 
@@ -24,6 +25,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--root", type=Path, default=Path("out/bench_parallel"), help="folder for the runs' outputs")
     ap.add_argument("--json", type=Path, default=None, help="write the results here (after every run)")
     a = ap.parse_args(argv)
+    check_output(ap, a.root, "--root", "folder")
+    check_output(ap, a.json, "--json", "file")
     cases = [c.strip() for c in a.cases.split(",") if c.strip()]
     bad = [c for c in cases if c not in CASES]
     if bad:

@@ -11,6 +11,7 @@ import argparse
 import json
 from pathlib import Path
 
+from cascgp_experiments.cli.options import check_output
 from cascgp_experiments.compare import compare_results, format_comparison
 
 
@@ -20,13 +21,19 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("other", type=Path, help="results.json of the run to compare")
     ap.add_argument("--json", type=Path, default=None, help="write the comparison here")
     a = ap.parse_args(argv)
+    check_output(ap, a.json, "--json", "file")
     runs = []
     for p in (a.reference, a.other):
         try:
             runs.append(json.loads(p.read_text()))
         except (OSError, ValueError) as exc:
             ap.error(f"{p}: expected a study's results.json ({exc})")
-    c = compare_results(*runs)
+        if not isinstance(runs[-1], dict) or not ({"jaco", "sarcos"} & set(runs[-1])):
+            ap.error(f"{p}: expected a study's results.json (no 'jaco' or 'sarcos' results)")
+    try:
+        c = compare_results(*runs)
+    except ValueError as exc:
+        ap.error(f"the runs cannot be compared: {exc}")
     print(format_comparison(c))
     if a.json is not None:
         a.json.parent.mkdir(parents=True, exist_ok=True)

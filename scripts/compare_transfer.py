@@ -12,6 +12,7 @@ import argparse
 import json
 from pathlib import Path
 
+from cascgp_experiments.cli.options import check_output
 from cascgp_experiments.compare import compare_transfer, format_transfer_comparison
 
 
@@ -21,6 +22,7 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("other", type=Path, help="results.json of the run to compare")
     ap.add_argument("--json", type=Path, default=None, help="write the comparison here")
     a = ap.parse_args(argv)
+    check_output(ap, a.json, "--json", "file")
     runs = []
     for p in (a.reference, a.other):
         try:

@@ -15,6 +15,7 @@ import argparse
 def main(argv: list[str] | None = None) -> None:
     from cascgp.data import DynamicsData
     from cascgp.io import write_json
+    from cascgp_experiments.cli.options import check_input, check_output
     from cascgp_experiments.analyses import spearman_block
 
     ap = argparse.ArgumentParser(description="Spearman correlation of joint states and torques")
@@ -22,6 +23,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--out", required=True, help="JSON file to write")
     ap.add_argument("--hz", type=float, default=10.0, help="subsample to this rate first")
     a = ap.parse_args(argv)
+    check_input(ap, a.data, "--data", "file")
+    check_output(ap, a.out, "--out", "file")
     d = DynamicsData.load(a.data).subsample(a.hz)
     write_json(a.out, spearman_block(d))
 

@@ -31,6 +31,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--tol", type=float, default=0.1)
     args = ap.parse_args(argv)
     from cascgp_experiments.audit_suite import run_audit
+    from cascgp_experiments.cli.options import check_output, check_sarcos_file
+
+    check_output(ap, args.out, "--out", "folder")
+    if args.sarcos:
+        check_sarcos_file(ap, args.sarcos)
 
     command = "python -m scripts.fit_audit " + " ".join(argv if argv is not None else sys.argv[1:])
     res, text = run_audit(args.out, sarcos=args.sarcos, cold=args.cold, seed=args.seed, quick=args.quick,

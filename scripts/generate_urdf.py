@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 
+from cascgp_experiments.cli.options import check_output
 from cascgp_experiments.nominal_urdf import DEFAULT_OUT, OUT_NAMES, write
 from jaco_env.link_inertials import LINK_INERTIALS
 
@@ -28,6 +29,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--error", type=float, default=0.1, help="relative calibration error e in [0, 1)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the calibration error")
     args = parser.parse_args(argv)
+    check_output(parser, args.out, "--out", "file")
     targets = ([(args.out, args.link_inertials)] if args.out is not None
                else [(str(DEFAULT_OUT.with_name(name)), li) for li, name in OUT_NAMES.items()])
     for out, li in targets:

@@ -28,6 +28,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from cascgp_experiments.cli.options import check_output
+
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
@@ -126,6 +128,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--n-marbles", type=int, default=30)
     p.add_argument("--jobs", type=int, default=2, help="worker processes")
     args = p.parse_args(argv)
+    check_output(p, args.out, "--out", "folder")
     jobs = [(t, c, args.payload, args.seed, args.n_marbles) for t in args.tasks for c in args.controllers]
     if args.jobs > 1:
         with ProcessPoolExecutor(args.jobs) as ex:

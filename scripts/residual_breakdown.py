@@ -14,6 +14,7 @@ import argparse
 from pathlib import Path
 
 from cascgp.io import write_json
+from cascgp_experiments.cli.options import check_output
 from cascgp_experiments.residual import ROWS, breakdown
 
 
@@ -23,6 +24,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--seconds", type=float, default=20.0)
     p.add_argument("--seed", type=int, default=0)
     a = p.parse_args(argv)
+    check_output(p, a.out, "--out", "folder")
     res = breakdown(a.seconds, a.seed)
     write_json(a.out / "residual_breakdown.json", {"seconds": a.seconds, "seed": a.seed, **res}, indent=2)
     print("| N m, per joint | " + " | ".join(f"J{i + 1}" for i in range(6)) + " |")

@@ -17,6 +17,7 @@ from pathlib import Path
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
+from cascgp_experiments.cli.options import check_output  # noqa: E402
 from cascgp_experiments.soak import FAULTS, RSS_BOUND_MIB, SoakConfig, run_soak  # noqa: E402
 
 
@@ -31,6 +32,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[SoakConfig, Path]:
     p.add_argument("--max-steps", type=int, default=200, help="longest episode (control steps)")
     p.add_argument("--fault", choices=FAULTS, default=None, help="inject a failure (to check the checks)")
     a = p.parse_args(argv)
+    check_output(p, a.out, "--out", "folder")
     try:
         cfg = SoakConfig(minutes=a.minutes, seed=a.seed, rss_bound_mib=a.rss_bound_mib,
                          warmup_cycles=a.warmup_cycles, max_steps=a.max_steps, fault=a.fault)

@@ -42,6 +42,27 @@ def check_sarcos_file(parser: argparse.ArgumentParser, path: str, source: str = 
         parser.error(f"{source}: {exc}")
 
 
+def check_input(parser: argparse.ArgumentParser, path: str | os.PathLike | None, option: str, kind: str,
+                contains: tuple[str, ...] = ()) -> None:
+    """``parser.error`` (exit status 2) naming ``option`` unless ``path`` is an existing ``kind`` (``"file"`` or
+    ``"folder"``; a folder holding the files named in ``contains``). ``None`` (the option left out) passes."""
+    if path is None:
+        return
+    path = Path(path)
+    try:
+        if not path.exists():
+            parser.error(f"{option}: {kind} not found: {path}")
+        if kind == "file" and path.is_dir():
+            parser.error(f"{option}: {path} is a folder; expected a file")
+        if kind == "folder" and not path.is_dir():
+            parser.error(f"{option}: {path} is a file; expected a folder")
+        missing = [name for name in contains if not (path / name).is_file()]
+    except OSError as exc:  # e.g. a folder on the way that this process may not search
+        parser.error(f"{option}: {path}: {exc.strerror or exc}")
+    if missing:
+        parser.error(f"{option}: {path} has no {' or '.join(missing)}; expected a folder with {', '.join(contains)}")
+
+
 def output_path_problem(path: str | os.PathLike, kind: str) -> str | None:
     """What stops a command from writing its output ``path`` (``kind``: ``"file"`` or ``"folder"``), checked
     before the command's work (a fit can take minutes): ``None`` when nothing does. Refused: a file path that is
