@@ -62,8 +62,10 @@ from typing import Callable
 import numpy as np
 from tqdm import tqdm
 
-from cascgp.data import DynamicsData, SavGol
 from cascgp.checks import check_count, check_positive
+from cascgp.data import DynamicsData, SavGol
+from cascgp.io import write_json
+from cascgp_experiments.common import machine_info, package_versions
 
 ENV_ID = "JacoPayload-v0"
 
@@ -361,20 +363,30 @@ def _motions(cfg: CollectConfig) -> list[tuple[str, int, int, float]]:
 
 
 def _record_all(cfg: CollectConfig, workers: int, ray_address: str | None, vector_env: bool
-                ) -> dict[str, list[DynamicsData]]:
-    """The records of every motion, by split. ``workers=1``: one after the other in this process;
+                ) -> tuple[dict[str, list[DynamicsData]], dict | None]:
+    """The records of every motion, by split, and the run's job statistics (``JobResults.stats``: one job
+    per motion; ``None`` with ``vector_env``). ``workers=1``: one after the other in this process;
     otherwise one job per motion (:func:`motion_job`) on ``workers`` local processes or on Ray; with
     ``vector_env``, the motions of a split run ``workers`` at a time in one Gymnasium ``AsyncVectorEnv``
     instead. The records are the same in every case."""
+    from cascgp_experiments.execution import JobResults, run_jobs
+
     motions = _motions(cfg)
     parts: dict[str, list[DynamicsData]] = {"train": [], "test": []}
     if ray_address is None and workers <= 1:
+        serial = JobResults()
+        serial.job_seconds, t0 = [], time.perf_counter()
         for split in ("train", "test"):
             mine = [m for m in motions if m[0] == split]
             for _, k, seed, seconds in tqdm(mine, desc=f"collect {split} ({len(mine)} x {mine[0][3]:g} s)",
                                             unit="motion"):
+                t1 = time.perf_counter()
                 parts[split].append(record_motion(seed, seconds, cfg, segment=k,
                                                   desc=f"{split} {k + 1}/{len(mine)}"))
+                serial.append(None)
+                serial.job_seconds.append(time.perf_counter() - t1)
+        serial.wall_s = time.perf_counter() - t0
+        return parts, serial.stats()
     elif ray_address is None and vector_env:
         with tqdm(total=sum(sum(_steps(m[3], cfg)) for m in motions), desc=f"collect, {workers} at a time",
                   unit="step", unit_scale=True, mininterval=1.0) as bar:
@@ -384,17 +396,15 @@ def _record_all(cfg: CollectConfig, workers: int, ray_address: str | None, vecto
                     batch = mine[b:b + workers]
                     parts[split] += record_motions_vector([m[2] for m in batch], batch[0][3], cfg,
                                                           segments=[m[1] for m in batch], bar=bar)
-    else:
-        from cascgp_experiments.execution import run_jobs
-
-        res = run_jobs(motion_job, [{"seed": seed, "duration": seconds, "cfg": asdict(cfg), "segment": k}
+        return parts, None
+    res = run_jobs(motion_job, [{"seed": seed, "duration": seconds, "cfg": asdict(cfg), "segment": k}
                                     for _, k, seed, seconds in motions],
-                       workers=workers, ray_address=ray_address, desc=f"collect ({len(motions)} motions)",
-                       units=[sum(_steps(m[3], cfg)) for m in motions], unit="step",
-                       label=lambda j: f"seed {j['seed']}")
-        for (split, *_), data in zip(motions, res):
-            parts[split].append(data)
-    return parts
+                   workers=workers, ray_address=ray_address, desc=f"collect ({len(motions)} motions)",
+                   units=[sum(_steps(m[3], cfg)) for m in motions], unit="step",
+                   label=lambda j: f"seed {j['seed']}")
+    for (split, *_), data in zip(motions, res):
+        parts[split].append(data)
+    return parts, res.stats()
 
 
 def _assemble(cfg: CollectConfig, split: str, parts: list[DynamicsData]) -> DynamicsData:
@@ -425,7 +435,9 @@ def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: boo
     or, with ``ray_address``, on a Ray cluster (:mod:`cascgp_experiments.execution`); ``vector_env``:
     the motions of a split ``workers`` at a time in a Gymnasium ``AsyncVectorEnv`` instead (slower here:
     see the module's notes). The data do not depend on any of these.
-    Returns ``(train, test, info)`` with ``info = {"reused": bool, "wall_s": float}``.
+    Returns ``(train, test, info)`` with ``info = {"reused": bool, "wall_s": float, "jobs": dict | None}``
+    (``jobs``: the job statistics of a new collection, also written with the versions and the machine to
+    ``<out>/collection_run.json``; ``None`` when the files were reused or ``vector_env`` ran the motions).
     """
     from cascgp_experiments.execution import check_workers
 
@@ -435,14 +447,17 @@ def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: boo
     if not force and all(p.exists() for p in paths.values()):
         loaded = {s: DynamicsData.load(p) for s, p in paths.items()}
         if all(same_collection(d.meta.get("collection"), cfg) for d in loaded.values()):
-            return loaded["train"], loaded["test"], {"reused": True, "wall_s": 0.0}
+            return loaded["train"], loaded["test"], {"reused": True, "wall_s": 0.0, "jobs": None}
     t0 = time.perf_counter()
-    parts = _record_all(cfg, workers, ray_address, vector_env)
+    parts, jobs = _record_all(cfg, workers, ray_address, vector_env)
     data = {}
     for split in ("train", "test"):
         data[split] = _assemble(cfg, split, parts[split])
         data[split].save(paths[split])
-    return data["train"], data["test"], {"reused": False, "wall_s": time.perf_counter() - t0}
+    info = {"reused": False, "wall_s": time.perf_counter() - t0, "jobs": jobs}
+    write_json(out / "collection_run.json", {**info, "provenance": {"versions": package_versions(),
+                                                                     "machine": machine_info()}})
+    return data["train"], data["test"], info
 
 
 def study_data(folder: str | Path | None, out: str | Path, *, preset: str = "quick", sensor_noise: str = "default",

@@ -42,11 +42,12 @@ CASES: dict[str, tuple[str, list[str]]] = {
 
 def job_stats(module: str, out: Path) -> tuple[dict[str, Any], Any]:
     """(job statistics, the experiment's numbers) of one run's results JSON."""
-    if module == "scripts.collect_jaco_data":  # no job statistics; the numbers are the files' arrays
+    if module == "scripts.collect_jaco_data":  # the job statistics of collection_run.json; the files' arrays
         from cascgp_experiments.collect import data_path
         from cascgp_experiments.curves import npz_digest
 
-        return ({"n_jobs": 0, "job_seconds_sum": 0.0, "job_seconds_max": 0.0, "backend": "", "workers": None},
+        jobs = read_json(out / "collection_run.json")["jobs"]
+        return ({k: jobs[k] for k in ("n_jobs", "job_seconds_sum", "job_seconds_max", "backend", "workers")},
                 {s: npz_digest(data_path(out, s)) for s in ("train", "test")})
     res = read_json(out / "results.json")
     if module == "scripts.task_transfer":

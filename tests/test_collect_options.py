@@ -196,6 +196,21 @@ def test_collect_command_prints_a_summary_and_reuses_its_files(tmp_path: Path, c
     assert first[0] == (f"{tmp_path / 'jaco_train.npz'}: {train.n_samples} samples, {len(train.segments)} "
                         f"motion(s), 6 joints, dt {train.dt:g} s")
     assert first[1].startswith(f"{tmp_path / 'jaco_test.npz'}: ") and first[2].startswith("collected in ")
+    # the run's record: one job per motion, each timed, with the versions and the machine
+    from cascgp.io import read_json
+    from cascgp_experiments.parallel_bench import job_stats
+
+    test = DynamicsData.load(tmp_path / "jaco_test.npz")
+    n_motions = len(train.segments) + len(test.segments)
+    run = read_json(tmp_path / "collection_run.json")
+    jobs = run["jobs"]
+    assert (jobs["n_jobs"], jobs["workers"], jobs["backend"]) == (n_motions, 1, "in-process")
+    assert len(jobs["job_seconds"]) == n_motions and all(s > 0 for s in jobs["job_seconds"])
+    assert jobs["job_seconds_sum"] <= jobs["wall_s"] <= run["wall_s"]
+    assert run["provenance"]["versions"]["numpy"] == np.__version__ and run["provenance"]["machine"]["cpus"]
+    assert f"({n_motions} motions as jobs on 1 worker(s), in-process; the longest" in first[2]
+    assert job_stats("scripts.collect_jaco_data", tmp_path)[0]["n_jobs"] == n_motions  # bench_parallel's row
     main(args)
     again = capsys.readouterr().out.splitlines()
     assert again[:2] == first[:2] and again[2].startswith(f"reused the files in {tmp_path}")
+    assert read_json(tmp_path / "collection_run.json") == run  # a reuse leaves the record of the collection

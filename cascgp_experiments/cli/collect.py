@@ -69,8 +69,11 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     for split, d in (("train", train), ("test", test)):
         print(f"{data_path(a.out, split)}: {d.n_samples} samples, {len(d.segments)} motion(s), {d.dof} "
               f"joints, dt {d.dt:g} s")
+    jobs = info["jobs"]
     print(f"reused the files in {a.out} (same settings; --force collects again)" if info["reused"]
-          else f"collected in {info['wall_s']:.1f} s")
+          else f"collected in {info['wall_s']:.1f} s" + (
+              f" ({jobs['n_jobs']} motions as jobs on {jobs['workers']} worker(s), {jobs['backend']}; the longest "
+              f"{jobs['job_seconds_max']:.1f} s)" if jobs else ""))
 
 
 if __name__ == "__main__":
