@@ -18,7 +18,8 @@ prismatic joints, and continuous joints, which become revolute joints whose
 position is the angle (:func:`cascgp.rbd_joints.angle_joints`); the callers pass
 joint positions as ``(N,)`` vectors. Joints that a log does not have (a
 gripper's fingers) can be locked: ``joints=`` names the model's joints and
-``locked=`` the others' positions (:func:`cascgp.rbd_joints.lock_joints`).
+``locked=`` the others' positions (:func:`cascgp.rbd_joints.lock_joints`); a URDF mimic joint
+follows its locked primary.
 
 ``load_nominal(urdf_path)`` reads the JSON sidecar written next to the URDF by
 :mod:`cascgp_experiments.urdf_export` (armature, torque and velocity limits, gravity,
@@ -45,7 +46,7 @@ import numpy as np
 import pinocchio as pin
 
 from cascgp.data import F64, all_finite
-from cascgp.rbd_joints import angle_joints, check_joint_selection, lock_joints
+from cascgp.rbd_joints import angle_joints, check_joint_selection, lock_joints, mimic_joints
 from cascgp.urdf_parser_output import parser_output, parser_reason
 
 __all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
@@ -102,7 +103,8 @@ class RigidBodyModel:
         source, urdf_text: the URDF's path and document, kept as attributes.
         joints: the model's joints, in Pinocchio's order of the URDF's joints (default: every joint not in
             ``locked``).
-        locked: positions (rad or m; 0 is the URDF's zero) of the joints not in ``joints``; default 0 for each.
+        locked: positions (rad or m; 0 is the URDF's zero) of the joints not in ``joints``; default 0 for each
+            (a mimic joint of ``urdf_text``: what its locked primary gives).
 
     Raises:
         ValueError: a joint with more than one position, no movable joint, a bad joint selection or a vector of
@@ -126,7 +128,7 @@ class RigidBodyModel:
         model = angle_joints(model)  # a copy: the caller's model is never changed
         values: dict[str, float] = {}
         if joints is not None or locked:
-            values = check_joint_selection(model, joints, locked)
+            values = check_joint_selection(model, joints, locked, mimic_joints(urdf_text))
             model = lock_joints(model, values)
         if model.nv == 0:
             raise ValueError(f"{'the model' if source is None else repr(source)}: no degrees of freedom (no "
@@ -170,7 +172,8 @@ class RigidBodyModel:
             dof: if given, the expected number of joints; a mismatch raises ``ValueError``.
             joints: the model's joints, in Pinocchio's order of the URDF's joints (default: every joint not in
                 ``locked``).
-            locked: positions (rad or m) of the joints not in ``joints``, ``{name: q}``; default 0 for each.
+            locked: positions (rad or m) of the joints not in ``joints``, ``{name: q}``; default 0 for each
+                (a mimic joint: what its locked primary gives).
         """
         path = Path(path)
         if not path.is_file():
@@ -395,7 +398,8 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints
         urdf_path: the URDF file.
         dof: if given, the expected number of joints.
         joints: the model's joints (default: every joint not in ``locked``).
-        locked: positions (rad or m) of the joints not in ``joints``, ``{name: q}``; default 0 for each.
+        locked: positions (rad or m) of the joints not in ``joints``, ``{name: q}``; default 0 for each
+            (a mimic joint: what its locked primary gives).
 
     Raises:
         FileNotFoundError: the URDF is missing.

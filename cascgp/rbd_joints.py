@@ -13,8 +13,12 @@ Pinocchio model before :class:`cascgp.rbd.RigidBodyModel` uses it:
 * **Joints the log does not have.** A gripper's fingers, for instance. :func:`lock_joints` keeps the joints
   named (the log's, in Pinocchio's order of the URDF's joints: depth first from the base) and locks every
   other one at a given position (default 0, the URDF's zero), with Pinocchio's ``buildReducedModel``: the
-  locked joint's bodies become rigid parts of their parent body, inertia included. Pinocchio reads a URDF
-  ``<mimic>`` joint as a joint of its own, so a locked mimic joint needs its own position too.
+  locked joint's bodies become rigid parts of their parent body, inertia included.
+* **Mimic joints.** A URDF ``<mimic>`` joint (a gripper's second finger) moves with another joint:
+  :math:`q = m\\,q_\\text{primary} + o`. Pinocchio reads it as a joint of its own; :func:`mimic_joints` reads the
+  relation from the URDF, and :func:`check_joint_selection` locks a mimic joint whose primary is locked at the
+  position the relation gives, and refuses one whose primary is a joint of the model (it would have to move
+  with a joint of the log, and a locked joint cannot).
 
 Spherical, planar and floating joints are refused: the log format gives each joint one position.
 """
@@ -24,10 +28,15 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import xml.etree.ElementTree as ET
+
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["angle_joints", "lock_joints", "check_joint_selection"]
+__all__ = ["angle_joints", "lock_joints", "check_joint_selection", "mimic_joints"]
+
+#: How far (rad or m) a mimic joint's given position may be from the one its relation gives.
+MIMIC_TOL = 1e-9
 
 #: Per-dof vectors of a ``pinocchio.Model`` that :func:`angle_joints` copies as they are (those present).
 _PER_VELOCITY = ("armature", "damping", "lowerDryFrictionLimit", "upperDryFrictionLimit", "lowerEffortLimit",
@@ -98,22 +107,44 @@ def angle_joints(model: pin.Model) -> pin.Model:
     return out
 
 
+def mimic_joints(urdf_text: str | None) -> dict[str, tuple[str, float, float]]:
+    """The URDF's ``<mimic>`` relations: ``{joint: (primary, multiplier, offset)}`` (URDF defaults 1 and 0);
+    empty for ``None`` or a document that does not parse as XML (Pinocchio parsed it: then it has none)."""
+    if not urdf_text:
+        return {}
+    try:
+        root = ET.fromstring(urdf_text)
+    except (ET.ParseError, ValueError):
+        return {}
+    out = {}
+    for joint in root.iter("joint"):
+        mimic = joint.find("mimic")
+        if mimic is not None and joint.get("name") and mimic.get("joint"):
+            out[joint.get("name", "")] = (mimic.get("joint", ""), float(mimic.get("multiplier", 1.0)),
+                                          float(mimic.get("offset", 0.0)))
+    return out
+
+
 def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
-                          locked: Mapping[str, float] | None) -> dict[str, float]:
+                          locked: Mapping[str, float] | None,
+                          mimics: Mapping[str, tuple[str, float, float]] | None = None) -> dict[str, float]:
     """The positions of the joints to lock, ``joints`` and ``locked`` checked against ``model``'s joints.
 
     Args:
         model: a model with one position per joint (see :func:`angle_joints`).
         joints: the joints to keep, distinct names of ``model``'s joints in its order (depth first from the
             base); default: every joint not in ``locked``.
-        locked: positions (rad or m, the URDF's zero at 0) of joints not kept; default 0 for each.
+        locked: positions (rad or m, the URDF's zero at 0) of joints not kept; default 0 for each, and for a
+            mimic joint (``mimics``) the position its locked primary gives it.
+        mimics: :func:`mimic_joints` of the URDF.
 
     Returns:
         ``{name: position}`` of every joint not in ``joints`` (empty when all are kept).
 
     Raises:
         ValueError: naming ``joints`` or ``locked`` and what was expected (a name not in the URDF, another
-            order, a repeated name, a position that is not a finite number or is outside the joint's limits).
+            order, a repeated name, a position that is not a finite number or is outside the joint's limits, a
+            mimic joint locked while its primary is kept, or locked elsewhere than its relation says).
     """
     names = list(model.names)[1:]
     if isinstance(joints, (str, bytes)):
@@ -132,26 +163,59 @@ def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
     if ordered != keep:
         raise ValueError(f"joints: list them in the URDF model's order (depth first from the base), {ordered}; "
                          f"got {keep}")
+    for name in keep:
+        if name in given:
+            raise ValueError(f"locked: {name!r} is one of the model's joints (joints= names them); only the "
+                             "other joints are locked")
     values: dict[str, float] = {}
-    for name in names:
-        if name in keep:
-            if name in given:
-                raise ValueError(f"locked: {name!r} is one of the model's joints (joints= names them); only the "
-                                 "other joints are locked")
-            continue
+    mimics = {k: v for k, v in (mimics or {}).items() if k in names and k not in keep and v[0] in names}
+    for name in [n for n in names if n not in keep and n not in mimics] + _primaries_first(mimics):
         value = given.get(name, 0.0)
         try:
             x = float(value)
         except (TypeError, ValueError):
             raise ValueError(f"locked: {name!r}: expected a number (rad or m), got {value!r}") from None
+        if name in mimics:
+            x = _mimic_position(name, mimics[name], keep, values, given, x)
         j = model.getJointId(name)
         lo, hi = model.lowerPositionLimit[model.idx_qs[j]], model.upperPositionLimit[model.idx_qs[j]]
         if not np.isfinite(x) or not lo <= x <= hi:
-            where = "" if name in given else " (the default; give its position in locked=)"
+            where = ("" if name in given else f" (from {mimics[name][0]!r}, which it mimics)" if name in mimics
+                     else " (the default; give its position in locked=)")
+            shown = repr(value) if name in given or name not in mimics else f"{x:g}"
             raise ValueError(f"locked: {name!r}: expected a finite position within the joint's limits "
-                             f"[{lo:g}, {hi:g}], got {value!r}{where}")
+                             f"[{lo:g}, {hi:g}], got {shown}{where}")
         values[name] = x
     return values
+
+
+def _primaries_first(mimics: Mapping[str, tuple[str, float, float]]) -> list[str]:
+    """The mimic joints, each after the mimic joint it follows (if any)."""
+    order: list[str] = []
+    while len(order) < len(mimics):
+        ready = [m for m, (p, *_) in mimics.items() if m not in order and (p not in mimics or p in order)]
+        if not ready:
+            raise ValueError(f"locked: the URDF's mimic joints {sorted(set(mimics) - set(order))} follow each other "
+                             "in a cycle")
+        order += ready
+    return order
+
+
+def _mimic_position(name: str, relation: tuple[str, float, float], keep: Sequence[str],
+                    values: Mapping[str, float], given: Mapping[str, Any], x: float) -> float:
+    """The locked position of mimic joint ``name`` (``x``: the one given, if any): its relation applied to its
+    primary's locked position. ``ValueError`` when the primary is kept or ``x`` was given otherwise."""
+    primary, mult, offset = relation
+    if primary in keep:
+        raise ValueError(f"joints: {name!r} mimics {primary!r}, one of the model's joints, so it moves with it "
+                         f"and cannot be locked: name {name!r} in joints= too (the log then has its position), or "
+                         f"lock {primary!r} as well")
+    follow = mult * values[primary] + offset
+    if name in given and not abs(x - follow) <= MIMIC_TOL:
+        raise ValueError(f"locked: {name!r} mimics {primary!r} (multiplier {mult:g}, offset {offset:g}): expected "
+                         f"{follow:g} from {primary!r} at {values[primary]:g}, got {given[name]!r} (leave it out "
+                         "and it follows)")
+    return follow
 
 
 def lock_joints(model: pin.Model, locked: Mapping[str, float]) -> pin.Model:

@@ -262,3 +262,52 @@ def test_fit_command_takes_joints_and_lock(tmp_path: Path, capsys: pytest.Captur
                   "--joints", "j1,j2,j3"])
     assert "--joints: chooses joints of the URDF; it needs --urdf" in capsys.readouterr().err
     assert not (tmp_path / "x.npz").exists()
+
+
+def _mimic_gripper(tmp_path: Path, relation: str = 'multiplier="0.5" offset="0.005"') -> Path:
+    """The gripper arm with finger2 a URDF mimic joint of finger1."""
+    text = arm_urdf(("continuous", "revolute", "revolute"), fingers="prismatic")
+    head = '<joint name="finger2" type="prismatic">'
+    return write(tmp_path, "mimic.urdf", text.replace(head, f'{head}<mimic joint="finger1" {relation}/>'))
+
+
+def test_a_locked_mimic_joint_follows_its_primary(tmp_path: Path) -> None:
+    """finger2 = 0.5 finger1 + 0.005: locking finger1 at 0.02 puts finger2 at 0.015, the welded reference's."""
+    urdf = _mimic_gripper(tmp_path)
+    welded = RigidBodyModel.from_urdf(write(tmp_path, "welded.urdf",
+                                            arm_urdf(("revolute",) * 3, fingers="fixed", at=(0.02, 0.015))))
+    q, qd, qdd = states(12, seed=5)
+    for locked in ({"finger1": 0.02}, {"finger1": 0.02, "finger2": 0.015}):  # left out, or given as it follows
+        rbd = RigidBodyModel.from_urdf(urdf, joints=["j1", "j2", "j3"], locked=locked)
+        assert rbd.locked == pytest.approx({"finger1": 0.02, "finger2": 0.015}, abs=1e-15)
+        np.testing.assert_allclose(rbd.inverse_dynamics(q, qd, qdd), welded.inverse_dynamics(q, qd, qdd),
+                                   rtol=1e-12, atol=1e-12)
+    # a model file keeps the locked positions and loads them again, without the URDF file
+    model = make_model("sp-standard", 3, rbd, gp_config=GPFitConfig(n_restarts=1, seed=0))
+    model.fit(_log(arm_urdf(("revolute",) * 3, fingers="fixed", at=(0.02, 0.015)), 40, seed=6))
+    model.save(tmp_path / "m.npz")
+    urdf.unlink()
+    assert load_model(tmp_path / "m.npz").rbd.locked == rbd.locked
+    # the URDF's defaults: multiplier 1, offset 0
+    from cascgp.rbd_joints import mimic_joints
+
+    assert mimic_joints(_mimic_gripper(tmp_path, "").read_text()) == {"finger2": ("finger1", 1.0, 0.0)}
+    assert mimic_joints(None) == {} and mimic_joints("not xml") == {}
+
+
+_HALF = 'multiplier="0.5" offset="0.005"'
+
+
+@pytest.mark.parametrize("relation, kwargs, match", [
+    (_HALF, {"joints": ["j1", "j2", "j3"], "locked": {"finger1": 0.02, "finger2": 0.03}},
+     r"locked: 'finger2' mimics 'finger1' \(multiplier 0.5, offset 0.005\): expected 0.015 from 'finger1' at "
+     r"0.02, got 0.03 \(leave it out and it follows\)"),
+    (_HALF, {"joints": ["j1", "j2", "j3", "finger1"]},
+     r"joints: 'finger2' mimics 'finger1', one of the model's joints, so it moves with it and cannot be locked"),
+    ('multiplier="1" offset="0.01"', {"joints": ["j1", "j2", "j3"], "locked": {"finger1": 0.035}},  # 0.045 > 0.04
+     r"locked: 'finger2': expected a finite position within the joint's limits \[0, 0.04\], got 0.045 \(from "
+     r"'finger1', which it mimics\)"),
+])
+def test_mimic_joint_errors(tmp_path: Path, relation: str, kwargs: dict, match: str) -> None:
+    with pytest.raises(ValueError, match=match):
+        RigidBodyModel.from_urdf(_mimic_gripper(tmp_path, relation), **kwargs)
