@@ -70,7 +70,11 @@ def add_protocol_args(p: Any) -> None:
 def protocol_from_args(p: Any, a: Any, *, min_attempts: int, two_tasks_why: str
                        ) -> tuple[TransferConfig, tuple[int, ...]]:
     """The settings and seeds of :func:`add_protocol_args`' options (``p.error`` for bad ones: seeds not integers,
-    fewer than ``min_attempts`` attempts, fewer than two tasks, explained by ``two_tasks_why``)."""
+    fewer than ``min_attempts`` attempts, fewer than two tasks, explained by ``two_tasks_why``; an ``--out`` that
+    cannot be written)."""
+    from cascgp_experiments.cli.options import check_output
+
+    check_output(p, a.out, "--out", "folder")
     try:
         seeds = tuple(int(s) for s in a.seeds.split(","))
     except ValueError:

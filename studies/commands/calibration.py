@@ -18,6 +18,8 @@ import argparse
 import os
 from pathlib import Path
 
+from cascgp_experiments.cli.options import check_input, check_output
+
 for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_v, "1")
 
@@ -46,6 +48,8 @@ def main(argv: list[str] | None = None) -> None:
                          "subset k) and score the test coverage with it (the recalibration test of "
                          "docs/studies/calibration.md)")
     a = ap.parse_args(argv)
+    check_output(ap, a.out, "--out", "folder")
+    check_input(ap, a.data, "--data", "folder", contains=("jaco_train.npz", "jaco_test.npz"))
     if a.data and (a.sensor_noise != "default" or a.qdd != "savgol" or a.collect != "quick"):
         ap.error("--collect/--sensor-noise/--qdd apply to a new collection: leave out --data")
     if a.recalibrate and not 1 <= a.subsets <= 5:

@@ -27,6 +27,7 @@ import argparse
 from pathlib import Path
 
 from cascgp.io import read_json
+from cascgp_experiments.cli.options import check_output
 from cascgp_experiments.execution import add_execution_args, check_args, session
 from studies.lag_diagnosis import LAG_SEEDS, run_diagnosis
 from studies.lag_steps import run_episodes, run_factorial, run_refit
@@ -50,6 +51,7 @@ def main(argv: list[str] | None = None) -> int:
     add_execution_args(p)
     a = p.parse_args(argv)
     check_args(p, a)
+    check_output(p, a.out, "--out", "folder")
     try:
         seeds = tuple(int(s) for s in a.seeds.split(","))
     except ValueError:

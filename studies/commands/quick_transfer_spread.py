@@ -35,6 +35,8 @@ import json
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from cascgp_experiments.cli.options import check_output
+
 TASK_A, TASK_B = "front", "left"
 LEARNER = "sp-inward-igated-online"
 RATIOS = ("rbd_over_pd_front", "rbd_over_pd_left", "learner_front_1_over_rbd", "learner_left_0_over_rbd")
@@ -101,6 +103,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--sensor-pipeline", default="ideal", choices=("ideal", "jaco2"),
                    help="the env's sensing (default ideal: the protocol's first population; jaco2: its addendum)")
     a = p.parse_args(argv)
+    check_output(p, a.out, "--out", "folder")
     try:
         seeds = _seeds(a.seeds)
     except ValueError:

@@ -21,6 +21,7 @@ import sys
 from pathlib import Path
 
 from cascgp.io import read_json, write_json
+from cascgp_experiments.cli.options import check_output
 from cascgp_experiments.execution import add_execution_args, check_args, session
 from studies.sensing_factorial import ARMS, run
 from studies.sensing_factorial_report import figure, markdown, slim
@@ -39,6 +40,7 @@ def main(argv: list[str] | None = None) -> int:
     add_execution_args(p)
     a = p.parse_args(argv)
     check_args(p, a)
+    check_output(p, a.out, "--out", "folder")
     if a.report is not None:
         if not a.report.is_file():
             p.error(f"--report: no file {a.report}")
