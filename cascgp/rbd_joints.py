@@ -17,8 +17,10 @@ Pinocchio model before :class:`cascgp.rbd.RigidBodyModel` uses it:
 * **Mimic joints.** A URDF ``<mimic>`` joint (a gripper's second finger) moves with another joint:
   :math:`q = m\\,q_\\text{primary} + o`. Pinocchio reads it as a joint of its own; :func:`mimic_joints` reads the
   relation from the URDF, and :func:`check_joint_selection` locks a mimic joint whose primary is locked at the
-  position the relation gives, and refuses one whose primary is a joint of the model (it would have to move
-  with a joint of the log, and a locked joint cannot).
+  position the relation gives. Locking one whose primary is a joint of the model (it would have to move with a
+  joint of the log, and a locked joint cannot) needs its position given, and a given position that disagrees
+  with the relation is used with a warning (model files saved before mimic joints were followed hold such
+  positions).
 
 Spherical, planar and floating joints are refused: the log format gives each joint one position.
 """
@@ -28,6 +30,7 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import warnings
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -117,12 +120,19 @@ def mimic_joints(urdf_text: str | None) -> dict[str, tuple[str, float, float]]:
     except (ET.ParseError, ValueError):
         return {}
     out = {}
-    for joint in root.iter("joint"):
-        mimic = joint.find("mimic")
+    for joint in root.iter():
+        if _local(joint.tag) != "joint":
+            continue
+        mimic = next((c for c in joint if _local(c.tag) == "mimic"), None)
         if mimic is not None and joint.get("name") and mimic.get("joint"):
             out[joint.get("name", "")] = (mimic.get("joint", ""), float(mimic.get("multiplier", 1.0)),
                                           float(mimic.get("offset", 0.0)))
     return out
+
+
+def _local(tag: object) -> str:
+    """An element's tag without its XML namespace (``{uri}joint`` -> ``joint``)."""
+    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
 
 
 def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
@@ -135,7 +145,8 @@ def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
         joints: the joints to keep, distinct names of ``model``'s joints in its order (depth first from the
             base); default: every joint not in ``locked``.
         locked: positions (rad or m, the URDF's zero at 0) of joints not kept; default 0 for each, and for a
-            mimic joint (``mimics``) the position its locked primary gives it.
+            mimic joint (``mimics``) the position its locked primary gives it (without ``joints``, a mimic joint
+            of a locked joint is locked too).
         mimics: :func:`mimic_joints` of the URDF.
 
     Returns:
@@ -144,7 +155,7 @@ def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
     Raises:
         ValueError: naming ``joints`` or ``locked`` and what was expected (a name not in the URDF, another
             order, a repeated name, a position that is not a finite number or is outside the joint's limits, a
-            mimic joint locked while its primary is kept, or locked elsewhere than its relation says).
+            mimic joint locked without a position while its primary is kept).
     """
     names = list(model.names)[1:]
     if isinstance(joints, (str, bytes)):
@@ -152,7 +163,12 @@ def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
     if locked is not None and not isinstance(locked, Mapping):
         raise ValueError(f"locked: expected a mapping of joint names to positions, got {type(locked).__name__}")
     given = dict(locked or {})
-    keep = [n for n in names if n not in given] if joints is None else [str(n) for n in joints]
+    mimics = {k: v for k, v in (mimics or {}).items() if k in names and v[0] in names}
+    if joints is None:
+        following = _following(mimics, set(given))
+        keep = [n for n in names if n not in given and n not in following]
+    else:
+        keep = [str(n) for n in joints]
     unknown = [n for n in [*keep, *given] if n not in names]
     if unknown:
         field = "joints" if unknown[0] in keep else "locked"
@@ -168,7 +184,7 @@ def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
             raise ValueError(f"locked: {name!r} is one of the model's joints (joints= names them); only the "
                              "other joints are locked")
     values: dict[str, float] = {}
-    mimics = {k: v for k, v in (mimics or {}).items() if k in names and k not in keep and v[0] in names}
+    mimics = {k: v for k, v in mimics.items() if k not in keep}
     for name in [n for n in names if n not in keep and n not in mimics] + _primaries_first(mimics):
         value = given.get(name, 0.0)
         try:
@@ -189,6 +205,17 @@ def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
     return values
 
 
+def _following(mimics: Mapping[str, tuple[str, float, float]], locked: set[str]) -> set[str]:
+    """The mimic joints not in ``locked`` that follow a joint in it, directly or through other mimic joints."""
+    out: set[str] = set()
+    grew = True
+    while grew:
+        new = {m for m, (p, *_) in mimics.items() if m not in locked | out and p in locked | out}
+        out |= new
+        grew = bool(new)
+    return out
+
+
 def _primaries_first(mimics: Mapping[str, tuple[str, float, float]]) -> list[str]:
     """The mimic joints, each after the mimic joint it follows (if any)."""
     order: list[str] = []
@@ -204,18 +231,24 @@ def _primaries_first(mimics: Mapping[str, tuple[str, float, float]]) -> list[str
 def _mimic_position(name: str, relation: tuple[str, float, float], keep: Sequence[str],
                     values: Mapping[str, float], given: Mapping[str, Any], x: float) -> float:
     """The locked position of mimic joint ``name`` (``x``: the one given, if any): its relation applied to its
-    primary's locked position. ``ValueError`` when the primary is kept or ``x`` was given otherwise."""
+    primary's locked position. A position given otherwise is kept, with a warning; without one, a kept primary is
+    a ``ValueError``."""
     primary, mult, offset = relation
     if primary in keep:
+        if name in given:
+            warnings.warn(f"locked: {name!r} mimics {primary!r}, one of the model's joints, so it moves with it; "
+                          f"it is locked at {x:g} as given", UserWarning, stacklevel=4)
+            return x
         raise ValueError(f"joints: {name!r} mimics {primary!r}, one of the model's joints, so it moves with it "
                          f"and cannot be locked: name {name!r} in joints= too (the log then has its position), or "
                          f"lock {primary!r} as well")
     follow = mult * values[primary] + offset
     if name in given and not abs(x - follow) <= MIMIC_TOL:
-        raise ValueError(f"locked: {name!r} mimics {primary!r} (multiplier {mult:g}, offset {offset:g}): expected "
-                         f"{follow:g} from {primary!r} at {values[primary]:g}, got {given[name]!r} (leave it out "
-                         "and it follows)")
-    return follow
+        warnings.warn(f"locked: {name!r} mimics {primary!r} (multiplier {mult:g}, offset {offset:g}), which puts it "
+                      f"at {follow:g}; it is locked at {x:g} as given (leave it out and it follows)", UserWarning,
+                      stacklevel=4)
+        return x
+    return x if name in given else follow
 
 
 def lock_joints(model: pin.Model, locked: Mapping[str, float]) -> pin.Model:

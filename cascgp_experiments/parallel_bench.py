@@ -46,7 +46,8 @@ def job_stats(module: str, out: Path) -> tuple[dict[str, Any], Any]:
         from cascgp_experiments.collect import data_path
         from cascgp_experiments.curves import npz_digest
 
-        jobs = read_json(out / "collection_run.json")["jobs"]
+        jobs = read_json(out / "collection_run.json")["jobs"] or {  # None: the motions ran in a vector env
+            "n_jobs": 0, "job_seconds_sum": 0.0, "job_seconds_max": 0.0, "backend": "vector-env", "workers": None}
         return ({k: jobs[k] for k in ("n_jobs", "job_seconds_sum", "job_seconds_max", "backend", "workers")},
                 {s: npz_digest(data_path(out, s)) for s in ("train", "test")})
     res = read_json(out / "results.json")

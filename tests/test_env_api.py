@@ -187,6 +187,15 @@ def test_out_of_range_action_is_clipped(big, dtype):
     env.close()
 
 
+@pytest.mark.parametrize("dtype", [np.float64, np.float32])
+def test_tiny_action_passes_under_strict_floating_point_errors(pour_env, dtype):
+    """The action check neither overflows nor underflows for ordinary finite actions (1e-9 N m here)."""
+    pour_env.reset(seed=0, options={"task": "front"})
+    with np.errstate(all="raise"):
+        pour_env.step(np.full(6, 1e-9, dtype=dtype))
+    np.testing.assert_allclose(pour_env.unwrapped.data.ctrl[:6], np.full(6, 1e-9), rtol=1e-6)
+
+
 @pytest.mark.parametrize(
     "options, exc, match",
     [

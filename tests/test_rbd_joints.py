@@ -226,14 +226,18 @@ def test_a_model_with_locked_joints_saves_and_loads(tmp_path: Path) -> None:
             load_model(tmp_path / "bad.npz")
 
 
-def test_fit_command_takes_joints_and_lock(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    urdf = write(tmp_path, "gripper.urdf", arm_urdf(("continuous", "revolute", "revolute"), fingers="prismatic"))
-    data = _log(arm_urdf(("revolute",) * 3, fingers="fixed", at=(0.04, 0.04)), 60, seed=3)
-    log = tmp_path / "train.csv"
+def _csv_log(folder: Path, data: DynamicsData) -> Path:
+    log = folder / "train.csv"
     with log.open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(["t", *(f"{g}{j}" for g in ("q", "qd", "qdd", "tau") for j in (1, 2, 3))])
         w.writerows(np.column_stack([data.t, data.q, data.qd, data.qdd, data.tau]).tolist())
+    return log
+
+
+def test_fit_command_takes_joints_and_lock(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    urdf = write(tmp_path, "gripper.urdf", arm_urdf(("continuous", "revolute", "revolute"), fingers="prismatic"))
+    log = _csv_log(tmp_path, _log(arm_urdf(("revolute",) * 3, fingers="fixed", at=(0.04, 0.04)), 60, seed=3))
     base = ["--data", str(log), "--urdf", str(urdf), "--model", "sp-standard", "--restarts", "1"]
 
     assert fit_main([*base, "--out", str(tmp_path / "m0.npz")]) == 2
@@ -298,10 +302,38 @@ def test_a_locked_mimic_joint_follows_its_primary(tmp_path: Path) -> None:
 _HALF = 'multiplier="0.5" offset="0.005"'
 
 
+def test_a_mimic_joint_follows_without_joints_and_in_a_namespaced_urdf(tmp_path: Path) -> None:
+    """locked= alone: the mimic joint of a locked joint is locked too; a URDF with a default XML namespace too."""
+    urdf = _mimic_gripper(tmp_path)
+    alone = RigidBodyModel.from_urdf(urdf, locked={"finger1": 0.02})
+    assert alone.joint_names == ("j1", "j2", "j3")
+    assert alone.locked == pytest.approx({"finger1": 0.02, "finger2": 0.015}, abs=1e-15)
+    spaced = urdf.read_text().replace('<robot name="arm">', '<robot name="arm" xmlns="http://example.org/urdf">')
+    from cascgp.rbd_joints import mimic_joints
+
+    assert mimic_joints(spaced) == {"finger2": ("finger1", 0.5, 0.005)}
+    assert RigidBodyModel.from_urdf_text(spaced, joints=["j1", "j2", "j3"], locked={"finger1": 0.02}).locked == \
+        alone.locked
+
+
+@pytest.mark.parametrize("kwargs, match, locked", [
+    # a position given otherwise than the relation says is used, with a warning (model files saved before)
+    ({"joints": ["j1", "j2", "j3"], "locked": {"finger1": 0.02, "finger2": 0.03}},
+     r"locked: 'finger2' mimics 'finger1' \(multiplier 0.5, offset 0.005\), which puts it at 0.015; it is locked "
+     r"at 0.03 as given", {"finger1": 0.02, "finger2": 0.03}),
+    ({"joints": ["j1", "j2", "j3", "finger1"], "locked": {"finger2": 0.01}},
+     r"locked: 'finger2' mimics 'finger1', one of the model's joints, so it moves with it; it is locked at 0.01",
+     {"finger2": 0.01}),
+    ({"locked": {"finger2": 0.01}}, r"'finger2' mimics 'finger1', one of the model's joints", {"finger2": 0.01}),
+])
+def test_a_mimic_position_given_otherwise_is_used_with_a_warning(tmp_path: Path, kwargs: dict, match: str,
+                                                                 locked: dict) -> None:
+    with pytest.warns(UserWarning, match=match):
+        rbd = RigidBodyModel.from_urdf(_mimic_gripper(tmp_path), **kwargs)
+    assert rbd.locked == locked
+
+
 @pytest.mark.parametrize("relation, kwargs, match", [
-    (_HALF, {"joints": ["j1", "j2", "j3"], "locked": {"finger1": 0.02, "finger2": 0.03}},
-     r"locked: 'finger2' mimics 'finger1' \(multiplier 0.5, offset 0.005\): expected 0.015 from 'finger1' at "
-     r"0.02, got 0.03 \(leave it out and it follows\)"),
     (_HALF, {"joints": ["j1", "j2", "j3", "finger1"]},
      r"joints: 'finger2' mimics 'finger1', one of the model's joints, so it moves with it and cannot be locked"),
     ('multiplier="1" offset="0.01"', {"joints": ["j1", "j2", "j3"], "locked": {"finger1": 0.035}},  # 0.045 > 0.04
@@ -311,3 +343,16 @@ _HALF = 'multiplier="0.5" offset="0.005"'
 def test_mimic_joint_errors(tmp_path: Path, relation: str, kwargs: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         RigidBodyModel.from_urdf(_mimic_gripper(tmp_path, relation), **kwargs)
+
+
+def test_fit_command_notes_a_mimic_position_given_otherwise(tmp_path: Path, capsys: pytest.CaptureFixture[str]
+                                                            ) -> None:
+    log = _csv_log(tmp_path, _log(arm_urdf(("revolute",) * 3, fingers="fixed", at=(0.02, 0.03)), 40, seed=7))
+    args = ["--data", str(log), "--urdf", str(_mimic_gripper(tmp_path)), "--model", "sp-standard", "--restarts", "1",
+            "--out", str(tmp_path / "m.npz"), "--joints", "j1,j2,j3"]
+    assert fit_main([*args, "--lock", "finger1=0.02,finger2=0.03"]) == 0
+    err = capsys.readouterr().err
+    assert "note: --lock: 'finger2' mimics 'finger1' (multiplier 0.5, offset 0.005), which puts it at 0.015" in err
+    assert "finger1 locked at 0.02; finger2 locked at 0.03" in err
+    assert fit_main([*args, "--lock", "finger1=0.02"]) == 0
+    assert "finger1 locked at 0.02; finger2 locked at 0.015)" in capsys.readouterr().err

@@ -209,9 +209,13 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
     rbd = None
     if a.urdf is not None:
         try:
-            rbd = load_nominal(a.urdf, joints=a.joints, locked=a.lock)
+            with warnings.catch_warnings(record=True) as said:  # each a note, in the command's terms
+                warnings.simplefilter("always")
+                rbd = load_nominal(a.urdf, joints=a.joints, locked=a.lock)
         except ValueError as exc:
             raise _Fail(_as_options(str(exc))) from None
+        for w in said:
+            _note(prog, f"note: {_as_options(str(w.message))}")
         if rbd.dof != data.dof:
             more = "; name the log's joints with --joints (the others are locked)" if rbd.dof > data.dof else ""
             what = "the rigid-body model" if rbd.locked else "the URDF"

@@ -297,10 +297,11 @@ class JacoMujocoEnv(MujocoEnv):
         self._qacc_arm = live_view(d.qacc, self.arm_dof_adr)
         self._act_low = self.action_space.low.astype(np.float64)
         self._act_high = self.action_space.high.astype(np.float64)
-        # finiteness probes by dtype: a.dot(p) is finite exactly when every entry of a is, and the probe's
-        # scale keeps each product of a finite entry below 4e8: a clipped action brings no NumPy warning
-        # (a.dot(a) overflowed for entries above 1e154); only +inf beside -inf, refused anyway, warns
-        self._finite_probe = {"d": np.full(_N, 1e-300), "f": np.full(_N, 1e-30, np.float32)}
+        # finiteness probes by dtype: a.dot(p) is finite exactly when every entry of a is; with p = 1/8 the six
+        # products of finite entries are exact and sum below the dtype's largest number, so a huge finite action
+        # raises no overflow (a.dot(a) overflowed above 1e154, and underflowed below 1e-154, where this
+        # underflows only below 1e-307); only +inf beside -inf, refused anyway, makes NumPy warn
+        self._finite_probe = {"d": np.full(_N, 0.125), "f": np.full(_N, 0.125, np.float32)}
         slots = [slice(0, _N)] + ([slice(_N, 2 * _N)] if control_mode == "velocity" else [])
         self._period = ControlPeriod(m, d, self.frame_skip, slots, self._tau_sensor, self.arm_dof_adr)
         self._pending: np.ndarray | None = None  # this step's pipeline measurement, time not yet set
