@@ -34,6 +34,9 @@ def main(argv: list[str] | None = None) -> None:
         c = compare_results(*runs)
     except ValueError as exc:
         ap.error(f"the runs cannot be compared: {exc}")
+    except (KeyError, TypeError, AttributeError) as exc:  # a JSON with the top-level keys but not their contents
+        what = f"no {exc}" if isinstance(exc, KeyError) else str(exc)
+        ap.error(f"expected two study results.json files; one lacks what a study writes ({what})")
     print(format_comparison(c))
     if a.json is not None:
         a.json.parent.mkdir(parents=True, exist_ok=True)

@@ -74,3 +74,8 @@ def test_compare_study_names_different_grids(tmp_path, capsys):
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "Traceback" not in err
     assert "cannot be compared" in err and "(3, 4, 2) / (3, 5, 2)" in err and "grid points" in err
+    (tmp_path / "c.json").write_text(json.dumps({"jaco": {"no models": 1}}))
+    with pytest.raises(SystemExit) as exc:
+        main([str(tmp_path / "a.json"), str(tmp_path / "c.json")])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "Traceback" not in err and "one lacks what a study writes (no 'models')" in err
