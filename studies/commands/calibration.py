@@ -49,9 +49,9 @@ def main(argv: list[str] | None = None) -> None:
                          "docs/studies/calibration.md)")
     a = ap.parse_args(argv)
     check_output(ap, a.out, "--out", "folder")
-    check_input(ap, a.data, "--data", "folder", contains=("jaco_train.npz", "jaco_test.npz"))
     if a.data and (a.sensor_noise != "default" or a.qdd != "savgol" or a.collect != "quick"):
         ap.error("--collect/--sensor-noise/--qdd apply to a new collection: leave out --data")
+    check_input(ap, a.data, "--data", "folder", contains=("jaco_train.npz", "jaco_test.npz"))
     if a.recalibrate and not 1 <= a.subsets <= 5:
         ap.error(f"--recalibrate: --subsets must be 1-5 (each subset needs an unseen training motion of the 10), "
                  f"got {a.subsets}")
