@@ -164,19 +164,28 @@ class FeedforwardController:
         online: int | None = None,
         online_every: int = 4,
     ) -> None:
-        limits = np.asarray(torque_limits)
-        if limits.dtype.kind not in "fiu" or limits.ndim != 1 or limits.size == 0 or \
-                not np.all(np.isfinite(limits)) or not np.all(limits > 0):
-            raise ValueError(f"torque_limits must be a 1-D array of finite positive values, got {torque_limits!r}")
-        self.torque_limits = limits.astype(float)
-        self._neg_limits = -self.torque_limits
-        self.dof = int(self.torque_limits.shape[0])
+        self.dof = 0  # set from the limits: their setter checks them
+        self.torque_limits = torque_limits
+        self.dof = int(self._torque_limits.shape[0])
         self.kp, self.kd = kp, kd  # the properties' setters check them
         self.model: Any = model  # duck-typed (predict_one / inverse_dynamics); None: PD only
         if model is not None:
+            if not (hasattr(model, "predict_one") or hasattr(model, "inverse_dynamics")):
+                raise TypeError("model: expected a fitted cascgp model, an object with inverse_dynamics(q, qd, qdd) "
+                                f"or None (PD only), got {type(model).__name__}")
+            if getattr(model, "fitted", True) is False:
+                raise ValueError(f"model: {getattr(model, 'name', type(model).__name__)} is not fitted (fit it "
+                                 "first: model.fit(data))")
             model_dof = getattr(model, "dof", self.dof)
             if int(model_dof) != self.dof:
                 raise ValueError(f"model.dof ({model_dof}) does not match torque_limits ({self.dof} joints)")
+        if fallback is not None:
+            if not hasattr(fallback, "inverse_dynamics"):
+                raise TypeError("fallback: expected a rigid-body model (an object with inverse_dynamics(q, qd, qdd)) "
+                                f"or None, got {type(fallback).__name__}")
+            fallback_dof = getattr(fallback, "dof", self.dof)
+            if int(fallback_dof) != self.dof:
+                raise ValueError(f"fallback.dof ({fallback_dof}) does not match torque_limits ({self.dof} joints)")
         if fallback is None and model is not None and hasattr(model, "inverse_dynamics"):
             fallback = model
         if fallback is None and model is not None and getattr(model, "rbd", None) is not None:
@@ -210,6 +219,27 @@ class FeedforwardController:
         self.n_fallbacks = 0
         self.n_bad_measurements = 0
         self.last_model_error: str | None = None
+
+    @property
+    def torque_limits(self) -> np.ndarray:
+        """Symmetric actuator limits (N m), one per joint, as a read-only array. Assigning new limits (as many
+        joints) validates them as the constructor does (``ValueError`` for a non-finite or non-positive limit or
+        another shape, nothing changed); every later output lies within them."""
+        return self._torque_limits
+
+    @torque_limits.setter
+    def torque_limits(self, value: Any) -> None:
+        limits = np.asarray(value)
+        if limits.dtype.kind not in "fiu" or limits.ndim != 1 or limits.size == 0 or \
+                not np.all(np.isfinite(limits)) or not np.all(limits > 0):
+            raise ValueError(f"torque_limits must be a 1-D array of finite positive values, got {value!r}")
+        if self.dof and limits.shape != (self.dof,):
+            raise ValueError(f"torque_limits: expected {self.dof} limits (one per joint), got shape {limits.shape}")
+        limits = limits.astype(float)  # a copy: the caller's array cannot change the limits later
+        limits.setflags(write=False)
+        neg = -limits
+        neg.setflags(write=False)
+        self._torque_limits, self._neg_limits = limits, neg
 
     @property
     def kp(self) -> np.ndarray:
@@ -311,7 +341,7 @@ class FeedforwardController:
             # below, which this tick needs only for a non-finite measurement or an absurd error.
             feedback = self._feedback_nonfinite(q, qd, q_d, qd_d)
         tau = self._feedforward(t, q_d, qd_d, qdd_d, reference) + feedback
-        return np.minimum(np.maximum(tau, self._neg_limits), self.torque_limits)  # np.clip, without its wrapper
+        return np.minimum(np.maximum(tau, self._neg_limits), self._torque_limits)  # np.clip, without its wrapper
 
     def _feedback_nonfinite(self, q: np.ndarray, qd: np.ndarray, q_d: np.ndarray, qd_d: np.ndarray) -> np.ndarray:
         """The feedback torque when a measurement is not finite or an error overflows."""

@@ -254,7 +254,7 @@ class _VarianceRule:
         """The weights for corrections :math:`d` and variances :math:`v` (any shape; ``prior`` :math:`p` broadcast
         against ``var``); 0 where a weight, a correction or a variance is not finite."""
         d = np.asarray(correction, dtype=float)
-        v = np.asarray(var, dtype=float)
+        v = np.maximum(np.asarray(var, dtype=float), 0.0)  # a negative variance (round-off, a user model) is 0
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             w = self._weights(d, v, prior)
         return np.where(np.isfinite(w) & np.isfinite(d) & np.isfinite(v), w, 0.0)

@@ -125,6 +125,34 @@ def test_bad_arguments_name_the_field():
     ctrl = FeedforwardController(None, KP, KD, LIMITS)
     with pytest.raises(ValueError, match="shape"):
         ctrl(0.0, np.zeros(5), np.zeros(6), reference)
+    # a model or fallback the controller cannot use is refused here, not run as PD only with a fallback every tick
+    from cascgp.models import make_model
+
+    with pytest.raises(TypeError, match="model: expected a fitted cascgp model, an object with inverse_dynamics"):
+        FeedforwardController("np-inward", KP, KD, LIMITS)
+    with pytest.raises(ValueError, match="model: np-inward is not fitted"):
+        FeedforwardController(make_model("np-inward", 6), KP, KD, LIMITS)
+    with pytest.raises(TypeError, match="fallback: expected a rigid-body model"):
+        FeedforwardController(NaNModel(), KP, KD, LIMITS, fallback="rbd")
+    with pytest.raises(ValueError, match=r"fallback.dof \(6\) does not match torque_limits \(3 joints\)"):
+        FeedforwardController(None, KP[:3], KD[:3], LIMITS[:3], fallback=AffineRBD())
+
+
+def test_new_torque_limits_are_validated_and_bound_every_later_output():
+    ctrl = FeedforwardController(AffineRBD(), KP, KD, LIMITS)
+    q_d, qd_d, _ = reference(0.2)
+    ctrl.torque_limits = np.full(6, 1.0)
+    assert np.all(np.abs(ctrl(0.2, q_d + 5.0, qd_d - 5.0, reference)) <= 1.0)
+    with pytest.raises(ValueError, match="read-only"):
+        ctrl.torque_limits[:] = 1e6  # in place: refused (the limits are a read-only array)
+    for bad in (np.full(6, np.nan), np.zeros(6), np.ones(5), "high"):
+        with pytest.raises(ValueError, match="torque_limits"):
+            ctrl.torque_limits = bad
+        np.testing.assert_array_equal(ctrl.torque_limits, np.ones(6))  # a rejected value changes nothing
+    limits = LIMITS.copy()
+    ctrl = FeedforwardController(None, KP, KD, limits)
+    limits[:] = 1e6  # the caller's array is copied
+    assert np.all(np.abs(ctrl(0.2, q_d + 5.0, qd_d - 5.0, reference)) <= LIMITS)
 
 
 def test_gains_can_be_scheduled_by_assignment_and_are_validated():
@@ -391,7 +419,7 @@ def test_gate_rules_are_objects_behind_one_protocol(fitted_planar_sp_model, arm3
     ctrl.observe(state[0], state[1], nominal, 0.1)
 
 
-def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
+def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model, arm3_rbd):
     with pytest.raises(ValueError, match="gate: needs a nominal"):
         FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], gate=True)
     with pytest.raises(ValueError, match="gate: needs a fitted cascgp model"):
@@ -405,14 +433,14 @@ def test_gate_needs_a_cascade_model_and_a_nominal_model(fitted_planar_model):
     df = make_model("np-inward-df", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=10)).fit(
         sinusoid_data(make_arm(3), 6.0, 10.0, seed=4))
     with pytest.raises(ValueError, match="gate 'innovation': needs a derivative-based"):
-        FeedforwardController(df, KP[:3], KD[:3], LIMITS[:3], fallback=AffineRBD(), gate="innovation")
+        FeedforwardController(df, KP[:3], KD[:3], LIMITS[:3], fallback=arm3_rbd, gate="innovation")
     # gate=True is the default rule: innovation for a derivative-based model, Wiener for a derivative-free one.
     arm = make_arm(3)
     assert FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], fallback=arm, gate=True).gate == \
         "innovation"
     assert FeedforwardController(df, KP[:3], KD[:3], LIMITS[:3], fallback=arm, gate=True).gate == "wiener"
     with pytest.raises(ValueError, match="gate 'floor': needs a semi-parametric"):
-        FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], fallback=AffineRBD(), gate="floor")
+        FeedforwardController(fitted_planar_model, KP[:3], KD[:3], LIMITS[:3], fallback=arm, gate="floor")
 
 
 def test_an_offline_controller_uses_the_fitted_model_even_after_an_online_episode(fitted_planar_model, arm3_train):

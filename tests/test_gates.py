@@ -25,6 +25,12 @@ def test_gate_weights_are_the_documented_rules() -> None:
     # No correction and no uncertainty: the model (1); a non-finite weight: the nominal torque (0).
     assert gate_weights(np.zeros(2), np.zeros(2)).tolist() == [1.0, 1.0]
     assert gate_weights(np.array([np.inf, 1.0]), np.array([1.0, np.inf])).tolist() == [0.0, 0.0]
+    # A negative variance (round-off, a user model) counts as 0: every weight stays within [0, 1].
+    d2, neg = rng.normal(size=(5, 3)), -rng.uniform(0.01, 2.0, size=(5, 3))
+    for rule in ("wiener", "floor", "variance"):
+        w = gate_weights(d2, neg, rule, prior)
+        assert np.all((0.0 <= w) & (w <= 1.0))
+        np.testing.assert_array_equal(w, gate_weights(d2, np.zeros_like(neg), rule, prior))
     for rule in ("variance", "floor"):
         with pytest.raises(ValueError, match="prior"):
             gate_weights(d, v, rule)
