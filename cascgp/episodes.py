@@ -22,13 +22,14 @@ recorded            source
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
 
 from cascgp.controller import Controller
-from cascgp.data import DynamicsData
+from cascgp.data import DynamicsData, SavGol
 
 
 @dataclass
@@ -84,6 +85,15 @@ def _split_obs(obs: np.ndarray, dof: int) -> tuple[np.ndarray, np.ndarray, np.nd
     return obs[:dof], obs[dof:2 * dof], obs[2 * dof:3 * dof], float(obs[3 * dof])
 
 
+def _checked_smoothing(smoothing: Any) -> SavGol | None:
+    """``smoothing`` as :meth:`DynamicsData.from_measurements` takes it, checked before an episode runs."""
+    if isinstance(smoothing, (int, np.integer)) and not isinstance(smoothing, bool):
+        return SavGol(int(smoothing))
+    if smoothing is not None and not isinstance(smoothing, SavGol):
+        raise TypeError(f"smoothing: expected None, an odd int window or SavGol, got {smoothing!r}")
+    return smoothing
+
+
 def run_episode(
     env: Any,
     controller: Controller,
@@ -102,12 +112,26 @@ def run_episode(
             the reset, then ``controller(t, q, qd, task.reference)`` every tick (its output is sent
             to ``env.step`` as float32).
         seed, options: passed to ``env.reset`` (e.g. ``options={"task": "front", "payload_mass": 1.0}``).
-        smoothing: optional smoothing window for the numerical differentiation of ``qd``.
-        meta: extra metadata stored in the record.
+        smoothing: optional smoothing window for the numerical differentiation of ``qd``
+            (:meth:`~cascgp.data.DynamicsData.from_measurements`).
+        meta: extra metadata stored in the record (a JSON-serialisable dict).
         callback: optional ``callback(env.unwrapped, info)`` called after every step (e.g. to log
             extra metrics from the simulator's state).
+
+    ``smoothing`` and ``meta`` are checked before the reset (``TypeError``/``ValueError`` naming them). A tick whose
+    measured ``t``, ``q``, ``qd`` or torque is not finite (a sensor fault; the controller copes with it) is left out
+    of the record, which starts a new segment after it (``data.meta["n_dropped_ticks"]`` counts them); the errors
+    are computed on the recorded ticks.
     """
     dof = controller.dof
+    savgol = _checked_smoothing(smoothing)
+    if meta is not None:
+        if not isinstance(meta, dict):
+            raise TypeError(f"meta: expected a dict, got {type(meta).__name__}")
+        try:
+            json.dumps(meta)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"meta: expected a JSON-serialisable dict ({exc})") from None
     obs, info = env.reset(seed=seed, options=options)
     unwrapped = env.unwrapped
     task = unwrapped.task
@@ -135,13 +159,18 @@ def run_episode(
             callback(unwrapped, info)
         if terminated or truncated:
             break
-    t_arr, q_arr = np.asarray(ts), np.asarray(qs)
+    t_arr, q_arr, qd_arr, tau_arr = np.asarray(ts), np.asarray(qs), np.asarray(qds), np.asarray(taus)
+    ok = np.isfinite(t_arr) & np.isfinite(q_arr).all(1) & np.isfinite(qd_arr).all(1) & np.isfinite(tau_arr).all(1)
     record_meta = {"source": "episode", "task": getattr(task, "name", None),
                    "controller": controller.name, "payload_mass": info.get("payload_mass")}
+    if not ok.all():
+        record_meta["n_dropped_ticks"] = int((~ok).sum())
     record_meta.update(meta or {})
-    data = DynamicsData.from_measurements(t_arr, q_arr, np.asarray(qds), np.asarray(taus),
-                                          smoothing=smoothing, meta=record_meta)
-    err_meas = reference(t_arr)[0] - q_arr
+    segment = np.cumsum(~ok)[ok]  # a new segment after every left-out tick
+    t_arr, q_arr = t_arr[ok], q_arr[ok]
+    data = DynamicsData.from_measurements(t_arr, q_arr, qd_arr[ok], tau_arr[ok], smoothing=savgol,
+                                          meta=record_meta, segment=segment)
+    err_meas = np.array([reference(t)[0] for t in t_arr.tolist()]).reshape(len(t_arr), dof) - q_arr
     joint_rmse = np.sqrt(np.mean(err_meas**2, axis=0))
     tracking = float(np.sqrt(np.mean(np.square(errors)))) if errors else float(np.sqrt(np.mean(err_meas**2) * dof))
     n_marbles = info.get("n_marbles", 0) or 0

@@ -82,6 +82,51 @@ def test_episode_records_measurements_with_aligned_torques():
     assert np.isnan(res.in_jar) and res.n_fallbacks == 0 and not res.unstable
 
 
+class FaultyEnv(TwoJointEnv):
+    """A sensor fault: the velocity reads NaN at the ticks in ``bad``; the reference takes scalar times only."""
+
+    def __init__(self, bad=(), **kw):
+        super().__init__(**kw)
+        self.bad, self.n_resets = set(bad), 0
+        self.task = type("ScalarTask", (), {"name": "sine", "reference": lambda _, t: SineTask().reference(float(t))})()
+
+    def reset(self, **kw):
+        self.n_resets += 1
+        return super().reset(**kw)
+
+    def _obs(self):
+        obs = super()._obs()
+        if self.k in self.bad:
+            obs[2] = np.nan
+        return obs
+
+
+def test_a_faulty_measurement_is_left_out_of_the_record():
+    """The episode runs through a NaN reading (the controller copes); the record leaves its tick out and starts a
+    new segment after it; the errors are those of the other ticks, with a reference that takes scalars only."""
+    env = FaultyEnv(bad=(20, 21, 50))
+    res = run_episode(env, FeedforwardController(None, 20.0, 5.0, np.full(2, 10.0)), seed=0, smoothing=5)
+    clean = run_episode(FaultyEnv(), FeedforwardController(None, 20.0, 5.0, np.full(2, 10.0)), seed=0, smoothing=5)
+    keep = np.setdiff1d(np.arange(env.steps), [20, 21, 50])
+    d = res.data
+    assert res.steps == env.steps and d.n_samples == keep.size and d.meta["n_dropped_ticks"] == 3
+    assert len(d.segments) == 3 and np.all(np.isfinite(d.qdd))
+    np.testing.assert_array_equal(d.t, clean.data.t[keep])
+    err = np.array([SineTask().reference(t)[0] for t in d.t]) - d.q
+    np.testing.assert_allclose(res.joint_rmse, np.sqrt(np.mean(err**2, axis=0)))
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [({"smoothing": 4}, ValueError, "SavGol.window"),
+                                                ({"smoothing": "5"}, TypeError, "smoothing: expected"),
+                                                ({"meta": [1]}, TypeError, "meta: expected a dict"),
+                                                ({"meta": {"x": object()}}, TypeError, "meta: expected a JSON")])
+def test_bad_arguments_are_refused_before_the_reset(kwargs, exc, match):
+    env = FaultyEnv()
+    with pytest.raises(exc, match=match):
+        run_episode(env, FeedforwardController(None, 20.0, 5.0, np.full(2, 10.0)), seed=0, **kwargs)
+    assert env.n_resets == 0
+
+
 def test_exact_feedforward_tracks_better_than_pd():
     # Soft gains: PD alone lags; the exact feedforward leaves only the zero-order-hold error.
     pd = run_episode(TwoJointEnv(), FeedforwardController(None, 4.0, 1.0, np.full(2, 10.0)), seed=0)
@@ -125,6 +170,23 @@ def test_buffer_errors():
                          t=np.arange(3.0))
     with pytest.raises(ValueError, match="dof"):
         buf.append(three)
+    for kwargs, match in (({"rate_hz": None}, "rate_hz: expected a finite number > 0"),
+                          ({"rate_hz": "10"}, "rate_hz"), ({"max_samples": 10.0}, "max_samples: expected an integer"),
+                          ({"max_samples": 1}, "max_samples: expected an integer >= 2")):
+        with pytest.raises(ValueError, match=match):
+            buf.training_set(**kwargs)
+    with pytest.raises(ValueError, match="folder: expected a folder path"):
+        DataBuffer("")
+
+
+def test_a_folder_with_another_robots_episode_is_refused_naming_the_file(tmp_path):
+    buf = DataBuffer(tmp_path)
+    buf.append(run_episode(TwoJointEnv(), FeedforwardController(None, 1.0, 1.0, np.ones(2)), seed=0).data)
+    three = DynamicsData(q=np.zeros((3, 3)), qd=np.zeros((3, 3)), qdd=np.zeros((3, 3)), tau=np.zeros((3, 3)),
+                         t=np.arange(3.0))
+    three.save(tmp_path / "episode_00001.npz")  # written beside the buffer, not through it
+    with pytest.raises(ValueError, match=r"episode_00001.npz holds 3-DOF data, episode_00000.npz 2-DOF data"):
+        DataBuffer(tmp_path)
 
 
 def test_online_controller_learns_inside_the_episode_from_the_runner_measurements():
