@@ -27,6 +27,7 @@ import os
 import re
 from pathlib import Path
 
+from cascgp.checks import check_count, check_positive
 from cascgp.data import DynamicsData
 from cascgp.io import file_in_path
 
@@ -52,6 +53,8 @@ class DataBuffer:
     """
 
     def __init__(self, folder: str | os.PathLike[str] | None = None) -> None:
+        if folder is not None and not str(os.fspath(folder)).strip():
+            raise ValueError("folder: expected a folder path (or None for a buffer in memory), got an empty path")
         self.folder = None if folder is None else Path(folder)
         self._episodes: list[DynamicsData] = []
         if self.folder is not None:
@@ -61,7 +64,12 @@ class DataBuffer:
                 raise NotADirectoryError(f"folder: cannot keep the buffer's episodes in {self.folder}: "
                                          f"{file_in_path(self.folder)} is a file") from None
             found = [(int(m.group(1)), p) for p in self.folder.iterdir() if (m := _EPISODE_FILE.match(p.name))]
-            self._episodes = [DynamicsData.load(p) for _, p in sorted(found, key=lambda e: e[0])]
+            paths = [p for _, p in sorted(found, key=lambda e: e[0])]
+            self._episodes = [DynamicsData.load(p) for p in paths]
+            for p, e in zip(paths, self._episodes):
+                if e.dof != self._episodes[0].dof:
+                    raise ValueError(f"folder: {p} holds {e.dof}-DOF data, {paths[0].name} {self._episodes[0].dof}-DOF "
+                                     "data; one buffer holds one robot's episodes")
 
     def __len__(self) -> int:
         return len(self._episodes)
@@ -104,8 +112,8 @@ class DataBuffer:
 
     def training_set(self, rate_hz: float = 10.0, max_samples: int = 500) -> DynamicsData:
         """All data subsampled to ``rate_hz`` and thinned evenly to at most ``max_samples`` rows."""
-        if max_samples < 2:
-            raise ValueError(f"max_samples must be at least 2, got {max_samples}")
+        rate_hz = check_positive(rate_hz, "rate_hz", "Hz")
+        max_samples = check_count(max_samples, "max_samples", 2)
         data = DynamicsData.concat([e.subsample(rate_hz) for e in self._episodes]) if self._episodes else None
         if data is None:
             raise ValueError("the buffer is empty")

@@ -41,6 +41,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from .checks import check_count, check_positive
 from .derivatives import SavGol, differentiate
 from .io import atomic_savez, check_format_header, read_npz
 
@@ -327,19 +328,26 @@ class DynamicsData:
             sel: Any = idx
         else:
             sel = np.asarray(idx)
+            if sel.ndim != 1:
+                raise TypeError(f"take: idx: expected a 1-D sequence of indices, a boolean mask or a slice, got "
+                                f"{type(idx).__name__} of shape {sel.shape}")
+            if sel.size == 0:
+                raise ValueError("take: idx: expected at least one row, got none")
             if sel.dtype == bool:
                 if sel.shape != (self.n_samples,):
                     raise ValueError(f"take: idx: boolean mask of shape ({self.n_samples},) expected, got {sel.shape}")
             elif sel.dtype.kind not in "iu":
                 raise TypeError(f"take: idx: expected integer indices, a boolean mask or a slice, got {sel.dtype}")
+            elif sel.min() < -self.n_samples or sel.max() >= self.n_samples:
+                bad = sel[(sel < -self.n_samples) | (sel >= self.n_samples)][0]
+                raise ValueError(f"take: idx: row {bad} is out of range for {self.n_samples} rows")
         return DynamicsData(q=self.q[sel], qd=self.qd[sel], qdd=self.qdd[sel], tau=self.tau[sel],
                             t=self.t[sel], segment=self._ids[sel], meta=self.meta)
 
     def thin(self, max_samples: int) -> "DynamicsData":
         """At most ``max_samples`` rows, evenly spaced over all rows (first and last kept); ``self`` if it has no
         more. Row ``round(k (T - 1) / (max_samples - 1))`` for ``k = 0 .. max_samples - 1``, duplicates dropped."""
-        if max_samples < 2:
-            raise ValueError(f"thin: max_samples: expected an integer >= 2, got {max_samples}")
+        max_samples = check_count(max_samples, "thin: max_samples", 2)
         if self.n_samples <= max_samples:
             return self
         return self.take(np.unique(np.linspace(0, self.n_samples - 1, max_samples).round().astype(np.int64)))
@@ -349,9 +357,8 @@ class DynamicsData:
         then every row at least ``1/rate_hz`` after the last kept one (with a tolerance of a
         quarter sample period).  For regular 50 Hz data and 10 Hz this keeps every 5th row.
         A rate at or above the data rate keeps every row.  Segments are kept."""
-        if not np.isfinite(rate_hz) or rate_hz <= 0:
-            raise ValueError(f"subsample: rate_hz: expected a positive finite rate, got {rate_hz}")
-        period = 1.0 / float(rate_hz)
+        rate_hz = check_positive(rate_hz, "subsample: rate_hz", "Hz")
+        period = 1.0 / rate_hz
         dt = self.dt
         tol = 0.25 * dt if np.isfinite(dt) else 0.0
         keep = np.zeros(self.n_samples, dtype=bool)
@@ -380,8 +387,7 @@ class DynamicsData:
         """The leading rows covering ``seconds`` of data, counted as in :attr:`duration`
         (segment after segment): row r is kept when the data time elapsed before it is below
         ``seconds``.  At 10 Hz, ``first_seconds(30)`` keeps 300 rows."""
-        if not np.isfinite(seconds) or seconds <= 0:
-            raise ValueError(f"first_seconds: seconds: expected a positive number, got {seconds}")
+        seconds = check_positive(seconds, "first_seconds: seconds", "s")
         dt = self.dt
         dt = 0.0 if not np.isfinite(dt) else dt
         elapsed = np.empty(self.n_samples)

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .checks import check_positive
 from .data import DynamicsData
 
 __all__ = ["STRUCTURES", "FEATURE_KINDS", "state_features", "states_from_arrays", "input_spec",
@@ -45,9 +46,7 @@ def _check_kind(kind: str) -> None:
 
 
 def _check_delta(delta: float) -> float:
-    if not np.isfinite(delta) or delta <= 0:
-        raise ValueError(f"delta: expected a positive finite time step (s), got {delta!r}")
-    return float(delta)
+    return check_positive(delta, "delta", "s")
 
 
 def history_from_data(data: DynamicsData, delta: float) -> tuple[np.ndarray, np.ndarray]:

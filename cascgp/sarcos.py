@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .checks import check_positive
 from .data import DynamicsData
 
 __all__ = ["IAS_TO_GPML_TORQUE", "SARCOS_DOF", "SARCOS_RATE_HZ", "check_ias", "load_ias", "load_gpml",
@@ -143,11 +144,10 @@ def _make(X: np.ndarray, Y: np.ndarray, rows: np.ndarray, *, rate_hz: float, jum
                         segment=seg_ids.astype(np.int64), meta=meta)
 
 
-def _check_common(rate_hz: float, torque_scale: float) -> None:
-    if not np.isfinite(rate_hz) or rate_hz <= 0:
-        raise ValueError(f"rate_hz: expected a positive rate, got {rate_hz!r}")
-    if not np.isfinite(torque_scale) or torque_scale <= 0:
-        raise ValueError(f"torque_scale: expected a positive factor, got {torque_scale!r}")
+def _check_common(rate_hz: float, torque_scale: float, jump_factor: float) -> None:
+    check_positive(rate_hz, "rate_hz", "Hz")
+    check_positive(torque_scale, "torque_scale")
+    check_positive(jump_factor, "jump_factor")
 
 
 def _units(torque_scale: float, native: str) -> str:
@@ -169,7 +169,7 @@ def load_ias(path: str | os.PathLike, *, dedup: bool = True, torque_scale: float
     decimals).  ``torque_scale``: factor on the file's torques (``IAS_TO_GPML_TORQUE`` for
     GPML units).  See the module docstring for time, segments and units.
     """
-    _check_common(rate_hz, torque_scale)
+    _check_common(rate_hz, torque_scale, jump_factor)
     check_ias(path)
     d = _loadmat(path)
     X_tr, Y_tr = np.asarray(d["X_train"], float), np.asarray(d["Y_train"], float)
@@ -197,7 +197,7 @@ def load_gpml(path: str | os.PathLike, *, torque_scale: float = 1.0, rate_hz: fl
               jump_factor: float = 20.0, variable: str | None = None) -> DynamicsData:
     """Load a GPML-format file (``sarcos_inv.mat`` or ``sarcos_inv_test.mat``; the one ``T x 28``
     matrix, or ``variable``).  ``torque_scale=1/IAS_TO_GPML_TORQUE`` gives IAS units."""
-    _check_common(rate_hz, torque_scale)
+    _check_common(rate_hz, torque_scale, jump_factor)
     d = _loadmat(path)
     if variable is None:
         cands = [k for k, v in d.items() if not k.startswith("__") and isinstance(v, np.ndarray)

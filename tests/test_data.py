@@ -180,6 +180,27 @@ def test_take():
     assert d.take([0, 3, 5]).n_samples == 3
     with pytest.raises(ValueError, match=r"DynamicsData\.t"):
         d.take([5, 3])
+    assert d.take([-1]).t[0] == d.t[-1]  # NumPy's negative indices
+    for idx, exc, match in (([100], ValueError, "take: idx: row 100 is out of range for 20 rows"),
+                            ([-21], ValueError, "row -21 is out of range"),
+                            ([], ValueError, "take: idx: expected at least one row"),
+                            (3, TypeError, "take: idx: expected a 1-D sequence"),
+                            ([0.5], TypeError, "take: idx: expected integer indices")):
+        with pytest.raises(exc, match=match):
+            d.take(idx)
+
+
+@pytest.mark.parametrize("call, match", [
+    (lambda d: d.subsample(None), r"subsample: rate_hz: expected a finite number > 0 \(Hz\), got None"),
+    (lambda d: d.subsample("10"), "subsample: rate_hz"),
+    (lambda d: d.subsample(np.array([10.0, 5.0])), "subsample: rate_hz"),
+    (lambda d: d.first_seconds("1"), r"first_seconds: seconds: expected a finite number > 0 \(s\)"),
+    (lambda d: d.thin(2.5), "thin: max_samples: expected an integer >= 2, got 2.5"),
+    (lambda d: d.thin(None), "thin: max_samples"),
+])
+def test_scalar_arguments_name_themselves(call, match):
+    with pytest.raises(ValueError, match=match):
+        call(DynamicsData(**_rec()))
 
 
 def test_from_measurements_central_differences():

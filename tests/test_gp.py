@@ -298,6 +298,13 @@ def test_input_errors_name_the_field():
         GPFitConfig(kernel="linear")
     with pytest.raises(ValueError, match="n_restarts"):
         GPFitConfig(n_restarts=0)
+    for field, bad in (("snr_max", True), ("catch_up_windows", True)):
+        with pytest.raises(ValueError, match=field):
+            GPFitConfig(**{field: bad})
+    changed = GPFitConfig(n_restarts=1)
+    changed.n_restarts = 0  # set after construction: the fit checks the settings again
+    with pytest.raises(ValueError, match=r"config\.n_restarts: expected an integer >= 1, got 0"):
+        GPBank(changed).fit([X], [y])
     with pytest.raises(RuntimeError, match="not fitted"):
         bank.predict([X])
     bank.fit([X], [y])

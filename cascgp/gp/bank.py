@@ -221,6 +221,10 @@ class GPBank:
         The fit runs with ``config.threads`` torch and BLAS threads (one by default) and restores the caller's
         thread settings afterwards (:func:`cascgp.gp.likelihood.fit_threads`).
         """
+        try:
+            replace(self.config)  # its checks again: a field may have been set after construction
+        except (TypeError, ValueError) as exc:
+            raise type(exc)(f"config.{exc}") from None
         with fit_threads(self.config.threads):
             return self._fit(X, y, init, shared)
 

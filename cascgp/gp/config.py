@@ -118,10 +118,11 @@ class GPFitConfig:
         for name in ("drop_after", "stall_window", "race_at", "threads"):
             check_count(getattr(self, name), name, optional=True)
         check_count(self.seed, "seed", minimum=0)  # NumPy's generators take seeds >= 0
-        if self.snr_max is not None and (not isinstance(self.snr_max, (int, float)) or not math.isfinite(self.snr_max)
-                                         or self.snr_max <= 0):
+        if self.snr_max is not None and (isinstance(self.snr_max, bool) or not isinstance(self.snr_max, (int, float))
+                                         or not math.isfinite(self.snr_max) or self.snr_max <= 0):
             raise ValueError(f"snr_max: expected None or a finite number > 0, got {self.snr_max!r}")
-        if not isinstance(self.catch_up_windows, (int, float)) or not self.catch_up_windows > 0:
+        if isinstance(self.catch_up_windows, bool) or not isinstance(self.catch_up_windows, (int, float)) \
+                or not self.catch_up_windows > 0:
             raise ValueError(f"catch_up_windows: expected a number > 0, got {self.catch_up_windows!r}")
         check_count(self.screen_n, "screen_n", minimum=2, optional=True)
         self.noise_floor_target = check_target_floor(self.noise_floor_target, "noise_floor_target")

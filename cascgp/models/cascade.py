@@ -17,6 +17,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from cascgp.checks import check_positive
 from cascgp.data import DynamicsData, all_finite
 from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
 from cascgp.gp import GPBank, GPFitConfig
@@ -80,8 +81,7 @@ class CascadedGPModel:
             raise ValueError(f"gp_config.noise_floor_target: expected one noise-variance floor per joint "
                              f"({self.dof}, N m^2), got {len(t)}")
         self.gp_config = gp_config
-        if not np.isfinite(df_delta) or df_delta <= 0:
-            raise ValueError(f"df_delta: expected a positive time step (s), got {df_delta!r}")
+        check_positive(df_delta, "df_delta", "s")
         self.df_delta = float(df_delta)
         self.train_on_predicted = bool(train_on_predicted)
         N = self.dof
