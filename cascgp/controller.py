@@ -87,7 +87,7 @@ def _as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
         raise ValueError(f"{name} must be one real number or {dof} of them (one per joint), got shape "
                          f"{arr.shape}") from None
     if not np.all(np.isfinite(gain)) or np.any(gain < 0):
-        raise ValueError(f"{name} must be finite and non-negative, got {gain}")
+        raise ValueError(f"{name} must be finite and non-negative, got {value!r}")
     return gain
 
 

@@ -279,7 +279,7 @@ class DynamicsData:
             smoothing = SavGol(int(smoothing))
         if smoothing is not None and not isinstance(smoothing, SavGol):
             raise TypeError(f"smoothing: expected None, an odd int window or SavGol, got {smoothing!r}")
-        qd_a = np.asarray(qd, dtype=np.float64)
+        qd_a = as_real_array("DynamicsData.qd", qd, "(T, N)")  # complex, text or ragged input refused by name
         # Build once without qdd to get all shape/finite/time checks with the usual messages.
         probe = cls(q=q, qd=qd_a, qdd=np.zeros_like(qd_a), tau=tau, t=t, segment=segment,
                     meta=meta or {})

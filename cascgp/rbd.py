@@ -73,6 +73,8 @@ def _as_vector(name: str, value: Any, n: int) -> np.ndarray:
         raise ValueError(f"{name} must have shape ({n},) (one value per joint), got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {arr}")
+    if name.endswith("_limits") and not np.all(arr > 0):
+        raise ValueError(f"{name} must be > 0 (symmetric limits, one per joint), got {arr}")
     return arr
 
 
@@ -139,6 +141,8 @@ class RigidBodyModel:
         self.joint_names: tuple[str, ...] = tuple(model.names[1:])
         if armature is not None:
             model.armature = _as_vector("armature", armature, self.dof).copy()
+            if np.any(model.armature < 0):
+                raise ValueError(f"armature must be >= 0 (rotor inertia, kg m^2), got {armature!r}")
         if gravity is not None:
             g = _as_vector("gravity", gravity, 3)
             model.gravity = pin.Motion(g, np.zeros(3))

@@ -140,8 +140,12 @@ def _make(X: np.ndarray, Y: np.ndarray, rows: np.ndarray, *, rate_hz: float, jum
     t = np.arange(X.shape[0], dtype=np.float64) / rate_hz
     sel = np.asarray(rows)
     _, seg_ids = np.unique(seg[sel], return_inverse=True)
-    return DynamicsData(q=q[sel], qd=qd[sel], qdd=qdd[sel], tau=Y[sel] * torque_scale, t=t[sel],
-                        segment=seg_ids.astype(np.int64), meta=meta)
+    try:
+        return DynamicsData(q=q[sel], qd=qd[sel], qdd=qdd[sel], tau=Y[sel] * torque_scale, t=t[sel],
+                            segment=seg_ids.astype(np.int64), meta=meta)
+    except ValueError as exc:  # a NaN, or no rows left: name the file and the matrix
+        left = f" ({len(sel)} of {X.shape[0]} rows kept)" if len(sel) != X.shape[0] else ""
+        raise ValueError(f"{meta.get('file', 'the SARCOS file')}: {name}{left}: {exc}") from None
 
 
 def _check_common(rate_hz: float, torque_scale: float, jump_factor: float) -> None:

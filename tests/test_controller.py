@@ -116,8 +116,10 @@ def test_derivative_free_model_gets_reference_history():
 
 
 def test_bad_arguments_name_the_field():
-    with pytest.raises(ValueError, match="kp"):
+    with pytest.raises(ValueError, match="kp must be finite and non-negative, got -1.0"):
         FeedforwardController(None, -1.0, KD, LIMITS)
+    with pytest.raises(ValueError, match="kp must be finite and non-negative, got None"):
+        FeedforwardController(None, None, KD, LIMITS)
     with pytest.raises(ValueError, match="torque_limits"):
         FeedforwardController(None, KP, KD, np.array([1.0, -2.0]))
     with pytest.raises(ValueError, match="model.dof"):

@@ -190,6 +190,13 @@ def test_take():
             d.take(idx)
 
 
+@pytest.mark.parametrize("qd", [np.ones((20, 3)) * (1 + 1j), np.full((20, 3), "a"), [[1.0, 2.0, 3.0], [1.0]]])
+def test_from_measurements_refuses_what_the_constructor_refuses(qd):
+    r = _rec()
+    with pytest.raises(TypeError, match=r"DynamicsData\.qd: expected a (real )?numeric"):
+        DynamicsData.from_measurements(r["t"], r["q"], qd, r["tau"])
+
+
 @pytest.mark.parametrize("call, match", [
     (lambda d: d.subsample(None), r"subsample: rate_hz: expected a finite number > 0 \(Hz\), got None"),
     (lambda d: d.subsample("10"), "subsample: rate_hz"),

@@ -287,6 +287,12 @@ def test_construction_errors(tmp, exact_urdf):
         RigidBodyModel.from_urdf(exact_urdf, armature=[1.0, 2.0])
     with pytest.raises(ValueError, match="armature must be finite"):
         RigidBodyModel.from_urdf(exact_urdf, armature=[np.nan] * 6)
+    with pytest.raises(ValueError, match=r"armature must be >= 0 \(rotor inertia"):
+        RigidBodyModel.from_urdf(exact_urdf, armature=-0.1)
+    rbd = RigidBodyModel.from_urdf(exact_urdf)
+    for field in ("torque_limits", "velocity_limits"):
+        with pytest.raises(ValueError, match=f"{field} must be > 0"):
+            RigidBodyModel(rbd.pin_model, **{field: [1.0, 1.0, 0.0, 1.0, 1.0, 1.0]})
 
     lone = tmp / "lone" / "arm.urdf"
     lone.parent.mkdir()

@@ -87,3 +87,23 @@ def test_check_ias_reads_names_and_shapes_only(tmp_path) -> None:
     with pytest.raises(ValueError, match="text.mat: not a readable MATLAB .mat file"):
         check_ias(tmp_path / "text.mat")
 
+
+
+def test_a_bad_matrix_names_the_file_and_the_matrix(tmp_path) -> None:
+    """A NaN in the training inputs, or a test split whose rows all stand in the training set: the file and the
+    matrix are named (they were DynamicsData's messages alone). Tiny files: no SARCOS copy needed."""
+    from scipy.io import savemat
+
+    rng = np.random.default_rng(0)
+    X, Y = rng.normal(size=(4, 21)), rng.normal(size=(4, 7))
+    bad = X.copy()
+    bad[2, 5] = np.nan
+    savemat(tmp_path / "nan.mat", {"X_train": bad, "Y_train": Y, "X_test": X, "Y_test": Y})
+    with pytest.raises(ValueError, match=r"nan.mat: X_train: DynamicsData.q: non-finite value .* at row 2"):
+        load_ias(tmp_path / "nan.mat")
+    savemat(tmp_path / "dup.mat", {"X_train": X, "Y_train": Y, "X_test": X[:2], "Y_test": Y[:2]})
+    with pytest.raises(ValueError, match=r"dup.mat: X_test \(0 of 2 rows kept\): "):
+        load_ias(tmp_path / "dup.mat")
+    for kwargs in ({"jump_factor": -1.0}, {"rate_hz": None}):
+        with pytest.raises(ValueError, match=next(iter(kwargs))):
+            load_ias(tmp_path / "nan.mat", **kwargs)
