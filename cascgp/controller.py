@@ -282,6 +282,9 @@ class FeedforwardController:
         tau = self._model_torque(t, q_d, qd_d, qdd_d, reference)
         if tau is not None and tau.shape == (self.dof,) and all_finite(tau):
             return tau
+        if tau is not None:  # an output, but not one torque per joint, finite
+            self.last_model_error = (f"the model returned shape {tau.shape}, expected ({self.dof},)"
+                                     if tau.shape != (self.dof,) else "the model returned a non-finite torque")
         self.n_fallbacks += 1
         if self.fallback is not None and self.fallback is not self.model:
             try:

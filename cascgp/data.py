@@ -164,6 +164,8 @@ class DynamicsData:
                 else:
                     raise TypeError(
                         f"DynamicsData.segment: expected integer ids, got dtype {seg_raw.dtype}")
+            if seg_raw.dtype.kind in "uf" and seg_raw.size and not np.abs(seg_raw).max() < 2.0**63:
+                raise ValueError(f"DynamicsData.segment: expected ids below 2**63, got {seg_raw.max()!r}")
             seg = np.array(seg_raw, dtype=np.int64, order="C", copy=True)
         for name in _ARRAY_FIELDS:
             _check_finite(name, arrays[name])
@@ -402,10 +404,14 @@ class DynamicsData:
     def save(self, path: str | os.PathLike, *, exclusive: bool = False) -> Path:
         """Write an ``.npz`` archive atomically (see :func:`cascgp.io.atomic_savez`); returns the path.
         ``exclusive=True`` raises ``FileExistsError`` instead of replacing an existing file."""
+        try:
+            meta_json = json.dumps(self.meta)
+        except (TypeError, ValueError) as exc:  # meta changed after construction
+            raise TypeError(f"DynamicsData.meta: expected a JSON-serialisable dict ({exc})") from None
         return atomic_savez(path, exclusive=exclusive, arrays={
             "format_kind": np.array(_KIND), "format_version": np.array(FORMAT_VERSION),
             "q": self.q, "qd": self.qd, "qdd": self.qdd, "tau": self.tau, "t": self.t,
-            "segment": self._ids, "meta_json": np.array(json.dumps(self.meta)),
+            "segment": self._ids, "meta_json": np.array(meta_json),
         })
 
     @classmethod

@@ -9,8 +9,13 @@ __all__ = ["rmse", "nrmse", "interval_coverage", "std_scale_for_level"]
 
 
 def _pair(pred: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    p = np.asarray(pred, dtype=np.float64)
-    y = np.asarray(target, dtype=np.float64)
+    try:
+        p = np.asarray(pred, dtype=np.float64)
+        y = np.asarray(target, dtype=np.float64)
+    except (TypeError, ValueError) as exc:  # text, ragged lists
+        raise ValueError(f"pred/target: expected real (T, N) or (T,) arrays ({exc})") from None
+    if p.ndim > 2 or y.ndim > 2:
+        raise ValueError(f"pred/target: expected (T, N) or (T,) arrays, got shapes {p.shape} and {y.shape}")
     if p.ndim == 1:
         p = p[:, None]
     if y.ndim == 1:

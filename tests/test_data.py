@@ -91,11 +91,19 @@ def test_segment_must_be_nondecreasing():
         DynamicsData(**_rec(segment=seg))
     with pytest.raises(TypeError, match=r"DynamicsData\.segment"):
         DynamicsData(**_rec(segment=np.full(20, 0.5)))
+    for huge in (np.r_[np.zeros(19), 1e30], np.r_[np.zeros(19, np.uint64), np.uint64(2**64 - 1)]):
+        with pytest.raises(ValueError, match=r"DynamicsData\.segment: expected ids below 2\*\*63"):
+            DynamicsData(**_rec(segment=huge))
 
 
-def test_meta_must_be_json():
+def test_meta_must_be_json(tmp_path):
     with pytest.raises(TypeError, match=r"DynamicsData\.meta"):
         DynamicsData(**_rec(), meta={"x": object()})
+    d = DynamicsData(**_rec())
+    d.meta["x"] = object()  # changed after construction: save names it, and writes nothing
+    with pytest.raises(TypeError, match=r"DynamicsData\.meta: expected a JSON-serialisable dict"):
+        d.save(tmp_path / "d.npz")
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_save_load_roundtrip(tmp_path):

@@ -28,6 +28,10 @@ def test_errors():
         rmse(p, y)
     with pytest.raises(ValueError, match="at least one row"):
         rmse(np.zeros((0, 2)), np.zeros((0, 2)))
+    with pytest.raises(ValueError, match=r"expected \(T, N\) or \(T,\) arrays, got shapes \(2, 2, 2\)"):
+        rmse(np.zeros((2, 2, 2)), np.zeros((2, 2, 2)))
+    with pytest.raises(ValueError, match="pred/target: expected real"):
+        nrmse([[1.0, 2.0], [1.0]], y)
 
 
 def test_interval_coverage_of_a_gaussian_sample_and_errors():
