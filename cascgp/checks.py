@@ -31,7 +31,9 @@ def check_count(v: Any, field_name: str, minimum: int = 1, optional: bool = Fals
 
 def check_positive(v: Any, field_name: str, unit: str = "", zero: bool = False) -> float:
     """``v`` as a ``float`` if it is a finite real number above 0 (or 0 itself, with ``zero``); else ``ValueError``
-    naming ``field_name``."""
+    naming ``field_name``. A 0-d NumPy array counts as its number."""
+    if isinstance(v, np.ndarray) and v.ndim == 0 and v.dtype.kind in "fiu":
+        v = v[()]
     if isinstance(v, bool) or not isinstance(v, (int, float, np.integer, np.floating)) or not math.isfinite(v) \
             or v < 0 or (v == 0 and not zero):
         raise ValueError(f"{field_name}: expected a finite number {'>=' if zero else '>'} 0"

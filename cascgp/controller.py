@@ -220,6 +220,12 @@ class FeedforwardController:
         self.n_bad_measurements = 0
         self.last_model_error: str | None = None
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """A copy or an unpickled controller keeps its limits read-only (copying makes arrays writable)."""
+        self.__dict__.update(state)
+        for name in ("_torque_limits", "_neg_limits"):
+            getattr(self, name).setflags(write=False)
+
     @property
     def torque_limits(self) -> np.ndarray:
         """Symmetric actuator limits (N m), one per joint, as a read-only array. Assigning new limits (as many

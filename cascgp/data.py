@@ -165,7 +165,8 @@ class DynamicsData:
                     raise TypeError(
                         f"DynamicsData.segment: expected integer ids, got dtype {seg_raw.dtype}")
             if seg_raw.dtype.kind in "uf" and seg_raw.size and not np.abs(seg_raw).max() < 2.0**63:
-                raise ValueError(f"DynamicsData.segment: expected ids below 2**63, got {seg_raw.max()!r}")
+                big = seg_raw[~(np.abs(seg_raw) < 2.0**63)][0]
+                raise ValueError(f"DynamicsData.segment: expected ids within +-2**63, got {big!r}")
             seg = np.array(seg_raw, dtype=np.int64, order="C", copy=True)
         for name in _ARRAY_FIELDS:
             _check_finite(name, arrays[name])

@@ -37,7 +37,8 @@ class EpisodeResult:
     """What one episode measured and how well it went.
 
     Attributes:
-        data: the measured record at the control rate (one segment).
+        data: the measured record at the control rate (one segment; one more after each run of left-out
+            ticks).
         tracking_rmse: RMSE of the true joint-position error over the episode (rad), from
             ``info["tracking_error"]`` when the environment reports it, else from the measured q.
         joint_rmse: per-joint RMSE of ``q_d - q_measured`` (rad), shape (N,).
@@ -85,6 +86,16 @@ def _split_obs(obs: np.ndarray, dof: int) -> tuple[np.ndarray, np.ndarray, np.nd
     return obs[:dof], obs[dof:2 * dof], obs[2 * dof:3 * dof], float(obs[3 * dof])
 
 
+def _long_runs(ok: np.ndarray, min_len: int) -> np.ndarray:
+    """``ok`` with the runs of True shorter than ``min_len`` set to False."""
+    out = ok.copy()
+    edges = np.flatnonzero(np.diff(np.r_[0, ok.astype(np.int8), 0]))  # starts and ends of the runs of True
+    for lo, hi in zip(edges[::2], edges[1::2]):
+        if hi - lo < min_len:
+            out[lo:hi] = False
+    return out
+
+
 def _checked_smoothing(smoothing: Any) -> SavGol | None:
     """``smoothing`` as :meth:`DynamicsData.from_measurements` takes it, checked before an episode runs."""
     if isinstance(smoothing, (int, np.integer)) and not isinstance(smoothing, bool):
@@ -120,8 +131,9 @@ def run_episode(
 
     ``smoothing`` and ``meta`` are checked before the reset (``TypeError``/``ValueError`` naming them). A tick whose
     measured ``t``, ``q``, ``qd`` or torque is not finite (a sensor fault; the controller copes with it) is left out
-    of the record, which starts a new segment after it (``data.meta["n_dropped_ticks"]`` counts them); the errors
-    are computed on the recorded ticks.
+    of the record, which starts a new segment after it, and so is a run of good ticks between faults too short to
+    differentiate (under 3 ticks, or the ``smoothing`` window); ``data.meta["n_dropped_ticks"]`` counts them. The
+    errors are computed on the recorded ticks.
     """
     dof = controller.dof
     savgol = _checked_smoothing(smoothing)
@@ -161,6 +173,11 @@ def run_episode(
             break
     t_arr, q_arr, qd_arr, tau_arr = np.asarray(ts), np.asarray(qs), np.asarray(qds), np.asarray(taus)
     ok = np.isfinite(t_arr) & np.isfinite(q_arr).all(1) & np.isfinite(qd_arr).all(1) & np.isfinite(tau_arr).all(1)
+    if not ok.all():  # runs of good ticks between faults too short to differentiate are left out too
+        ok = _long_runs(ok, max(3, savgol.window if savgol is not None else 3))
+        if not ok.any():
+            raise ValueError(f"run_episode: no {max(3, savgol.window if savgol else 3)} consecutive ticks of the "
+                             f"{steps} had finite measurements (t, q, qd, torque); nothing to record")
     record_meta = {"source": "episode", "task": getattr(task, "name", None),
                    "controller": controller.name, "payload_mass": info.get("payload_mass")}
     if not ok.all():

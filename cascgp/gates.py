@@ -254,10 +254,11 @@ class _VarianceRule:
         """The weights for corrections :math:`d` and variances :math:`v` (any shape; ``prior`` :math:`p` broadcast
         against ``var``); 0 where a weight, a correction or a variance is not finite."""
         d = np.asarray(correction, dtype=float)
-        v = np.maximum(np.asarray(var, dtype=float), 0.0)  # a negative variance (round-off, a user model) is 0
+        v_raw = np.asarray(var, dtype=float)
+        v = np.maximum(v_raw, 0.0)  # a negative finite variance (round-off, a user model) is 0
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             w = self._weights(d, v, prior)
-        return np.where(np.isfinite(w) & np.isfinite(d) & np.isfinite(v), w, 0.0)
+        return np.where(np.isfinite(w) & np.isfinite(d) & np.isfinite(v_raw), w, 0.0)
 
     def _weights(self, d: np.ndarray, v: np.ndarray, prior: Any) -> np.ndarray:
         raise NotImplementedError

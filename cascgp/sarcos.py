@@ -151,7 +151,9 @@ def _make(X: np.ndarray, Y: np.ndarray, rows: np.ndarray, *, rate_hz: float, jum
 def _check_common(rate_hz: float, torque_scale: float, jump_factor: float) -> None:
     check_positive(rate_hz, "rate_hz", "Hz")
     check_positive(torque_scale, "torque_scale")
-    check_positive(jump_factor, "jump_factor")
+    if isinstance(jump_factor, bool) or not isinstance(jump_factor, (int, float, np.integer, np.floating)) \
+            or not jump_factor > 0:  # inf: never split
+        raise ValueError(f"jump_factor: expected a number > 0 (inf: one segment), got {jump_factor!r}")
 
 
 def _units(torque_scale: float, native: str) -> str:

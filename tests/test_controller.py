@@ -155,6 +155,13 @@ def test_new_torque_limits_are_validated_and_bound_every_later_output():
     ctrl = FeedforwardController(None, KP, KD, limits)
     limits[:] = 1e6  # the caller's array is copied
     assert np.all(np.abs(ctrl(0.2, q_d + 5.0, qd_d - 5.0, reference)) <= LIMITS)
+    import copy
+    import pickle
+
+    for twin in (copy.deepcopy(ctrl), pickle.loads(pickle.dumps(ctrl))):  # a copy keeps them read-only
+        with pytest.raises(ValueError, match="read-only"):
+            twin.torque_limits[:] = 1.0
+        assert np.all(np.abs(twin(0.2, q_d + 5.0, qd_d - 5.0, reference)) <= LIMITS)
 
 
 def test_gains_can_be_scheduled_by_assignment_and_are_validated():

@@ -92,7 +92,7 @@ def test_segment_must_be_nondecreasing():
     with pytest.raises(TypeError, match=r"DynamicsData\.segment"):
         DynamicsData(**_rec(segment=np.full(20, 0.5)))
     for huge in (np.r_[np.zeros(19), 1e30], np.r_[np.zeros(19, np.uint64), np.uint64(2**64 - 1)]):
-        with pytest.raises(ValueError, match=r"DynamicsData\.segment: expected ids below 2\*\*63"):
+        with pytest.raises(ValueError, match=r"DynamicsData\.segment: expected ids within \+-2\*\*63"):
             DynamicsData(**_rec(segment=huge))
 
 
@@ -212,10 +212,16 @@ def test_from_measurements_refuses_what_the_constructor_refuses(qd):
     (lambda d: d.first_seconds("1"), r"first_seconds: seconds: expected a finite number > 0 \(s\)"),
     (lambda d: d.thin(2.5), "thin: max_samples: expected an integer >= 2, got 2.5"),
     (lambda d: d.thin(None), "thin: max_samples"),
+    (lambda d: d.subsample(np.array(-1.0)), "subsample: rate_hz"),
 ])
 def test_scalar_arguments_name_themselves(call, match):
     with pytest.raises(ValueError, match=match):
         call(DynamicsData(**_rec()))
+
+
+def test_a_zero_dimensional_array_is_a_number():
+    d = DynamicsData(**_rec())
+    assert d.subsample(np.array(10.0)).n_samples == d.subsample(10.0).n_samples
 
 
 def test_from_measurements_central_differences():

@@ -116,6 +116,14 @@ def test_a_faulty_measurement_is_left_out_of_the_record():
     np.testing.assert_allclose(res.joint_rmse, np.sqrt(np.mean(err**2, axis=0)))
 
 
+def test_good_ticks_between_faults_too_few_to_differentiate_are_left_out_too():
+    ctrl = FeedforwardController(None, 20.0, 5.0, np.full(2, 10.0))
+    res = run_episode(FaultyEnv(bad=(20, 23)), ctrl, seed=0)  # ticks 21 and 22 alone: no qdd from two rows
+    assert res.data.meta["n_dropped_ticks"] == 4 and len(res.data.segments) == 2
+    with pytest.raises(ValueError, match="run_episode: no 3 consecutive ticks of the 80 had finite measurements"):
+        run_episode(FaultyEnv(bad=range(0, 80, 2)), ctrl, seed=0)
+
+
 @pytest.mark.parametrize("kwargs, exc, match", [({"smoothing": 4}, ValueError, "SavGol.window"),
                                                 ({"smoothing": "5"}, TypeError, "smoothing: expected"),
                                                 ({"meta": [1]}, TypeError, "meta: expected a dict"),

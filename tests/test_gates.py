@@ -31,6 +31,7 @@ def test_gate_weights_are_the_documented_rules() -> None:
         w = gate_weights(d2, neg, rule, prior)
         assert np.all((0.0 <= w) & (w <= 1.0))
         np.testing.assert_array_equal(w, gate_weights(d2, np.zeros_like(neg), rule, prior))
+        assert gate_weights(np.ones(2), np.array([-np.inf, np.nan]), rule, prior[:2]).tolist() == [0.0, 0.0]
     for rule in ("variance", "floor"):
         with pytest.raises(ValueError, match="prior"):
             gate_weights(d, v, rule)

@@ -104,6 +104,8 @@ def test_a_bad_matrix_names_the_file_and_the_matrix(tmp_path) -> None:
     savemat(tmp_path / "dup.mat", {"X_train": X, "Y_train": Y, "X_test": X[:2], "Y_test": Y[:2]})
     with pytest.raises(ValueError, match=r"dup.mat: X_test \(0 of 2 rows kept\): "):
         load_ias(tmp_path / "dup.mat")
-    for kwargs in ({"jump_factor": -1.0}, {"rate_hz": None}):
+    for kwargs in ({"jump_factor": -1.0}, {"jump_factor": np.nan}, {"rate_hz": None}):
         with pytest.raises(ValueError, match=next(iter(kwargs))):
             load_ias(tmp_path / "nan.mat", **kwargs)
+    savemat(tmp_path / "ok.mat", {"X_train": X, "Y_train": Y, "X_test": X[:2] + 1.0, "Y_test": Y[:2]})
+    assert len(load_ias(tmp_path / "ok.mat", jump_factor=np.inf)[0].segments) == 1  # inf: never split

@@ -222,7 +222,7 @@ class GPBank:
         thread settings afterwards (:func:`cascgp.gp.likelihood.fit_threads`).
         """
         try:
-            replace(self.config)  # its checks again: a field may have been set after construction
+            self.config = replace(self.config)  # a checked copy: a field may have been set after construction
         except (TypeError, ValueError) as exc:
             raise type(exc)(f"config.{exc}") from None
         with fit_threads(self.config.threads):
