@@ -174,10 +174,11 @@ def run_episode(
     t_arr, q_arr, qd_arr, tau_arr = np.asarray(ts), np.asarray(qs), np.asarray(qds), np.asarray(taus)
     ok = np.isfinite(t_arr) & np.isfinite(q_arr).all(1) & np.isfinite(qd_arr).all(1) & np.isfinite(tau_arr).all(1)
     if not ok.all():  # runs of good ticks between faults too short to differentiate are left out too
-        ok = _long_runs(ok, max(3, savgol.window if savgol is not None else 3))
+        min_run = 3 if savgol is None else max(3, savgol.window)
+        ok = _long_runs(ok, min_run)
         if not ok.any():
-            raise ValueError(f"run_episode: no {max(3, savgol.window if savgol else 3)} consecutive ticks of the "
-                             f"{steps} had finite measurements (t, q, qd, torque); nothing to record")
+            raise ValueError(f"run_episode: no {min_run} consecutive ticks of the {steps} had finite measurements "
+                             "(t, q, qd, torque); nothing to record")
     record_meta = {"source": "episode", "task": getattr(task, "name", None),
                    "controller": controller.name, "payload_mass": info.get("payload_mass")}
     if not ok.all():
