@@ -21,12 +21,14 @@ Use it with ``JacoPayload-v0`` in velocity mode: ``action = gen.velocity(t)``.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
 import numpy as np
 
 from jaco_env import robot
+from jaco_env.checks import is_real_number
 
 #: Ranges of the joints in dm_control's convention (rad); None = continuous joint.
 JOINT_RANGES: tuple[tuple[float, float] | None, ...] = (
@@ -63,13 +65,23 @@ class SumOfSinusoids:
         self.q0 = np.asarray(self.q0, dtype=float).copy()
         if self.q0.shape != (robot.N_JOINTS,) or not np.all(np.isfinite(self.q0)):
             raise ValueError(f"q0 must be {robot.N_JOINTS} finite joint angles, got {self.q0!r}")
-        lo_f, hi_f = self.freq_range
-        if not 0 < lo_f <= hi_f:
-            raise ValueError(f"freq_range must satisfy 0 < low <= high, got {self.freq_range!r}")
+        try:
+            lo_f, hi_f = (float(f) for f in self.freq_range)
+        except (TypeError, ValueError):
+            raise ValueError(f"freq_range must be two frequencies (low, high) in Hz, got {self.freq_range!r}") from None
+        if not 0 < lo_f <= hi_f < math.inf:
+            raise ValueError(f"freq_range must satisfy 0 < low <= high < inf (Hz), got {self.freq_range!r}")
+        for name in ("speed", "max_excursion", "margin"):
+            v = getattr(self, name)
+            if not is_real_number(v) or not math.isfinite(v):
+                raise ValueError(f"{name} must be a finite real number, got {v!r}")
         if not 0 < self.speed <= 1:
             raise ValueError(f"speed must be in (0, 1], got {self.speed!r}")
-        if self.n_sines < 1:
-            raise ValueError(f"n_sines must be >= 1, got {self.n_sines!r}")
+        if not self.max_excursion > 0 or not self.margin >= 0:
+            raise ValueError(f"max_excursion must be > 0 and margin >= 0 (rad), got {self.max_excursion!r} and "
+                             f"{self.margin!r}")
+        if isinstance(self.n_sines, bool) or not isinstance(self.n_sines, (int, np.integer)) or self.n_sines < 1:
+            raise ValueError(f"n_sines must be an integer >= 1, got {self.n_sines!r}")
         rng = np.random.default_rng(self.seed)
         n = robot.N_JOINTS
         self.freqs = rng.uniform(lo_f, hi_f, (n, self.n_sines))

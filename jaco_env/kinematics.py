@@ -122,9 +122,14 @@ def solve_ik(p_target: np.ndarray, R_target: np.ndarray, q0: np.ndarray, *, iter
 
 
 @functools.lru_cache(maxsize=1)
-def home_pose() -> np.ndarray:
-    """The common start/end pose of every task (bottle upright in front of the robot)."""
+def _home_pose() -> np.ndarray:
     q, err = solve_ik(HOME_MOUTH, target_rotation(HOME_APPROACH, 0.0), HOME_GUESS)
     if err > 1e-4:
         raise RuntimeError(f"home pose IK did not converge (residual {err:.2e})")
     return q
+
+
+def home_pose() -> np.ndarray:
+    """The common start/end pose of every task (bottle upright in front of the robot), a new array each call (the
+    IK runs once; changing the array returned changes nothing else)."""
+    return _home_pose().copy()

@@ -115,13 +115,35 @@ class PDController:
     name = "pd"
 
     def __init__(self, kp: np.ndarray = DEFAULT_KP, kd: np.ndarray = DEFAULT_KD):
-        self.kp = _as_gain(kp, "kp")
-        self.kd = _as_gain(kd, "kd")
+        self.kp, self.kd = kp, kd  # the properties check them
         self.n_fallbacks = 0
         self.n_bad_measurements = 0
 
+    @property
+    def kp(self) -> np.ndarray:
+        """Proportional gains (N m / rad), one per joint; assigning checks them (a scalar is broadcast)."""
+        return self._kp
+
+    @kp.setter
+    def kp(self, value: np.ndarray | float) -> None:
+        self._kp = _as_gain(value, "kp")
+
+    @property
+    def kd(self) -> np.ndarray:
+        """Derivative gains (N m s / rad), one per joint; assigning checks them."""
+        return self._kd
+
+    @kd.setter
+    def kd(self, value: np.ndarray | float) -> None:
+        self._kd = _as_gain(value, "kd")
+
     def start(self, env: Any, info: dict[str, Any]) -> None:
-        """Called by the episode runner after ``env.reset``: zero the counters."""
+        """Called by the episode runner after ``env.reset``: zero the counters. ``ValueError`` for an env in
+        velocity mode (these controllers send torques)."""
+        mode = getattr(getattr(env, "unwrapped", env), "control_mode", "torque")
+        if mode != "torque":
+            raise ValueError(f"env: {self.name} sends joint torques; the env is in control_mode={mode!r} "
+                             "(make it with control_mode='torque')")
         self.n_fallbacks = 0
         self.n_bad_measurements = 0
 
@@ -212,10 +234,13 @@ class OracleController(PDController):
         env, follow its marbles."""
         super().start(env, info)
         n_marbles = int(info.get("n_marbles", self.n_marbles))
-        self._build(float(info["payload_mass"]), n_marbles,
-                    getattr(getattr(env, "unwrapped", env), "link_inertials", "dm_control"))
-        follow = self.follow_marbles and n_marbles > 0 and hasattr(env, "marbles_in_bottle_frame")
-        self._env = env if follow else None
+        if "payload_mass" not in info:
+            raise ValueError("info: expected the reset's info with 'payload_mass' (kg), as the jaco_env envs give it")
+        mass = scene.check_rigid_payload_mass(info["payload_mass"], "info['payload_mass']")
+        unwrapped = getattr(env, "unwrapped", env)  # a Gymnasium wrapper forwards no attributes
+        self._build(mass, n_marbles, getattr(unwrapped, "link_inertials", "dm_control"))
+        follow = self.follow_marbles and n_marbles > 0 and hasattr(unwrapped, "marbles_in_bottle_frame")
+        self._env = unwrapped if follow else None
 
     def _update_marbles(self, model: mujoco.MjModel) -> None:
         loc, in_bottle = self._env.marbles_in_bottle_frame()

@@ -92,6 +92,14 @@ class PouringTask:
                 raise ValueError(
                     f"PouringTask.payload_mass must be in (0, {scene.MAX_PAYLOAD}] kg or None, got {pm}")
             self.payload_mass = pm
+        for f in ("tilt", "pour_height", "pre_height", "pour_offset", "hold", "settle", "speed", "tip_speed"):
+            v = getattr(self, f)
+            if not is_real_number(v) or not np.isfinite(v):
+                raise TypeError(f"PouringTask.{f} must be a finite real number, got {type(v).__name__} {v!r}") \
+                    if not is_real_number(v) else ValueError(f"PouringTask.{f} must be finite, got {v!r}")
+            setattr(self, f, float(v))
+        if not 0 < self.tilt <= np.pi:
+            raise ValueError(f"PouringTask.tilt must be in (0, pi] rad, got {self.tilt}")
         for f in ("hold", "settle"):
             if not getattr(self, f) >= 0:
                 raise ValueError(f"PouringTask.{f} must be >= 0, got {getattr(self, f)}")

@@ -252,6 +252,11 @@ class JacoMujocoEnv(MujocoEnv):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         if render_mode == "human" and (reason := no_display_reason()) is not None:
             raise NoDisplayError(_no_display_message(reason))
+        for name, size in (("width", width), ("height", height)):
+            if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not 1 <= size <= 16384:
+                raise ValueError(f"{name} must be an integer number of pixels in [1, 16384], got {size!r}")
+        if camera_name is not None and not isinstance(camera_name, str):
+            raise TypeError(f"camera_name must be a camera's name or None, got {type(camera_name).__name__}")
         self.control_mode = control_mode
         self.sensor_noise = sensor_noise if sensor_noise is not None else SensorNoise.none()
         self.control_dt = 1.0 / float(control_freq)
@@ -278,6 +283,10 @@ class JacoMujocoEnv(MujocoEnv):
             default_camera_config=None if camera_name else DEFAULT_CAMERA,
         )
         m = self.model
+        if camera_name is not None and mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, camera_name) < 0:
+            cameras = [m.camera(i).name for i in range(m.ncam)]
+            self.close()
+            raise ValueError(f"camera_name: the scene has no camera {camera_name!r}; its cameras are {cameras}")
         joints = [m.joint(scene.ARM_PREFIX + n).id for n in robot.JOINT_NAMES]
         self.arm_qpos_adr = np.array([m.jnt_qposadr[j] for j in joints])
         self.arm_dof_adr = np.array([m.jnt_dofadr[j] for j in joints])

@@ -17,6 +17,7 @@ from gymnasium.utils import EzPickle
 from jaco_env import robot, scene
 from jaco_env.checks import real_array
 from jaco_env.envs.base import JacoMujocoEnv, check_options
+from jaco_env.excitation import JOINT_RANGES
 from jaco_env.kinematics import home_pose
 from jaco_env.sensors import MEASUREMENT_DIM, SensorNoise
 from jaco_env.signal_pipeline import SignalPipeline
@@ -50,7 +51,8 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
 
     ## Starting State
     At rest at the home pose ``jaco_env.kinematics.home_pose()`` or ``options["q0"]`` (6 finite
-    real angles). A rejected option raises before the simulation is touched.
+    real angles, joints 2 and 3 within their ranges ``jaco_env.excitation.JOINT_RANGES``). A rejected option raises
+    before the simulation is touched.
 
     ## Info
     ``time, payload_mass, unstable`` and ``qacc``: the true joint accelerations at the sample
@@ -117,7 +119,12 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
         if "payload_mass" in opts:
             parsed["payload_mass"] = scene.check_rigid_payload_mass(opts["payload_mass"], "options['payload_mass']")
         if "q0" in opts:
-            parsed["q0"] = real_array(opts["q0"], (robot.N_JOINTS,), "options['q0'] (joint angles, rad)")
+            q0 = real_array(opts["q0"], (robot.N_JOINTS,), "options['q0'] (joint angles, rad)")
+            for j, limits in enumerate(JOINT_RANGES):
+                if limits is not None and not limits[0] <= q0[j] <= limits[1]:
+                    raise ValueError(f"options['q0'][{j}]: joint {j + 1}'s angle must be within [{limits[0]:.3f}, "
+                                     f"{limits[1]:.3f}] rad, got {float(q0[j])!r}")
+            parsed["q0"] = q0
         return parsed
 
     def reset_model(self) -> np.ndarray:

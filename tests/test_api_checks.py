@@ -1,0 +1,125 @@
+"""Inputs of the environments' helpers and of the retraining loop refused by name, before anything runs; shared
+state that a caller's array must not reach."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import jaco_env  # noqa: F401  (registers the envs)
+from cascgp.learning import Feedback, RetrainConfig, attempt_plan, make_controller, run_controller
+from jaco_env.kinematics import home_pose
+from jaco_env.oracle import OracleController, PDController
+from jaco_env.robot import TORQUE_LIMITS
+from jaco_env.tasks import DEFAULT_TASKS
+
+
+def test_home_pose_is_a_new_array_each_call():
+    q = home_pose()
+    q[0] += 0.5  # the caller's copy: the envs and tasks still start at the home pose
+    assert home_pose()[0] == pytest.approx(q[0] - 0.5)
+    env = gym.make("JacoPayload-v0")
+    try:
+        env.reset(seed=0)
+        np.testing.assert_allclose(env.unwrapped.arm_state()[0], home_pose())
+    finally:
+        env.close()
+
+
+def test_payload_start_pose_within_the_joint_ranges():
+    env = gym.make("JacoPayload-v0")
+    q0 = home_pose()
+    q0[1] = 0.0
+    try:
+        with pytest.raises(ValueError, match=r"options\['q0'\]\[1\]: joint 2's angle must be within \[0.820, 5.463\]"):
+            env.reset(seed=0, options={"q0": q0})
+    finally:
+        env.close()
+
+
+def test_oracle_and_pd_check_the_env_the_info_and_new_gains():
+    pd = PDController()
+    for bad in (np.nan, "x", -1.0):
+        with pytest.raises((TypeError, ValueError), match="kp"):
+            pd.kp = bad
+    assert np.all(np.isfinite(pd.kp))  # a rejected gain changes nothing
+    env = gym.make("JacoPayload-v0", control_mode="velocity")
+    try:
+        _, info = env.reset(seed=0)
+        with pytest.raises(ValueError, match="control_mode='velocity'"):
+            pd.start(env.unwrapped, info)
+    finally:
+        env.close()
+    pour = gym.make("JacoPour-v0", n_marbles=5)
+    try:
+        _, info = pour.reset(seed=0)
+        oracle = OracleController()
+        oracle.start(pour, info)  # the wrapped env, as gym.make returns it: its marbles are followed
+        assert oracle._env is pour.unwrapped
+        for bad, exc, match in (({}, ValueError, "payload_mass"), ({"payload_mass": "1.0"}, TypeError, "kg"),
+                                ({"payload_mass": np.nan}, ValueError, "payload_mass")):
+            with pytest.raises(exc, match=match):
+                oracle.start(pour, bad)
+    finally:
+        pour.close()
+
+
+def test_retraining_plans_and_arguments_are_checked_before_anything_runs(tmp_path):
+    with pytest.raises(ValueError, match="tasks: expected a list of task names, got 'front'"):
+        attempt_plan("front", 1)
+    with pytest.raises(ValueError, match="attempts: expected an integer >= 1, got 0"):
+        attempt_plan(["front"], 0)
+    assert attempt_plan(["front", "left"], 1) == [("front", 0, "train"), ("left", 0, "train"), ("front", 1, "revisit")]
+    feedback = Feedback(kp=np.ones(6), kd=np.ones(6), torque_limits=np.asarray(TORQUE_LIMITS, float))
+    with pytest.raises(ValueError, match="rbd: controller 'rbd' needs the nominal rigid-body model"):
+        make_controller("rbd", None, None, feedback)
+    env = object()  # never reached: every check comes first
+    for plan, kwargs, exc, match in (
+            ([("front", 0, "tran")], {}, ValueError, r"plan\[0\]: expected \(task name, attempt number, phase"),
+            ([("front", 0)], {}, ValueError, r"plan\[0\]"),
+            ([("front", 0, "train")], {"reset_options": {"task": "left"}}, ValueError, "leave 'task' out"),
+            ([("front", 0, "train")], {"config": {"seed": 0}}, TypeError, "config: expected a RetrainConfig")):
+        with pytest.raises(exc, match=match):
+            run_controller("sp-inward", env, plan, None, feedback, buffer_dir=tmp_path / "buf", **kwargs)
+        assert not (tmp_path / "buf").exists()  # nothing written
+    assert isinstance(RetrainConfig(), RetrainConfig)
+
+
+@pytest.mark.parametrize("change, exc, match", [
+    ({"tilt": 0.0}, ValueError, r"tilt must be in \(0, pi\]"),
+    ({"tilt": np.nan}, ValueError, "tilt must be finite"),
+    ({"pour_height": np.nan}, ValueError, "pour_height must be finite"),
+    ({"hold": np.inf}, ValueError, "hold must be finite"),
+    ({"hold": "1"}, TypeError, "hold must be a finite real number"),
+    ({"speed": "0.5"}, TypeError, "speed"),
+])
+def test_a_pouring_task_checks_its_fields(change, exc, match):
+    with pytest.raises(exc, match=match):
+        DEFAULT_TASKS["front"].replace(**change)
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    ({"width": "480"}, ValueError, r"width must be an integer number of pixels in \[1, 16384\], got '480'"),
+    ({"height": -5}, ValueError, "height must be an integer"),
+    ({"camera_name": "nope"}, ValueError, r"camera_name: the scene has no camera 'nope'; its cameras are \["),
+    ({"camera_name": 3}, TypeError, "camera_name must be a camera's name or None"),
+])
+def test_render_settings_are_checked_at_construction(kwargs, exc, match):
+    with pytest.raises(exc, match=match):
+        gym.make("JacoPour-v0", n_marbles=5, render_mode="rgb_array", **kwargs)
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    ({"max_excursion": np.nan}, "max_excursion must be a finite real number"),
+    ({"max_excursion": 0.0}, "max_excursion must be > 0"),
+    ({"freq_range": (0.1, np.inf)}, r"freq_range must satisfy 0 < low <= high < inf"),
+    ({"freq_range": "fast"}, "freq_range must be two frequencies"),
+    ({"speed": "1"}, "speed must be a finite real number"),
+    ({"n_sines": 2.0}, "n_sines must be an integer >= 1"),
+])
+def test_an_excitation_checks_its_settings(kwargs, match):
+    from jaco_env.excitation import SumOfSinusoids
+
+    with pytest.raises(ValueError, match=match):
+        SumOfSinusoids(home_pose(), **kwargs)
