@@ -52,6 +52,9 @@ PLAIN_CONTROLLERS = ("pd", "rbd")
 ONLINE_WINDOW = 150
 #: One attempt: (task, attempt index within the task, phase). Only ``"train"`` attempts feed the buffer.
 Attempt = tuple[str, int, str]
+#: The phases of an attempt: a ``"train"`` attempt's data enter the buffer and a refit; a ``"revisit"`` (the first task
+#: again, after the others) or an ``"eval"`` attempt is scored only.
+PHASES = ("train", "revisit", "eval")
 #: ``factory(name, rbd, gp_config)`` -> an unfitted model with ``fit(data, init=previous)``.
 ModelFactory = Callable[[str, Any, GPFitConfig], Any]
 
@@ -170,8 +173,13 @@ def check_controller(name: str) -> None:
 
 
 def make_controller(name: str, rbd: Any, model: Any | None, feedback: Feedback) -> FeedforwardController:
-    """The controller for ``name`` given the current (possibly unfitted/None) learned model."""
+    """The controller for ``name`` given the current (possibly unfitted/None) learned model. Every controller but
+    ``"pd"`` needs ``rbd`` (the RBD feedforward, an SP model's mean, the fallback): ``ValueError`` without it."""
     base, gate, online = parse_controller(name)
+    if base != "pd" and rbd is None:
+        raise ValueError(f"rbd: controller {name!r} needs the nominal rigid-body model, got None")
+    if model is not None and not hasattr(model, "fitted"):
+        raise TypeError(f"model: expected None or a cascgp model, got {type(model).__name__}")
     if base == "pd":
         feedforward = None
     elif base == "rbd":
@@ -185,7 +193,11 @@ def make_controller(name: str, rbd: Any, model: Any | None, feedback: Feedback) 
 
 
 def attempt_plan(tasks: Sequence[str], attempts: int, revisit: bool = True) -> list[Attempt]:
-    """``attempts`` training attempts of every task in order, then (``revisit``) one more of the first task."""
+    """``attempts`` training attempts of every task in order, then (``revisit``) one more of the first task.
+    ``ValueError`` naming ``tasks`` (not a list of task names) or ``attempts`` (not an integer >= 1)."""
+    if isinstance(tasks, str) or not isinstance(tasks, Sequence) or not all(isinstance(t, str) for t in tasks):
+        raise ValueError(f"tasks: expected a list of task names, got {tasks!r}")
+    attempts = check_count(attempts, "attempts")
     plan = [(task, k, "train") for task in tasks for k in range(attempts)]
     if revisit and tasks:
         plan.append((tasks[0], attempts, "revisit"))
@@ -223,6 +235,11 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
         online controller and, after a refit, ``fit_seconds``; hooks may add keys.
     """
     base, _, _ = parse_controller(name)
+    if not isinstance(config, RetrainConfig):
+        raise TypeError(f"config: expected a RetrainConfig, got {type(config).__name__}")
+    plan = _checked_plan(plan)
+    if reset_options is not None and "task" in reset_options:
+        raise ValueError("reset_options: the plan sets each attempt's task; leave 'task' out")
     hooks = tuple(hooks)
     for h in hooks:
         if not isinstance(h, RunHooks):
@@ -259,6 +276,18 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
         for h in hooks:
             h.after_attempt(ctx, record)
     return run
+
+
+def _checked_plan(plan: Iterable[Attempt]) -> list[Attempt]:
+    """``plan`` as a list of ``(task, task_attempt, phase)``, checked before anything runs or is written."""
+    out = []
+    for i, entry in enumerate(plan):
+        if not (isinstance(entry, (tuple, list)) and len(entry) == 3 and isinstance(entry[0], str)
+                and isinstance(entry[1], (int, np.integer)) and not isinstance(entry[1], bool)
+                and entry[2] in PHASES):
+            raise ValueError(f"plan[{i}]: expected (task name, attempt number, phase in {PHASES}), got {entry!r}")
+        out.append((entry[0], int(entry[1]), entry[2]))
+    return out
 
 
 def _one_callback(callbacks: list[Any]) -> Any | None:
