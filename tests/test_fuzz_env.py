@@ -26,6 +26,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 import jaco_env
 from jaco_env import robot, scene
 from jaco_env.gains import DEFAULT_KD, DEFAULT_KP
+from jaco_env.excitation import JOINT_RANGES
 from jaco_env.kinematics import home_pose
 from jaco_env.oracle import OracleController, PDController
 from jaco_env.tasks import DEFAULT_TASKS, PouringTask
@@ -207,8 +208,10 @@ def _options(draw, which: str):
             q0, expected = draw(real6(-0.3, 0.3, finite_only=True))
             if expected == OK:
                 q0 = home_pose() + np.asarray(q0, float)
-            elif expected == "huge":
-                expected = OK  # absurd but finite angles are accepted (the simulation may then go unstable)
+            elif expected == "huge":  # absurd but finite angles: accepted on the continuous joints (the simulation
+                q0 = home_pose() + q0  # may then go unstable), refused outside joints 2 and 3's ranges
+                out = [j for j, r in enumerate(JOINT_RANGES) if r is not None and not r[0] <= q0[j] <= r[1]]
+                expected = ValueError if out else OK
             opts[k], verdicts[k] = q0, expected
     unknown = [k for k in keys if k not in allowed]
     if unknown:

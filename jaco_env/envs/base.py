@@ -283,7 +283,7 @@ class JacoMujocoEnv(MujocoEnv):
             default_camera_config=None if camera_name else DEFAULT_CAMERA,
         )
         m = self.model
-        if camera_name is not None and mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, camera_name) < 0:
+        if camera_name and mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, camera_name) < 0:
             cameras = [m.camera(i).name for i in range(m.ncam)]
             self.close()
             raise ValueError(f"camera_name: the scene has no camera {camera_name!r}; its cameras are {cameras}")
