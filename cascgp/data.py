@@ -42,7 +42,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from .checks import check_count, check_positive
-from .derivatives import SavGol, differentiate
+from .derivatives import SavGol, as_savgol, differentiate
 from .io import atomic_savez, check_format_header, read_npz
 
 __all__ = ["DynamicsData", "SavGol", "FORMAT_VERSION", "differentiate"]
@@ -278,10 +278,7 @@ class DynamicsData:
         little more bias on fast motions; no phase lag when centred (the default), past rows only
         with ``SavGol(..., causal=True)``.
         """
-        if isinstance(smoothing, (int, np.integer)) and not isinstance(smoothing, bool):
-            smoothing = SavGol(int(smoothing))
-        if smoothing is not None and not isinstance(smoothing, SavGol):
-            raise TypeError(f"smoothing: expected None, an odd int window or SavGol, got {smoothing!r}")
+        smoothing = as_savgol(smoothing)
         qd_a = as_real_array("DynamicsData.qd", qd, "(T, N)")  # complex, text or ragged input refused by name
         # Build once without qdd to get all shape/finite/time checks with the usual messages.
         probe = cls(q=q, qd=qd_a, qdd=np.zeros_like(qd_a), tau=tau, t=t, segment=segment,

@@ -8,10 +8,11 @@ running online can compute); :func:`differentiate` applies it per time-contiguou
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-__all__ = ["SavGol", "differentiate"]
+__all__ = ["SavGol", "as_savgol", "differentiate"]
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,16 @@ class SavGol:
 
         pos = self.window - 1 if self.causal else None
         return savgol_coeffs(self.window, self.polyorder, deriv=1, delta=float(dt), pos=pos, use="dot")
+
+
+def as_savgol(smoothing: Any) -> SavGol | None:
+    """A ``smoothing`` argument as a filter: ``None``, a :class:`SavGol`, or an odd ``int`` window (polyorder 2);
+    ``TypeError`` naming ``smoothing`` otherwise."""
+    if isinstance(smoothing, (int, np.integer)) and not isinstance(smoothing, bool):
+        return SavGol(int(smoothing))
+    if smoothing is not None and not isinstance(smoothing, SavGol):
+        raise TypeError(f"smoothing: expected None, an odd int window or SavGol, got {smoothing!r}")
+    return smoothing
 
 
 def differentiate(t: np.ndarray, x: np.ndarray, segment: np.ndarray, smoothing: SavGol | None) -> np.ndarray:

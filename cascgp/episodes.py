@@ -29,7 +29,8 @@ from typing import Any, Callable
 import numpy as np
 
 from cascgp.controller import Controller
-from cascgp.data import DynamicsData, SavGol
+from cascgp.data import DynamicsData
+from cascgp.derivatives import as_savgol
 
 
 @dataclass
@@ -96,15 +97,6 @@ def _long_runs(ok: np.ndarray, min_len: int) -> np.ndarray:
     return out
 
 
-def _checked_smoothing(smoothing: Any) -> SavGol | None:
-    """``smoothing`` as :meth:`DynamicsData.from_measurements` takes it, checked before an episode runs."""
-    if isinstance(smoothing, (int, np.integer)) and not isinstance(smoothing, bool):
-        return SavGol(int(smoothing))
-    if smoothing is not None and not isinstance(smoothing, SavGol):
-        raise TypeError(f"smoothing: expected None, an odd int window or SavGol, got {smoothing!r}")
-    return smoothing
-
-
 def run_episode(
     env: Any,
     controller: Controller,
@@ -136,7 +128,7 @@ def run_episode(
     errors are computed on the recorded ticks.
     """
     dof = controller.dof
-    savgol = _checked_smoothing(smoothing)
+    savgol = as_savgol(smoothing)  # checked before the episode runs
     if meta is not None:
         if not isinstance(meta, dict):
             raise TypeError(f"meta: expected a dict, got {type(meta).__name__}")

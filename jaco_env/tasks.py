@@ -94,9 +94,10 @@ class PouringTask:
             self.payload_mass = pm
         for f in ("tilt", "pour_height", "pre_height", "pour_offset", "hold", "settle", "speed", "tip_speed"):
             v = getattr(self, f)
-            if not is_real_number(v) or not np.isfinite(v):
-                raise TypeError(f"PouringTask.{f} must be a finite real number, got {type(v).__name__} {v!r}") \
-                    if not is_real_number(v) else ValueError(f"PouringTask.{f} must be finite, got {v!r}")
+            if not is_real_number(v):
+                raise TypeError(f"PouringTask.{f} must be a finite real number, got {type(v).__name__} {v!r}")
+            if not np.isfinite(v):
+                raise ValueError(f"PouringTask.{f} must be finite, got {v!r}")
             setattr(self, f, float(v))
         if not 0 < self.tilt <= np.pi:
             raise ValueError(f"PouringTask.tilt must be in (0, pi] rad, got {self.tilt}")
