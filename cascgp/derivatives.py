@@ -46,6 +46,10 @@ class SavGol:
     def __post_init__(self) -> None:
         if not isinstance(self.causal, (bool, np.bool_)):
             raise TypeError(f"SavGol.causal: expected a bool, got {type(self.causal).__name__} {self.causal!r}")
+        for name in ("window", "polyorder"):
+            v = getattr(self, name)
+            if isinstance(v, (bool, np.bool_)) or not isinstance(v, (int, np.integer)):
+                raise TypeError(f"SavGol.{name}: expected an integer, got {type(v).__name__} {v!r}")
         if self.window < 3 or self.window % 2 == 0:
             raise ValueError(f"SavGol.window: expected an odd integer >= 3, got {self.window}")
         if not 1 <= self.polyorder < self.window:

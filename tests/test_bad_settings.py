@@ -64,6 +64,16 @@ def test_gp_fit_config_refuses_bad_tolerances(field, bad) -> None:
         assert type(v) is float and v == float(good)
 
 
+def test_gp_fit_config_bounds_the_start_spread() -> None:
+    """Beyond 20 log units a start's kernel is numerically constant; 1e308 overflowed NumPy's uniform draw."""
+    from cascgp.gp import GPFitConfig
+
+    assert GPFitConfig(init_spread=20).init_spread == 20.0
+    for bad in (20.5, 1e308):
+        with pytest.raises(ValueError, match=r"^init_spread: expected at most 20.0 \(log units\), got "):
+            GPFitConfig(init_spread=bad)
+
+
 def test_retrain_config_keeps_python_numbers() -> None:
     r = RetrainConfig(seed=np.int64(2), rate_hz=np.float64(5), cap=np.int32(100), restarts=np.int64(1))
     assert [type(v) for v in (r.seed, r.rate_hz, r.cap, r.restarts)] == [int, float, int, int]

@@ -77,3 +77,12 @@ def test_from_measurements_with_causal_filter_records_it() -> None:
     assert "causal Savitzky-Golay" in data.meta["qdd_source"]
     with pytest.raises(TypeError, match="SavGol.causal"):
         SavGol(5, 2, causal="yes")  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize("kwargs, name", [({"window": 5.0}, "window"), ({"window": True}, "window"),
+                                          ({"polyorder": 2.0}, "polyorder"), ({"window": "7"}, "window")])
+def test_savgol_takes_integers_only(kwargs, name) -> None:
+    """A float window (5.0) was accepted and failed later inside SciPy; it is refused by name."""
+    with pytest.raises(TypeError, match=rf"^SavGol.{name}: expected an integer, got "):
+        SavGol(**kwargs)
+    assert SavGol(np.int64(9), np.int32(3)).window == 9

@@ -413,3 +413,18 @@ def test_adopt_banks_refuses_banks_of_different_sizes_and_changes_nothing(arm3_t
         a.adopt_banks([a.banks[0], b.banks[0]], [(0, 0), (1, 1), (0, 2)], 40)
     assert a.banks == banks and a.where == where and a.n_train == 40
     np.testing.assert_array_equal(a.predict_one(*query), before)
+
+
+def test_adopt_banks_refuses_a_row_count_other_than_the_banks(arm3_train):
+    """``n_train`` must be the banks' number of rows (a file's ``config_json.n_train`` of -5 was accepted)."""
+    from cascgp.gp import GPFitConfig
+
+    a = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=10)).fit(arm3_train.take(np.arange(40)))
+    banks, where = list(a.banks), list(a.where)
+    for bad in (-5, 39, 40.0, True, "40"):
+        with pytest.raises(ValueError, match=r"^n_train: expected the banks' number of training rows \(40\), got "):
+            a.adopt_banks(banks, where, bad)
+    assert a.n_train == 40
+    a.adopt_banks(banks, where, np.int64(40))
+    assert a.n_train == 40 and type(a.n_train) is int
+

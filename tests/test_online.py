@@ -132,6 +132,12 @@ def test_bad_samples_are_refused_and_change_nothing() -> None:
     assert model.n_online == 0
     with pytest.raises(ValueError, match="window"):
         model.start_online(window=0)
+    model.add_sample(d.q[0], d.qd[0], d.qdd[0], d.tau[0])
+    ref = model.predict_one(d.q[1], d.qd[1], d.qdd[1])
+    with pytest.raises(ValueError, match=r"^window: 10000000 samples per joint would need about .* GB, more than"):
+        model.start_online(window=10**7)  # NumPy's MemoryError before; the open window is kept
+    assert model.n_online == 1
+    np.testing.assert_array_equal(model.predict_one(d.q[1], d.qd[1], d.qdd[1]), ref)
     df = make_model("np-inward-df", 2, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(d)
     with pytest.raises(ValueError, match="derivative-based"):
         df.start_online()

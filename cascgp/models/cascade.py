@@ -230,6 +230,8 @@ class CascadedGPModel:
         rows = {int(banks[k].n_train) for k, _ in where}
         if len(rows) != 1:
             raise ValueError(f"banks: the joints' GPs hold different numbers of training rows {sorted(rows)}")
+        if isinstance(n_train, bool) or not isinstance(n_train, (int, np.integer)) or n_train not in rows:
+            raise ValueError(f"n_train: expected the banks' number of training rows ({rows.pop()}), got {n_train!r}")
         post, fast = self._built(banks, where)  # may raise: nothing assigned yet
         self.banks, self.where, self.n_train = list(banks), [(k, b) for k, b in where], int(n_train)
         self._install(post, fast)
@@ -258,6 +260,8 @@ class CascadedGPModel:
         Args:
             q, qd, qdd: (T, N) or (N,) (``qd``/``qdd`` may be None for NP ``-df`` models).
             q_hist: ``-df`` models only: (T, 2, N) or (2, N): ``q(t - df_delta)``, ``q(t - 2 df_delta)``.
+                A derivative-based model ignores it, as an NP ``-df`` model ignores ``qd`` and ``qdd``, so that
+                one call serves every variant.
             propagate: cascades only: add the uncertainty of the neighbour's predicted torque to each
                 joint's variance (first-order propagation, below). ``False`` keeps the variance given the
                 chained mean input.

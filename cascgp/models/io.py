@@ -204,7 +204,7 @@ def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
     if not banks:
         raise ValueError(f"{path}: config_json.n_banks: expected at least one GP bank, got {n_banks}")
     try:
-        n_train = int(cfg["n_train"]) if "n_train" in cfg else int(banks[0].n_train)
+        n_train = cfg["n_train"] if "n_train" in cfg else int(banks[0].n_train)
         model.adopt_banks(banks, where, n_train)
     except (ValueError, TypeError) as exc:
         raise ValueError(f"{path}: {exc}") from exc

@@ -45,6 +45,7 @@ Derivative-based (``db``) models only.
 from __future__ import annotations
 
 import math
+import os
 from typing import Any
 
 import numpy as np
@@ -191,6 +192,20 @@ def check_supported(model: Any) -> None:
                          "samples carry measured ones, so they would not match its training inputs")
 
 
+def _check_window_memory(window: int, posts: list[Any]) -> None:
+    """``ValueError`` naming ``window`` when its arrays (per joint two window x window matrices and the window's rows
+    against the fitted set) would not fit in this machine's physical memory, instead of NumPy's ``MemoryError`` or
+    the system's out-of-memory kill later, when the pages are written."""
+    try:
+        phys = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):  # not POSIX: no bound known
+        return
+    need = sum(8 * (2 * window * window + 3 * window * (P.Z.shape[0] + P.Z.shape[1])) for P in posts)
+    if need > phys:
+        raise ValueError(f"window: {window} samples per joint would need about {need / 1e9:.3g} GB, more than this "
+                         f"machine's {phys / 1e9:.3g} GB of memory; choose a smaller window")
+
+
 class OnlineWindow:
     """Online samples of every joint of a fitted derivative-based cascade (see the module docstring).
 
@@ -204,6 +219,7 @@ class OnlineWindow:
         self.window = check_count(window, "window")
         self.model = model
         posts = model.posteriors()
+        _check_window_memory(self.window, posts)
         self.joints = [_JointWindow(P, self.window) for P in posts]
         self.fast = FastPath.build(posts, model.specs, model.order, capacity=self.window)
         self.n0 = posts[0].Z.shape[0]
