@@ -58,6 +58,9 @@ SIDECAR_FORMAT_VERSION = 1
 SUPPORTED_SIDECAR_VERSIONS = (SIDECAR_FORMAT_VERSION,)
 #: Fields every sidecar must hold (besides ``format_version``).
 SIDECAR_REQUIRED_FIELDS = ("armature", "torque_limits", "velocity_limits", "joint_names")
+_SIDECAR_FIELDS = (f"a sidecar holds format_version ({SIDECAR_FORMAT_VERSION}), joint_names (the model's joints), "
+                   "armature (kg m^2 per joint), torque_limits and velocity_limits (per joint, or null: unknown) "
+                   "and optionally gravity ([x, y, z] m/s^2); or remove it to use the URDF alone")
 
 
 def sidecar_path(urdf_path: str | os.PathLike) -> Path:
@@ -422,14 +425,15 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints
         raise ValueError(f"sidecar {str(js)!r} is not valid JSON: {exc}") from exc
     if not isinstance(meta, dict):
         raise ValueError(f"sidecar {str(js)!r} must hold a JSON object, got {type(meta).__name__}")
-    version = meta.get("format_version")
+    missing = [key for key in ("format_version", *SIDECAR_REQUIRED_FIELDS) if key not in meta]
+    if missing:  # every missing field at once, and what a sidecar holds
+        raise ValueError(f"sidecar {str(js)!r} lacks the field{'s' if len(missing) > 1 else ''} "
+                         f"{', '.join(map(repr, missing))}; {_SIDECAR_FIELDS}")
+    version = meta["format_version"]
     if version not in SUPPORTED_SIDECAR_VERSIONS:
         raise ValueError(
             f"sidecar {str(js)!r}: format_version must be one of {SUPPORTED_SIDECAR_VERSIONS}, got {version!r}"
         )
-    for key in SIDECAR_REQUIRED_FIELDS:
-        if key not in meta:
-            raise ValueError(f"sidecar {str(js)!r} lacks the field {key!r}")
     rbd = RigidBodyModel.from_urdf(urdf_path, dof=dof, joints=joints, locked=locked)
     if "dof" in meta and meta["dof"] != rbd.dof:
         raise ValueError(f"sidecar {str(js)!r}: dof {meta['dof']} does not match the URDF's {rbd.dof} joints")

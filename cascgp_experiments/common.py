@@ -40,8 +40,13 @@ DISTRIBUTION = "cascgp-jaco"
 
 
 def install_hint(extra: str) -> str:
-    """How to install an optional extra, installed from the index or from a source checkout."""
-    return f"pip install '{DISTRIBUTION}[{extra}]' (in a source checkout: pip install -e '.[{extra}]')"
+    """How to install an optional extra: from the wheel the distribution was installed from (README's way), or
+    from a source checkout."""
+    from cascgp import __version__
+
+    wheel = f"{DISTRIBUTION.replace('-', '_')}-{__version__}-py3-none-any.whl"
+    return (f"install the '{extra}' extra: pip install '{wheel}[{extra}]' (the wheel you installed, e.g. in dist/), "
+            f"or in a source checkout pip install -e '.[{extra}]'")
 
 
 def package_versions() -> dict[str, str]:

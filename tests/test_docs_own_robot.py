@@ -49,6 +49,29 @@ def test_the_page_has_the_example() -> None:
         assert step in runs
 
 
+def test_the_documented_sidecar_loads_with_the_example_urdf(tmp_path: Path) -> None:
+    """The page's sidecar (its one ``json`` block) is read as written, next to the worked example's URDF."""
+    import warnings
+
+    from cascgp.rbd import load_nominal
+
+    text = PAGE.read_text()
+    sidecar = re.findall(r"^```json\s*\n(.*?)^```\s*$", text, re.MULTILINE | re.DOTALL)
+    assert len(sidecar) == 1, "docs/own-robot.md: expected one json block (the sidecar)"
+    urdf = dict((title, code) for _, title, code in example_blocks(text))["arm.urdf"]
+    (tmp_path / "arm.urdf").write_text(urdf)
+    (tmp_path / "arm.json").write_text(sidecar[0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a sidecar: no "assuming zero armature" warning
+        rbd = load_nominal(tmp_path / "arm.urdf")
+    doc = json.loads(sidecar[0])
+    assert list(rbd.joint_names) == doc["joint_names"]
+    np.testing.assert_array_equal(rbd.armature, doc["armature"])
+    np.testing.assert_array_equal(rbd.torque_limits, doc["torque_limits"])
+    assert rbd.velocity_limits is None
+    np.testing.assert_array_equal(rbd.gravity, doc["gravity"])
+
+
 def test_worked_example_runs(tmp_path: Path) -> None:
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONPATH": str(REPO)}
     outputs: list[str] = []

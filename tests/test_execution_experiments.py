@@ -201,7 +201,7 @@ def test_ray_option_without_ray_is_a_clear_error(tmp_path: Path) -> None:
     for module in ("scripts.task_transfer", "scripts.collect_jaco_data"):
         run = subprocess.run([sys.executable, "-m", module, "--out", str(tmp_path / "o"), "--ray", "local"],
                              env=env, cwd=REPO, capture_output=True, text=True, timeout=300)
-        assert run.returncode == 2 and "pip install 'cascgp-jaco[ray]'" in run.stderr, (module, run.stderr[-2000:])
+        assert run.returncode == 2 and "py3-none-any.whl[ray]'" in run.stderr, (module, run.stderr[-2000:])
 
 
 # --------------------------------------------------------------------------- the --quick runs (slow)

@@ -305,8 +305,18 @@ def test_construction_errors(tmp, exact_urdf):
         load_nominal(lone)
     side = json.loads(exact_urdf.with_suffix(".json").read_text())
     lone.with_suffix(".json").write_text(json.dumps({k: v for k, v in side.items() if k != "armature"}))
-    with pytest.raises(ValueError, match="lacks the field 'armature'"):
+    with pytest.raises(ValueError, match="lacks the field 'armature'; a sidecar holds format_version"):
         load_nominal(lone)
+    lone.with_suffix(".json").write_text(json.dumps({"armature": side["armature"]}))  # every missing field at once
+    with pytest.raises(ValueError, match=r"lacks the fields 'format_version', 'torque_limits', 'velocity_limits', "
+                                         r"'joint_names'; a sidecar holds"):
+        load_nominal(lone)
+    minimal = {k: side[k] for k in ("format_version", "joint_names", "armature")}
+    lone.with_suffix(".json").write_text(json.dumps({**minimal, "torque_limits": None, "velocity_limits": None}))
+    plain = load_nominal(lone)  # null limits: unknown; gravity: Pinocchio's default
+    assert plain.torque_limits is None and plain.velocity_limits is None
+    np.testing.assert_array_equal(plain.armature, side["armature"])
+    np.testing.assert_array_equal(plain.gravity, [0.0, 0.0, -9.81])
     lone.with_suffix(".json").write_text(json.dumps({**side, "armature": [1.0] * 7}))
     with pytest.raises(ValueError, match=r"armature must have shape \(6,\)"):
         load_nominal(lone)

@@ -78,6 +78,7 @@ Modules
 :mod:`cascgp.models.queries`       checks of the queries; each joint's GP input
 :mod:`cascgp.models.jacobian`      derivatives of the cascaded mean (the input-noise term)
 :mod:`cascgp.models.online`        learning inside an episode (:meth:`CascadedGPModel.start_online`)
+:mod:`cascgp.models.coverage`      each joint's range of training positions; queries far outside it
 :mod:`cascgp.models.io`            model files (:func:`load_model`, ``model.save``)
 =================================  ==========================================================
 """

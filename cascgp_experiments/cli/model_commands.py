@@ -76,7 +76,7 @@ def _read(path: Path, require_tau: bool = True) -> Any:
 
 def _describe(prog: str, data: Any, path: Path) -> None:
     m = data.meta
-    steps = np.diff(data.t)[np.diff(data.segment) == 0]
+    steps = _periods(data)
     period = f", median sample period {np.median(steps):.4g} s" if steps.size else ""
     _note(prog, f"read {data.n_samples} rows, {data.dof} joint(s), {len(data.segments)} segment(s){period} from {path}")
     computed = [g for g in ("qd", "qdd") if m.get(f"{g}_source") == "computed"]
@@ -101,6 +101,59 @@ def _load(path: Path) -> Any:
 def _check_dof(model: Any, data: Any, path: Path) -> None:
     if data.dof != model.dof:
         raise _Fail(f"{path}: the log has {data.dof} joints, the model {model.name!r} has {model.dof}")
+
+
+def _periods(data: Any) -> np.ndarray:
+    """The sample periods within the log's segments (s)."""
+    return np.diff(data.t)[np.diff(data.segment) == 0]
+
+
+def _log_rate(data: Any) -> str:
+    """The log's sample rate from its median period within segments, as text."""
+    steps = _periods(data)
+    return f"about {1.0 / np.median(steps):.4g} Hz" if steps.size and np.median(steps) > 0 else "unknown"
+
+
+def _limits_note(prog: str, rbd: Any, data: Any) -> None:
+    """One note naming the joints with rows outside the URDF's position limits by more than a tenth of their span
+    (positions in degrees, or another zero, say); joints without limits (continuous) are not checked."""
+    lo = np.asarray(rbd.pin_model.lowerPositionLimit, dtype=float)
+    hi = np.asarray(rbd.pin_model.upperPositionLimit, dtype=float)
+    found = []
+    for j in range(rbd.dof):
+        if np.isfinite(lo[j]) and np.isfinite(hi[j]) and hi[j] > lo[j]:
+            pad = 0.1 * (hi[j] - lo[j])
+            out = float(((data.q[:, j] < lo[j] - pad) | (data.q[:, j] > hi[j] + pad)).mean())
+            if out > 0:
+                found.append(f"q{j + 1} {out:.0%} ([{lo[j]:.4g}, {hi[j]:.4g}])")
+    if found:
+        _note(prog, f"note: rows outside the URDF's position limits: {', '.join(found)}; positions must be in rad "
+                    "(m for a prismatic joint), 0 at the URDF's zero")
+
+
+def _coverage_note(prog: str, model: Any, data: Any) -> None:
+    """One note naming the joints with at least 5 % of the rows far outside the positions the model was trained on:
+    more than the training range's width beyond it (ordinary extrapolation near the range is not noted)."""
+    from cascgp.models.coverage import fraction_outside, training_position_range
+
+    out = fraction_outside(model, data.q, margin=1.0)
+    r = training_position_range(model)
+    found = [f"q{j + 1} {out[j]:.0%} ([{r[j, 0]:.4g}, {r[j, 1]:.4g}])" for j in np.flatnonzero(out >= 0.05)]
+    if found:
+        fades = ("its correction has faded, leaving the rigid-body model" if model.rbd is not None
+                 else "its prediction has faded towards zero torque")
+        _note(prog, f"note: rows far outside the positions the model was trained on (more than the range's width "
+                    f"beyond it): {', '.join(found)}; the model knows nothing there ({fades}). A log in another unit, "
+                    "or in another range of turns of a continuous joint, than the training log?")
+
+
+def _few_rows_note(prog: str, model: Any, data: Any) -> None:
+    """A note before a fit on fewer rows than a GP has inputs."""
+    inputs = max(3 * len(sj) + (tj is not None) for sj, tj in model.specs)
+    if data.n_samples < inputs:
+        _note(prog, f"note: {data.n_samples} rows for GPs of up to {inputs} inputs: too few to learn from, the model "
+                    f"stays close to its {'rigid-body model' if model.rbd is not None else 'prior'}; log more, "
+                    "and more varied, motion")
 
 
 # --------------------------------------------------------------------------- fit
@@ -217,16 +270,22 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
         for w in said:
             _note(prog, f"note: {_as_options(str(w.message))}")
         if rbd.dof != data.dof:
-            more = "; name the log's joints with --joints (the others are locked)" if rbd.dof > data.dof else ""
+            more = ("; name the log's joints with --joints, or lock the others with --lock NAME=Q,..."
+                    if rbd.dof > data.dof else "")
             what = "the rigid-body model" if rbd.locked else "the URDF"
             raise _Fail(f"{a.urdf}: {what} has {rbd.dof} joints ({', '.join(rbd.joint_names)}), the log "
                         f"{a.data} has {data.dof}{more}")
         locked = "".join(f"; {n} locked at {q:g}" for n, q in rbd.locked.items())
         _note(prog, f"rigid-body model: {a.urdf} ({rbd.dof} joints: {', '.join(rbd.joint_names)}{locked})")
+        _limits_note(prog, rbd, data)
     if a.rate_hz is not None:
         n0 = data.n_samples
+        rate = _log_rate(data)
         data = data.subsample(a.rate_hz)
-        _note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
+        if data.n_samples < n0:
+            _note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
+        else:
+            _note(prog, f"note: --rate-hz {a.rate_hz:g}: the log's rate ({rate}) is not higher; all {n0} rows kept")
     if data.n_samples > a.max_samples:
         n0 = data.n_samples
         data = data.thin(a.max_samples)
@@ -238,10 +297,14 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
         kw["threads"] = a.threads
     cfg = GPFitConfig(**kw)
     model = make_model(a.model, data.dof, rbd, gp_config=cfg)
+    _few_rows_note(prog, model, data)
     _note(prog, f"fitting {a.model}: {data.dof} GPs on {data.n_samples} rows, {cfg.n_restarts} start(s) each ...")
     t0 = time.perf_counter()
     model.fit(data)
     _note(prog, f"fitted in {time.perf_counter() - t0:.1f} s")
+    if model.n_train < data.n_samples:
+        _note(prog, f"note: {data.n_samples - model.n_train} row(s) lack {2 * model.df_delta:g} s of history within "
+                    "their segment and are left out (-df models)")
     model.save(a.out)
     print(f"saved {a.model} ({data.dof} joints, n_train={model.n_train}) to {a.out}")
     return 0
@@ -279,6 +342,7 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         if rows.sum() < 2:
             raise _Fail(f"{a.data}: fewer than 2 rows have the {2 * model.df_delta:g} s of history the -df model "
                         "needs")
+    _coverage_note(prog, model, data)
     tau = data.tau[rows]
     scores = {model.name: nrmse(mean[rows], tau)}
     if model.rbd is not None:
@@ -287,7 +351,9 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     nominal = scores.get("nominal (rigid body)")
     names = list(scores)
     width = max(12, *map(len, names))
-    print(f"nRMSE = RMSE / (max - min) of the test torques, {int(rows.sum())} rows of {a.data}")
+    left = "" if rows.all() else (f" ({int((~rows).sum())} row(s) without {2 * model.df_delta:g} s of history "
+                                  "left out)")
+    print(f"nRMSE = RMSE / (max - min) of the test torques, {int(rows.sum())} rows of {a.data}{left}")
     print("joint  " + "  ".join(f"{n:>{width}}" for n in names))
     for j in range(model.dof):
         print(f"{j + 1:>5}  " + "  ".join(f"{scores[n][j]:>{width}.4f}" for n in names))
@@ -337,6 +403,7 @@ def _predict(a: argparse.Namespace, prog: str) -> int:
     _describe(prog, data, a.data)
     _check_dof(model, data, a.data)
     mean, var = model.predict_data(data)
+    _coverage_note(prog, model, data)
     if model.feature_kind == "df":
         short = int((~history_from_data(data, model.df_delta)[1]).sum())
         if short:

@@ -90,8 +90,8 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
                    help="delete the data buffers and job cache of an earlier run in --out (without it, the same "
                         "command resumes a stopped run)")
     p.add_argument("--video", type=Path, default=None, metavar="DIR",
-                   help="write MP4 clips into the folder DIR (needs the video extra: pip install "
-                        "'cascgp-jaco[video]'): the first and last attempt of every task and the revisit, RBD and the "
+                   help="write MP4 clips into the folder DIR (needs the 'video' extra, as README's "
+                        "install shows): the first and last attempt of every task and the revisit, RBD and the "
                         "learned controller side by side, with RMSE and marbles on the frame. The clips are recorded "
                         "during the attempts: adding or changing --video on a rerun runs the controllers again")
     p.add_argument("--video-controller", type=str, default=None,

@@ -1,0 +1,49 @@
+r"""Where a fitted model's training data lie: each joint's range of positions, and the queries outside it.
+
+A GP's mean returns to its prior away from its training inputs (the rigid-body torque for SP models, zero for NP
+models), so a query far outside the positions a model was trained on is an extrapolation: a log recorded in
+degrees against a model trained in radians, or a continuous joint logged in another range of turns. The GP sees
+the angle as logged, :math:`q` and :math:`q + 2\pi` are two inputs to it even where the rigid-body torque is the
+same.
+
+Every GP of a model holds its joints' positions in the columns :math:`3k` of its inputs (``(q, q̇, q̈)`` or
+``(q, q(t - δ), q(t - 2δ))`` per state joint, :func:`cascgp.models.queries.state_cols`), so the range is read from
+the fitted banks: no file format holds it separately.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["training_position_range", "fraction_outside"]
+
+
+def training_position_range(model: Any) -> np.ndarray:
+    """``(N, 2)``: the smallest and largest position of each joint in the model's training data (rad or m).
+
+    Args:
+        model: a fitted :class:`~cascgp.models.CascadedGPModel`.
+    """
+    model._require_fitted()
+    lo = np.full(model.dof, np.inf)
+    hi = np.full(model.dof, -np.inf)
+    for j, (k, b) in enumerate(model.where):
+        X = model.banks[k].training_data()[0][b]
+        for i, s in enumerate(model.specs[j][0]):
+            lo[s] = min(lo[s], float(X[:, 3 * i].min()))
+            hi[s] = max(hi[s], float(X[:, 3 * i].max()))
+    return np.stack([lo, hi], axis=1)
+
+
+def fraction_outside(model: Any, q: Any, margin: float = 0.1) -> np.ndarray:
+    r"""``(N,)``: the fraction of the rows of ``q`` (T, N) outside each joint's training range widened by ``margin``
+    times its width on each side, :math:`[l - m (h - l),\; h + m (h - l)]`."""
+    q = np.asarray(q, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != model.dof or q.shape[0] == 0:
+        raise ValueError(f"q: expected shape (T, {model.dof}) with T >= 1, got {q.shape}")
+    r = training_position_range(model)
+    pad = margin * (r[:, 1] - r[:, 0])
+    out = (q < r[:, 0] - pad) | (q > r[:, 1] + pad)
+    return np.asarray(out.mean(axis=0))

@@ -1,0 +1,114 @@
+"""The notes of ``cascgp fit`` / ``evaluate`` / ``predict`` that point at likely mistakes without stopping the command
+(positions in degrees, a log far outside the training positions, too few rows, a ``-df`` model's rows without
+history, a --rate-hz above the log's rate), and :mod:`cascgp.models.coverage` under them."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+from tests.test_own_robot import arm_urdf, cascgp, simulate
+
+from cascgp.data import DynamicsData
+from cascgp.gp import GPFitConfig
+from cascgp.models import load_model, make_model
+from cascgp.models.coverage import fraction_outside, training_position_range
+
+
+def _write(path: Path, data: DynamicsData, degrees: bool = False) -> None:
+    """``t, q1..q3, tau1..tau3`` (positions in degrees if asked: the mistake the notes catch)."""
+    q = np.degrees(data.q) if degrees else data.q
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["t", "q1", "q2", "q3", "tau1", "tau2", "tau3"])
+        w.writerows(np.column_stack([data.t, q, data.tau]).tolist())
+
+
+@pytest.fixture(scope="module")
+def logs(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    folder = tmp_path_factory.mktemp("notes")
+    text = arm_urdf()
+    (folder / "robot.urdf").write_text(text)
+    run = simulate(text, 12.0, 50.0, seed=1)  # train on its first 8 s, test on the last 4 s: the same motions
+    train, test = run.take(np.arange(400)), run.take(np.arange(400, 600))
+    _write(folder / "train.csv", train)
+    _write(folder / "train_deg.csv", train, degrees=True)
+    _write(folder / "test.csv", test)
+    _write(folder / "test_deg.csv", test, degrees=True)
+    _write(folder / "few.csv", train.take(np.arange(5)))
+    with (folder / "two_joints.csv").open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["t", "q1", "q2", "tau1", "tau2"])
+        w.writerows(np.column_stack([train.t, train.q[:, :2], train.tau[:, :2]]).tolist())
+    return folder
+
+
+def test_training_position_range_and_fraction_outside(tmp_path: Path) -> None:
+    rng = np.random.default_rng(0)
+    T = 50
+    q = rng.uniform([-1.0, 0.0], [1.0, 0.5], (T, 2))
+    d = DynamicsData(q=q, qd=rng.normal(size=(T, 2)), qdd=rng.normal(size=(T, 2)), tau=rng.normal(size=(T, 2)),
+                     t=np.arange(T) * 0.02)
+    for name in ("np-inward", "np-standard", "np-outward"):
+        m = make_model(name, 2, gp_config=GPFitConfig(n_restarts=1, max_iter=5)).fit(d)
+        np.testing.assert_array_equal(training_position_range(m), np.stack([q.min(0), q.max(0)], axis=1))
+        m.save(tmp_path / "m.npz")  # read from the banks: a loaded model has it too
+        np.testing.assert_array_equal(training_position_range(load_model(tmp_path / "m.npz")),
+                                      training_position_range(m))
+    lo, hi = q.min(0), q.max(0)
+    w = hi - lo
+    probe = np.array([[lo[0] - 0.05 * w[0], hi[1]], [hi[0] + 0.2 * w[0], lo[1] - 2.0 * w[1]]])
+    np.testing.assert_array_equal(fraction_outside(m, probe), [0.5, 0.5])  # a tenth of the width is inside
+    np.testing.assert_array_equal(fraction_outside(m, probe, margin=1.0), [0.0, 0.5])
+    with pytest.raises(ValueError, match=r"^q: expected shape \(T, 2\)"):
+        fraction_outside(m, q[:, :1])
+
+
+def test_fit_notes_degrees_and_a_rate_above_the_logs(logs: Path) -> None:
+    r = cascgp("fit", "--data", "train_deg.csv", "--urdf", "robot.urdf", "--model", "sp-inward", "--out", "deg.npz",
+               "--rate-hz", "1000", "--max-samples", "60", "--restarts", "1", cwd=logs)
+    assert r.returncode == 0, r.stderr
+    assert "note: --rate-hz 1000: the log's rate (about 50 Hz) is not higher; all 400 rows kept" in r.stderr
+    note = next(line for line in r.stderr.splitlines() if "outside the URDF's position limits" in line)
+    assert all(f"q{j} " in note for j in (1, 2, 3)) and "([-3, 3])" in note and "must be in rad" in note
+    r = cascgp("fit", "--data", "train.csv", "--urdf", "robot.urdf", "--model", "sp-inward", "--out", "rad.npz",
+               "--max-samples", "60", "--restarts", "1", cwd=logs)
+    assert r.returncode == 0 and "position limits" not in r.stderr and "note: --rate" not in r.stderr, r.stderr
+
+
+def test_evaluate_and_predict_note_a_log_far_outside_the_training_positions(logs: Path) -> None:
+    r = cascgp("fit", "--data", "train.csv", "--model", "np-inward", "--out", "np.npz", "--max-samples", "60",
+               "--restarts", "1", cwd=logs)
+    assert r.returncode == 0, r.stderr
+    far = "far outside the positions the model was trained on"
+    r = cascgp("evaluate", "--model", "np.npz", "--data", "test.csv", cwd=logs)
+    assert r.returncode == 0 and far not in r.stderr, r.stderr  # the same unit: no note
+    for command, out in (("evaluate", ()), ("predict", ("--out", "pred.csv"))):
+        r = cascgp(command, "--model", "np.npz", "--data", "test_deg.csv", *out, cwd=logs)
+        assert r.returncode == 0, r.stderr
+        note = next(line for line in r.stderr.splitlines() if far in line)
+        assert "q1 " in note and "zero torque" in note and "another unit" in note
+
+
+def test_fit_notes_few_rows_and_rows_without_history(logs: Path) -> None:
+    r = cascgp("fit", "--data", "few.csv", "--model", "np-standard", "--out", "few.npz", "--restarts", "1", cwd=logs)
+    assert r.returncode == 0, r.stderr
+    assert "note: 5 rows for GPs of up to 9 inputs: too few to learn from" in r.stderr
+    r = cascgp("fit", "--data", "train.csv", "--model", "np-inward-df", "--out", "df.npz", "--rate-hz", "25",
+               "--restarts", "1", cwd=logs)
+    assert r.returncode == 0, r.stderr
+    n_train = load_model(logs / "df.npz").n_train
+    assert f"note: {200 - n_train} row(s) lack 0.2 s of history within their segment and are left out" in r.stderr
+    assert f"n_train={n_train})" in r.stdout
+    r = cascgp("evaluate", "--model", "df.npz", "--data", "test.csv", cwd=logs)
+    assert r.returncode == 0, r.stderr
+    assert "190 rows of test.csv (10 row(s) without 0.2 s of history left out)" in r.stdout  # 0.2 s at 50 Hz
+
+
+def test_a_urdf_with_more_joints_names_both_ways_out(logs: Path) -> None:
+    r = cascgp("fit", "--data", "two_joints.csv", "--urdf", "robot.urdf", "--model", "sp-inward", "--out", "m.npz",
+               cwd=logs)
+    assert r.returncode == 2, r.stderr
+    assert "name the log's joints with --joints, or lock the others with --lock NAME=Q" in r.stderr
