@@ -425,15 +425,13 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints
         raise ValueError(f"sidecar {str(js)!r} is not valid JSON: {exc}") from exc
     if not isinstance(meta, dict):
         raise ValueError(f"sidecar {str(js)!r} must hold a JSON object, got {type(meta).__name__}")
+    if "format_version" in meta and meta["format_version"] not in SUPPORTED_SIDECAR_VERSIONS:  # another layout
+        raise ValueError(f"sidecar {str(js)!r}: format_version must be one of {SUPPORTED_SIDECAR_VERSIONS}, got "
+                         f"{meta['format_version']!r}")
     missing = [key for key in ("format_version", *SIDECAR_REQUIRED_FIELDS) if key not in meta]
     if missing:  # every missing field at once, and what a sidecar holds
         raise ValueError(f"sidecar {str(js)!r} lacks the field{'s' if len(missing) > 1 else ''} "
                          f"{', '.join(map(repr, missing))}; {_SIDECAR_FIELDS}")
-    version = meta["format_version"]
-    if version not in SUPPORTED_SIDECAR_VERSIONS:
-        raise ValueError(
-            f"sidecar {str(js)!r}: format_version must be one of {SUPPORTED_SIDECAR_VERSIONS}, got {version!r}"
-        )
     rbd = RigidBodyModel.from_urdf(urdf_path, dof=dof, joints=joints, locked=locked)
     if "dof" in meta and meta["dof"] != rbd.dof:
         raise ValueError(f"sidecar {str(js)!r}: dof {meta['dof']} does not match the URDF's {rbd.dof} joints")

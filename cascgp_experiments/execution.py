@@ -319,7 +319,8 @@ def run_jobs(fn: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], *, worke
     Args:
         fn: a module-level function (it is pickled by reference), pure in its inputs.
         jobs: the inputs of each call (keyword arguments).
-        workers: parallel jobs (default :func:`default_workers`; 1: in this process).
+        workers: parallel jobs (default :func:`default_workers`; 1: in this process). Above 1, a script must call
+            this under ``if __name__ == "__main__":`` (each worker process imports the script again).
         ray_address: run on the Ray cluster at this address (``"local"``: a local instance with
             ``workers`` CPUs) instead of local processes.
         cache_dir: folder of the job cache (resume); ``None``: no cache.
@@ -468,7 +469,9 @@ def _drive_pool(pool: ProcessPoolExecutor, fn, jobs, todo, progress, finished) -
                     "running or waiting: " + "; ".join(f"{fn.__name__}({_short(jobs[j], 300)})"
                                                         for j in lost[:8])
                     + ("; ..." if len(lost) > 8 else "")
-                    + ". The finished jobs are cached (with a cache folder): run again to resume") from exc
+                    + ". The finished jobs are cached (with a cache folder): run again to resume. (A script that "
+                    "runs jobs in worker processes must do so under if __name__ == \"__main__\": each worker "
+                    "imports the script again)") from exc
             try:
                 again = finished(i, out)
             except JobError as exc:

@@ -64,14 +64,19 @@ def test_gp_fit_config_refuses_bad_tolerances(field, bad) -> None:
         assert type(v) is float and v == float(good)
 
 
-def test_gp_fit_config_bounds_the_start_spread() -> None:
-    """Beyond 20 log units a start's kernel is numerically constant; 1e308 overflowed NumPy's uniform draw."""
-    from cascgp.gp import GPFitConfig
+def test_a_fit_bounds_the_start_spread() -> None:
+    """Beyond 20 log units a start's kernel is numerically constant; 1e308 overflowed NumPy's uniform draw. The
+    bound is the fit's (a config, e.g. a saved model's, may hold more), checked before anything changes."""
+    from cascgp.gp import GPBank, GPFitConfig
 
-    assert GPFitConfig(init_spread=20).init_spread == 20.0
+    rng = np.random.default_rng(0)
+    X, y = rng.normal(size=(12, 2)), rng.normal(size=12)
+    assert GPBank(GPFitConfig(init_spread=20, n_restarts=2, max_iter=3)).fit([X], [y]).fitted
     for bad in (20.5, 1e308):
-        with pytest.raises(ValueError, match=r"^init_spread: expected at most 20.0 \(log units\), got "):
-            GPFitConfig(init_spread=bad)
+        bank = GPBank(GPFitConfig(init_spread=bad))
+        with pytest.raises(ValueError, match=r"^config.init_spread: expected at most 20.0 \(log units\) for a fit"):
+            bank.fit([X], [y])
+        assert not bank.fitted and bank.config.init_spread == bad
 
 
 def test_retrain_config_keeps_python_numbers() -> None:

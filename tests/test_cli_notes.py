@@ -9,11 +9,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from tests.conftest import make_arm
 from tests.test_own_robot import arm_urdf, cascgp, simulate
 
 from cascgp.data import DynamicsData
 from cascgp.gp import GPFitConfig
-from cascgp.models import load_model, make_model
+from cascgp.features import history_from_data
+from cascgp.models import MODEL_NAMES, load_model, make_model
 from cascgp.models.coverage import fraction_outside, training_position_range
 
 
@@ -51,26 +53,35 @@ def test_training_position_range_and_fraction_outside(tmp_path: Path) -> None:
     q = rng.uniform([-1.0, 0.0], [1.0, 0.5], (T, 2))
     d = DynamicsData(q=q, qd=rng.normal(size=(T, 2)), qdd=rng.normal(size=(T, 2)), tau=rng.normal(size=(T, 2)),
                      t=np.arange(T) * 0.02)
-    for name in ("np-inward", "np-standard", "np-outward"):
-        m = make_model(name, 2, gp_config=GPFitConfig(n_restarts=1, max_iter=5)).fit(d)
-        np.testing.assert_array_equal(training_position_range(m), np.stack([q.min(0), q.max(0)], axis=1))
-        m.save(tmp_path / "m.npz")  # read from the banks: a loaded model has it too
-        np.testing.assert_array_equal(training_position_range(load_model(tmp_path / "m.npz")),
-                                      training_position_range(m))
+    arm = make_arm(2)
+    for name in MODEL_NAMES:  # every variant, and the cascades fitted one joint at a time on predicted torques
+        for predicted in (False, True) if "standard" not in name else (False,):
+            m = make_model(name, 2, arm if name.startswith("sp") else None, train_on_predicted=predicted,
+                           gp_config=GPFitConfig(n_restarts=1, max_iter=5)).fit(d)
+            used = q[history_from_data(d, m.df_delta)[1]] if name.endswith("-df") else q  # rows with history
+            np.testing.assert_array_equal(training_position_range(m), np.stack([used.min(0), used.max(0)], axis=1))
+            if name == "sp-inward":
+                m.save(tmp_path / "m.npz")  # read from the banks: a loaded model has it too
+                np.testing.assert_array_equal(training_position_range(load_model(tmp_path / "m.npz", rbd=arm)),
+                                              training_position_range(m))
     lo, hi = q.min(0), q.max(0)
     w = hi - lo
     probe = np.array([[lo[0] - 0.05 * w[0], hi[1]], [hi[0] + 0.2 * w[0], lo[1] - 2.0 * w[1]]])
+    m = make_model("np-inward", 2, gp_config=GPFitConfig(n_restarts=1, max_iter=5)).fit(d)
     np.testing.assert_array_equal(fraction_outside(m, probe), [0.5, 0.5])  # a tenth of the width is inside
     np.testing.assert_array_equal(fraction_outside(m, probe, margin=1.0), [0.0, 0.5])
     with pytest.raises(ValueError, match=r"^q: expected shape \(T, 2\)"):
         fraction_outside(m, q[:, :1])
+    still = DynamicsData(q=np.column_stack([q[:, 0], np.full(T, 0.3)]), qd=d.qd, qdd=d.qdd, tau=d.tau, t=d.t)
+    m = make_model("np-inward", 2, gp_config=GPFitConfig(n_restarts=1, max_iter=5)).fit(still)
+    np.testing.assert_array_equal(fraction_outside(m, [[0.0, 0.3 + 1e-12]]), [0.0, 0.0])  # a joint held still
 
 
 def test_fit_notes_degrees_and_a_rate_above_the_logs(logs: Path) -> None:
     r = cascgp("fit", "--data", "train_deg.csv", "--urdf", "robot.urdf", "--model", "sp-inward", "--out", "deg.npz",
                "--rate-hz", "1000", "--max-samples", "60", "--restarts", "1", cwd=logs)
     assert r.returncode == 0, r.stderr
-    assert "note: --rate-hz 1000: the log's rate (about 50 Hz) is not higher; all 400 rows kept" in r.stderr
+    assert "note: --rate-hz 1000 keeps every row (the log's rate: about 50 Hz): all 400 rows kept" in r.stderr
     note = next(line for line in r.stderr.splitlines() if "outside the URDF's position limits" in line)
     assert all(f"q{j} " in note for j in (1, 2, 3)) and "([-3, 3])" in note and "must be in rad" in note
     r = cascgp("fit", "--data", "train.csv", "--urdf", "robot.urdf", "--model", "sp-inward", "--out", "rad.npz",
@@ -89,13 +100,17 @@ def test_evaluate_and_predict_note_a_log_far_outside_the_training_positions(logs
         r = cascgp(command, "--model", "np.npz", "--data", "test_deg.csv", *out, cwd=logs)
         assert r.returncode == 0, r.stderr
         note = next(line for line in r.stderr.splitlines() if far in line)
-        assert "q1 " in note and "zero torque" in note and "another unit" in note
+        assert "q1 " in note and "mean torque of the training log" in note and "another unit" in note
 
 
 def test_fit_notes_few_rows_and_rows_without_history(logs: Path) -> None:
     r = cascgp("fit", "--data", "few.csv", "--model", "np-standard", "--out", "few.npz", "--restarts", "1", cwd=logs)
     assert r.returncode == 0, r.stderr
-    assert "note: 5 rows for GPs of up to 9 inputs: too few to learn from" in r.stderr
+    assert "note: 5 rows for GPs of up to 9 inputs: too few to learn from" in r.stderr and "log more" in r.stderr
+    r = cascgp("fit", "--data", "train.csv", "--model", "np-standard", "--out", "few.npz", "--max-samples", "4",
+               "--restarts", "1", cwd=logs)
+    assert r.returncode == 0 and "note: 4 rows for GPs of up to 9 inputs" in r.stderr, r.stderr
+    assert "raise --max-samples" in r.stderr
     r = cascgp("fit", "--data", "train.csv", "--model", "np-inward-df", "--out", "df.npz", "--rate-hz", "25",
                "--restarts", "1", cwd=logs)
     assert r.returncode == 0, r.stderr

@@ -323,6 +323,9 @@ def test_construction_errors(tmp, exact_urdf):
     lone.with_suffix(".json").write_text(json.dumps({**side, "format_version": 99}))
     with pytest.raises(ValueError, match="format_version"):
         load_nominal(lone)
+    lone.with_suffix(".json").write_text(json.dumps({"format_version": 2, "joints": []}))  # a later layout
+    with pytest.raises(ValueError, match=r"format_version must be one of \(1,\), got 2$"):
+        load_nominal(lone)
     lone.with_suffix(".json").write_text(json.dumps({**side, "dof": 7}))
     with pytest.raises(ValueError, match="dof 7 does not match"):
         load_nominal(lone)

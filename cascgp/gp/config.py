@@ -12,12 +12,16 @@ import numpy as np
 from cascgp.checks import check_count, check_positive
 from cascgp.gp.kernels import check_kernel
 
-__all__ = ["GPFitConfig", "check_target_floor", "noise_var"]
+__all__ = ["GPFitConfig", "INIT_SPREAD_MAX", "check_target_floor", "noise_var"]
 
 
 #: Values of fields added after the first saved format, for configs saved without them (old behaviour).
 _LEGACY_DEFAULTS: dict[str, Any] = {"snr_max": None, "stall_window": None}
-_INIT_SPREAD_MAX = 20.0  # log units; see GPFitConfig.__post_init__
+#: The largest ``init_spread`` a fit takes (log units): a lengthscale scaled by e^20 (5e8) or more makes a start's
+#: kernel numerically constant on standardised inputs (1 or 0 off the diagonal in float64), so such a start cannot
+#: move, and far larger spreads overflow. Checked when a fit starts, not when a config is made, so that model files
+#: saved with a larger value still load (the spread plays no part in prediction).
+INIT_SPREAD_MAX = 20.0
 
 
 @dataclass
@@ -38,7 +42,8 @@ class GPFitConfig:
             every GP of the bank, or a sequence with one value per GP; ``None`` (default): no such bound, the fit
             is exactly the one without this field. See :meth:`floors` for the conversion.
         jitter_max: largest jitter (relative to the mean diagonal of K) tried when a Cholesky fails.
-        init_spread: half-width (in log units, at most 20) of the random perturbation of the log lengthscales.
+        init_spread: half-width (in log units) of the random perturbation of the log lengthscales; a fit refuses more
+            than ``INIT_SPREAD_MAX`` (20).
         drop_after: drop hopeless starts after this many iterations (``None``: never drop).
         drop_margin: a start is hopeless when its NLL exceeds the best of its GP by more than this (nats).
         screen_n: if set and ``n > screen_n``, first optimise all starts on ``screen_n`` random training points.
@@ -119,10 +124,6 @@ class GPFitConfig:
         for name in ("drop_after", "stall_window", "race_at", "threads"):
             check_count(getattr(self, name), name, optional=True)
         check_count(self.seed, "seed", minimum=0)  # NumPy's generators take seeds >= 0
-        if self.init_spread > _INIT_SPREAD_MAX:
-            # A lengthscale scaled by e^20 (5e8) or more makes a start's kernel numerically constant on standardised
-            # inputs (1 or 0 off the diagonal in float64): such a start cannot move, and far larger spreads overflow.
-            raise ValueError(f"init_spread: expected at most {_INIT_SPREAD_MAX} (log units), got {self.init_spread!r}")
         if self.snr_max is not None and (isinstance(self.snr_max, bool) or not isinstance(self.snr_max, (int, float))
                                          or not math.isfinite(self.snr_max) or self.snr_max <= 0):
             raise ValueError(f"snr_max: expected None or a finite number > 0, got {self.snr_max!r}")

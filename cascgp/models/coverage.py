@@ -1,10 +1,10 @@
 r"""Where a fitted model's training data lie: each joint's range of positions, and the queries outside it.
 
-A GP's mean returns to its prior away from its training inputs (the rigid-body torque for SP models, zero for NP
-models), so a query far outside the positions a model was trained on is an extrapolation: a log recorded in
-degrees against a model trained in radians, or a continuous joint logged in another range of turns. The GP sees
-the angle as logged, :math:`q` and :math:`q + 2\pi` are two inputs to it even where the rigid-body torque is the
-same.
+Away from its training inputs a GP's mean returns to its prior mean, the mean of its training targets (for an NP
+model the joint's mean torque in the training log; for an SP model the rigid-body torque plus the mean residual),
+so a query far outside the positions a model was trained on is an extrapolation: a log recorded in degrees against
+a model trained in radians, or a continuous joint logged in another range of turns. The GP sees the angle as
+logged, :math:`q` and :math:`q + 2\pi` are two inputs to it even where the rigid-body torque is the same.
 
 Every GP of a model holds its joints' positions in the columns :math:`3k` of its inputs (``(q, q̇, q̈)`` or
 ``(q, q(t - δ), q(t - 2δ))`` per state joint, :func:`cascgp.models.queries.state_cols`), so the range is read from
@@ -39,11 +39,12 @@ def training_position_range(model: Any) -> np.ndarray:
 
 def fraction_outside(model: Any, q: Any, margin: float = 0.1) -> np.ndarray:
     r"""``(N,)``: the fraction of the rows of ``q`` (T, N) outside each joint's training range widened by ``margin``
-    times its width on each side, :math:`[l - m (h - l),\; h + m (h - l)]`."""
+    times its width on each side, :math:`[l - m (h - l),\; h + m (h - l)]`. A joint that held one position in
+    training counts 0: the GPs cannot depend on a constant input."""
     q = np.asarray(q, dtype=np.float64)
     if q.ndim != 2 or q.shape[1] != model.dof or q.shape[0] == 0:
         raise ValueError(f"q: expected shape (T, {model.dof}) with T >= 1, got {q.shape}")
     r = training_position_range(model)
     pad = margin * (r[:, 1] - r[:, 0])
-    out = (q < r[:, 0] - pad) | (q > r[:, 1] + pad)
+    out = ((q < r[:, 0] - pad) | (q > r[:, 1] + pad)) & (r[:, 1] > r[:, 0])
     return np.asarray(out.mean(axis=0))

@@ -203,7 +203,7 @@ def _check_window_memory(window: int, posts: list[Any]) -> None:
     need = sum(8 * (2 * window * window + 3 * window * (P.Z.shape[0] + P.Z.shape[1])) for P in posts)
     if need > phys:
         raise ValueError(f"window: {window} samples per joint would need about {need / 1e9:.3g} GB, more than this "
-                         f"machine's {phys / 1e9:.3g} GB of memory; choose a smaller window")
+                         f"machine's {phys / 1e9:.3g} GB of physical memory; choose a smaller window")
 
 
 class OnlineWindow:

@@ -140,20 +140,20 @@ def _coverage_note(prog: str, model: Any, data: Any) -> None:
     r = training_position_range(model)
     found = [f"q{j + 1} {out[j]:.0%} ([{r[j, 0]:.4g}, {r[j, 1]:.4g}])" for j in np.flatnonzero(out >= 0.05)]
     if found:
-        fades = ("its correction has faded, leaving the rigid-body model" if model.rbd is not None
-                 else "its prediction has faded towards zero torque")
+        fades = ("it gives the rigid-body torque plus the training data's mean residual" if model.rbd is not None
+                 else "it gives each joint's mean torque of the training log")
         _note(prog, f"note: rows far outside the positions the model was trained on (more than the range's width "
                     f"beyond it): {', '.join(found)}; the model knows nothing there ({fades}). A log in another unit, "
                     "or in another range of turns of a continuous joint, than the training log?")
 
 
-def _few_rows_note(prog: str, model: Any, data: Any) -> None:
-    """A note before a fit on fewer rows than a GP has inputs."""
+def _few_rows_note(prog: str, model: Any, data: Any, thinned: bool) -> None:
+    """A note before a fit on fewer rows than a GP has inputs (``thinned``: by --max-samples)."""
     inputs = max(3 * len(sj) + (tj is not None) for sj, tj in model.specs)
     if data.n_samples < inputs:
+        more = "raise --max-samples" if thinned else "log more, and more varied, motion"
         _note(prog, f"note: {data.n_samples} rows for GPs of up to {inputs} inputs: too few to learn from, the model "
-                    f"stays close to its {'rigid-body model' if model.rbd is not None else 'prior'}; log more, "
-                    "and more varied, motion")
+                    f"stays close to its {'rigid-body model' if model.rbd is not None else 'prior'}; {more}")
 
 
 # --------------------------------------------------------------------------- fit
@@ -285,8 +285,9 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
         if data.n_samples < n0:
             _note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
         else:
-            _note(prog, f"note: --rate-hz {a.rate_hz:g}: the log's rate ({rate}) is not higher; all {n0} rows kept")
-    if data.n_samples > a.max_samples:
+            _note(prog, f"note: --rate-hz {a.rate_hz:g} keeps every row (the log's rate: {rate}): all {n0} rows kept")
+    thinned = data.n_samples > a.max_samples
+    if thinned:
         n0 = data.n_samples
         data = data.thin(a.max_samples)
         _note(prog, f"thinned evenly to {data.n_samples} of {n0} rows (--max-samples)")
@@ -297,7 +298,7 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
         kw["threads"] = a.threads
     cfg = GPFitConfig(**kw)
     model = make_model(a.model, data.dof, rbd, gp_config=cfg)
-    _few_rows_note(prog, model, data)
+    _few_rows_note(prog, model, data, thinned)
     _note(prog, f"fitting {a.model}: {data.dof} GPs on {data.n_samples} rows, {cfg.n_restarts} start(s) each ...")
     t0 = time.perf_counter()
     model.fit(data)
