@@ -16,7 +16,7 @@ from cascgp.data import DynamicsData
 from cascgp.gp import GPFitConfig
 from cascgp.features import history_from_data
 from cascgp.models import MODEL_NAMES, load_model, make_model
-from cascgp.models.coverage import fraction_outside, training_position_range
+from cascgp.models.coverage import fraction_in_training, fraction_outside, training_position_range, training_positions
 
 
 def _write(path: Path, data: DynamicsData, degrees: bool = False) -> None:
@@ -72,6 +72,9 @@ def test_training_position_range_and_fraction_outside(tmp_path: Path) -> None:
     np.testing.assert_array_equal(fraction_outside(m, probe, margin=1.0), [0.0, 0.5])
     with pytest.raises(ValueError, match=r"^q: expected shape \(T, 2\)"):
         fraction_outside(m, q[:, :1])
+    np.testing.assert_array_equal(training_positions(m), q)  # in training order
+    assert fraction_in_training(m, q[:10]) == 1.0 and fraction_in_training(m, q[:10] + 1e-15) == 0.0
+    assert fraction_in_training(m, np.vstack([q[:1], q[:3] + 1.0])) == 0.25
     still = DynamicsData(q=np.column_stack([q[:, 0], np.full(T, 0.3)]), qd=d.qd, qdd=d.qdd, tau=d.tau, t=d.t)
     m = make_model("np-inward", 2, gp_config=GPFitConfig(n_restarts=1, max_iter=5)).fit(still)
     np.testing.assert_array_equal(fraction_outside(m, [[0.0, 0.3 + 1e-12]]), [0.0, 0.0])  # a joint held still
@@ -95,7 +98,9 @@ def test_evaluate_and_predict_note_a_log_far_outside_the_training_positions(logs
     assert r.returncode == 0, r.stderr
     far = "far outside the positions the model was trained on"
     r = cascgp("evaluate", "--model", "np.npz", "--data", "test.csv", cwd=logs)
-    assert r.returncode == 0 and far not in r.stderr, r.stderr  # the same unit: no note
+    assert r.returncode == 0 and far not in r.stderr and "in-sample" not in r.stderr, r.stderr  # no note
+    r = cascgp("evaluate", "--model", "np.npz", "--data", "train.csv", cwd=logs)  # 60 of its 400 rows were fitted
+    assert r.returncode == 0 and "note: 15% of the rows are the model's training rows" in r.stderr, r.stderr
     for command, out in (("evaluate", ()), ("predict", ("--out", "pred.csv"))):
         r = cascgp(command, "--model", "np.npz", "--data", "test_deg.csv", *out, cwd=logs)
         assert r.returncode == 0, r.stderr

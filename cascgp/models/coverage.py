@@ -17,7 +17,23 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["training_position_range", "fraction_outside"]
+__all__ = ["training_positions", "training_position_range", "fraction_outside", "fraction_in_training"]
+
+
+def training_positions(model: Any) -> np.ndarray:
+    """``(n, N)``: the joint positions of the model's ``n`` training rows (rad or m), in training order (every GP of
+    a model is fitted on the same rows).
+
+    Args:
+        model: a fitted :class:`~cascgp.models.CascadedGPModel`.
+    """
+    model._require_fitted()
+    out = np.full((model.n_train, model.dof), np.nan)
+    for j, (k, b) in enumerate(model.where):
+        X = model.banks[k].training_data()[0][b]
+        for i, s in enumerate(model.specs[j][0]):
+            out[:, s] = X[:, 3 * i]
+    return out
 
 
 def training_position_range(model: Any) -> np.ndarray:
@@ -26,15 +42,8 @@ def training_position_range(model: Any) -> np.ndarray:
     Args:
         model: a fitted :class:`~cascgp.models.CascadedGPModel`.
     """
-    model._require_fitted()
-    lo = np.full(model.dof, np.inf)
-    hi = np.full(model.dof, -np.inf)
-    for j, (k, b) in enumerate(model.where):
-        X = model.banks[k].training_data()[0][b]
-        for i, s in enumerate(model.specs[j][0]):
-            lo[s] = min(lo[s], float(X[:, 3 * i].min()))
-            hi[s] = max(hi[s], float(X[:, 3 * i].max()))
-    return np.stack([lo, hi], axis=1)
+    q = training_positions(model)
+    return np.stack([q.min(axis=0), q.max(axis=0)], axis=1)
 
 
 def fraction_outside(model: Any, q: Any, margin: float = 0.1) -> np.ndarray:
@@ -48,3 +57,14 @@ def fraction_outside(model: Any, q: Any, margin: float = 0.1) -> np.ndarray:
     pad = margin * (r[:, 1] - r[:, 0])
     out = ((q < r[:, 0] - pad) | (q > r[:, 1] + pad)) & (r[:, 1] > r[:, 0])
     return np.asarray(out.mean(axis=0))
+
+
+def fraction_in_training(model: Any, q: Any) -> float:
+    """The fraction of the rows of ``q`` (T, N) whose positions are, bit for bit, those of one of the model's
+    training rows: a "test" log that is (or holds) the training log. Positions of a real log repeat exactly in
+    another log only by copying."""
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    if q.ndim != 2 or q.shape[1] != model.dof or q.shape[0] == 0:
+        raise ValueError(f"q: expected shape (T, {model.dof}) with T >= 1, got {q.shape}")
+    seen = {row.tobytes() for row in np.ascontiguousarray(training_positions(model))}
+    return sum(row.tobytes() in seen for row in q) / q.shape[0]

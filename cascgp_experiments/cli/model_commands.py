@@ -147,6 +147,16 @@ def _coverage_note(prog: str, model: Any, data: Any) -> None:
                     "or in another range of turns of a continuous joint, than the training log?")
 
 
+def _in_sample_note(prog: str, model: Any, data: Any) -> None:
+    """A note when at least 5 % of a test log's rows are the model's training rows (their positions bit for bit)."""
+    from cascgp.models.coverage import fraction_in_training
+
+    share = fraction_in_training(model, data.q)
+    if share >= 0.05:
+        _note(prog, f"note: {share:.0%} of the rows are the model's training rows (the same positions, bit for bit): "
+                    "scores on them are in-sample, not a test; evaluate on a log the model was not fitted to")
+
+
 def _few_rows_note(prog: str, model: Any, data: Any, thinned: bool) -> None:
     """A note before a fit on fewer rows than a GP has inputs (``thinned``: by --max-samples)."""
     inputs = max(3 * len(sj) + (tj is not None) for sj, tj in model.specs)
@@ -344,6 +354,7 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
             raise _Fail(f"{a.data}: fewer than 2 rows have the {2 * model.df_delta:g} s of history the -df model "
                         "needs")
     _coverage_note(prog, model, data)
+    _in_sample_note(prog, model, data)
     tau = data.tau[rows]
     scores = {model.name: nrmse(mean[rows], tau)}
     if model.rbd is not None:
