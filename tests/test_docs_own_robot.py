@@ -95,4 +95,8 @@ def test_worked_example_runs(tmp_path: Path) -> None:
     assert scores["data"]["n_scored"] == 600
     rows = list(csv.reader((tmp_path / "predictions.csv").open()))
     assert rows[0] == ["t", "tau1", "tau2", "tau3", "var1", "var2", "var3"] and len(rows) == 101
-    assert "model:" in outputs[-1] and "nominal:" in outputs[-1]
+    assert "model:" in outputs[-2] and "nominal:" in outputs[-2]
+    # the control loop: the learned feedforward tracks better than the URDF alone on every joint
+    learned, urdf = (np.array(line.split(":")[1].strip(" []").split(), dtype=float)
+                     for line in outputs[-1].splitlines() if line.startswith("tracking error"))
+    assert np.all(learned < urdf) and learned.max() < 0.05, (learned, urdf)
