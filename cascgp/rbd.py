@@ -46,7 +46,7 @@ import numpy as np
 import pinocchio as pin
 
 from cascgp.data import F64, all_finite
-from cascgp.rbd_joints import angle_joints, check_joint_selection, lock_joints, mimic_joints
+from cascgp.rbd_joints import angle_joints, joint_selection, lock_joints, mimic_joints
 from cascgp.urdf_parser_output import parser_output, parser_reason
 
 __all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
@@ -89,6 +89,10 @@ class RigidBodyModel:
         joint_names: names of the N joints, in URDF/Pinocchio order (the URDF's joints less the locked ones).
         locked: the URDF's joints that are not the model's, locked at a position (rad or m), ``{name: q}``;
             empty when the model has every joint.
+        coupled: the URDF's mimic joints that move with one of the model's joints (left out of ``joints`` and
+            ``locked``), ``{name: (joint, multiplier, offset)}``: the Pinocchio model keeps them at
+            :math:`q = m\\,q_\\text{joint} + o` (velocity and acceleration scaled by :math:`m`), and their torque
+            times :math:`m` adds to the joint's (:mod:`cascgp.rbd_joints`).
         armature: (N,) rotor inertia per joint (kg m^2), included in the inverse dynamics.
         gravity: (3,) gravity vector in the world frame (m/s^2).
         torque_limits, velocity_limits: (N,) or ``None`` (from the sidecar).
@@ -96,7 +100,8 @@ class RigidBodyModel:
         source: the URDF path it was read from (``None`` when built from text).
         urdf_text: the URDF document itself (``None`` when built from a ``pinocchio.Model``): model files
             embed it, so a saved semi-parametric model loads without the URDF file.
-        pin_model: the underlying ``pinocchio.Model`` (do not change its shape).
+        pin_model: the underlying ``pinocchio.Model`` (do not change its shape); with ``coupled`` joints it has
+            more joints than the model.
 
     Args:
         model: a fixed-base Pinocchio model; it is copied (continuous joints converted to revolute joints in
@@ -109,7 +114,8 @@ class RigidBodyModel:
         joints: the model's joints, in Pinocchio's order of the URDF's joints (default: every joint not in
             ``locked``).
         locked: positions (rad or m; 0 is the URDF's zero) of the joints not in ``joints``; default 0 for each
-            (a mimic joint of ``urdf_text``: what its locked primary gives).
+            (a mimic joint of ``urdf_text``: what its locked primary gives, or, if its primary is one of
+            ``joints``, coupled to it: :attr:`coupled`).
 
     Raises:
         ValueError: a joint with more than one position, no movable joint, a bad joint selection or a vector of
@@ -132,20 +138,39 @@ class RigidBodyModel:
     ) -> None:
         model = angle_joints(model)  # a copy: the caller's model is never changed
         values: dict[str, float] = {}
+        coupled: dict[str, tuple[str, float, float]] = {}
         if joints is not None or locked:
-            values = check_joint_selection(model, joints, locked, mimic_joints(urdf_text))
+            values, coupled = joint_selection(model, joints, locked, mimic_joints(urdf_text))
             model = lock_joints(model, values)
         if model.nv == 0:
             raise ValueError(f"{'the model' if source is None else repr(source)}: no degrees of freedom (no "
                              "revolute, continuous or prismatic joint)")
         self.locked: dict[str, float] = values
+        self.coupled: dict[str, tuple[str, float, float]] = coupled
         self.pin_model = model
-        self.dof: int = int(model.nv)
-        self.joint_names: tuple[str, ...] = tuple(model.names[1:])
+        names = list(model.names[1:])  # one position and one velocity each (angle_joints)
+        self._kept = np.array([i for i, n in enumerate(names) if n not in coupled], dtype=np.intp)
+        self.dof: int = int(self._kept.size)
+        self.joint_names: tuple[str, ...] = tuple(names[i] for i in self._kept)
+        # q_full = E q + b for coupled mimic joints (None without: Pinocchio's arrays are the model's). Written
+        # here rather than with Pinocchio's mimic joints (buildModelFromUrdf(mimic=True)) because its RNEA
+        # derivatives refuse them; the torque is the same: E^T tau_full is what Pinocchio's mimic RNEA returns.
+        self._E: np.ndarray | None = None
+        self._b: np.ndarray | None = None
+        if coupled:
+            E, b = np.zeros((model.nv, self.dof)), np.zeros(model.nq)
+            E[self._kept, np.arange(self.dof)] = 1.0
+            for name, (joint, mult, offset) in coupled.items():
+                E[names.index(name), self.joint_names.index(joint)] = mult
+                b[names.index(name)] = offset
+            self._E, self._b = E, b
         if armature is not None:
-            model.armature = _as_vector("armature", armature, self.dof).copy()
-            if np.any(model.armature < 0):
+            arm = _as_vector("armature", armature, self.dof).copy()
+            if np.any(arm < 0):
                 raise ValueError(f"armature must be >= 0 (rotor inertia, kg m^2), got {armature!r}")
+            full = np.array(model.armature, dtype=float)
+            full[self._kept] = arm
+            model.armature = full
         if gravity is not None:
             g = _as_vector("gravity", gravity, 3)
             model.gravity = pin.Motion(g, np.zeros(3))
@@ -180,7 +205,8 @@ class RigidBodyModel:
             joints: the model's joints, in Pinocchio's order of the URDF's joints (default: every joint not in
                 ``locked``).
             locked: positions (rad or m) of the joints not in ``joints``, ``{name: q}``; default 0 for each
-                (a mimic joint: what its locked primary gives).
+                (a mimic joint: what its locked primary gives; the mimic joint of a kept joint moves with it,
+                :attr:`RigidBodyModel.coupled`).
         """
         path = Path(path)
         if not path.is_file():
@@ -226,14 +252,27 @@ class RigidBodyModel:
 
     def _replace(self, **fields: Any) -> "RigidBodyModel":
         """A model of the same (converted, locked) Pinocchio model and URDF with other constructor ``fields``."""
-        out = RigidBodyModel(self.pin_model, source=self.source, urdf_text=self.urdf_text, **fields)
+        joints = list(self.joint_names) if self.coupled else None  # the coupling again, from the URDF's mimics
+        out = RigidBodyModel(self.pin_model, source=self.source, urdf_text=self.urdf_text, joints=joints, **fields)
         out.locked = dict(self.locked)  # self.pin_model has them locked already
         return out
 
     # ------------------------------------------------------------------ properties
     @property
     def armature(self) -> np.ndarray:
-        return np.array(self.pin_model.armature, dtype=float)
+        return np.array(self.pin_model.armature, dtype=float)[self._kept]
+
+    @property
+    def position_limits(self) -> np.ndarray:
+        """``(N, 2)``: each joint's lower and upper position limit from the URDF (rad or m; ``-inf, inf`` for a
+        continuous joint)."""
+        m = self.pin_model
+        return np.stack([np.asarray(m.lowerPositionLimit, float)[self._kept],
+                         np.asarray(m.upperPositionLimit, float)[self._kept]], axis=1)
+
+    def _per_joint(self, full: Any) -> np.ndarray:
+        """A per-joint vector of the Pinocchio model (its joints, coupled ones included) for the model's joints."""
+        return np.asarray(full, dtype=float)[self._kept]
 
     @property
     def gravity(self) -> np.ndarray:
@@ -266,7 +305,7 @@ class RigidBodyModel:
             tau: (N,) or (T, N) in N m, float64.
         """
         model, data = self.pin_model, self._data
-        if (type(q) is np.ndarray and type(qd) is np.ndarray and type(qdd) is np.ndarray
+        if (self._E is None and type(q) is np.ndarray and type(qd) is np.ndarray and type(qdd) is np.ndarray
                 and q.dtype == qd.dtype == qdd.dtype == F64 and q.shape == qd.shape == qdd.shape == (self.dof,)
                 and q.flags.c_contiguous and qd.flags.c_contiguous and qdd.flags.c_contiguous):
             # One configuration of float64 arrays (what a controller passes every tick): RNEA first, the checks
@@ -276,13 +315,17 @@ class RigidBodyModel:
             if all_finite(tau):
                 return tau.copy()
         q, qd, qdd = self._check_states(q, qd, qdd)
+        if self._E is not None:
+            E = self._E
+            q, qd, qdd = q @ E.T + self._b, qd @ E.T, qdd @ E.T
         if q.ndim == 1:
-            return pin.rnea(model, data, q, qd, qdd).copy()
+            tau = pin.rnea(model, data, q, qd, qdd).copy()
+            return tau if self._E is None else self._E.T @ tau
         out = np.empty_like(q)
         rnea = pin.rnea
         for t in range(q.shape[0]):
             out[t] = rnea(model, data, q[t], qd[t], qdd[t])
-        return out
+        return out if self._E is None else out @ self._E
 
     def inverse_dynamics_derivatives(self, q: Any, qd: Any, qdd: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r"""Partial derivatives of :meth:`inverse_dynamics`, by Pinocchio's analytic RNEA derivatives
@@ -301,12 +344,16 @@ class RigidBodyModel:
         """
         q, qd, qdd = self._check_states(q, qd, qdd)
         model, data = self.pin_model, self._data
+        E = self._E
+        if E is not None:  # the chain rule through q_full = E q + b: E^T (d tau_full / d x_full) E
+            q, qd, qdd = q @ E.T + self._b, qd @ E.T, qdd @ E.T
         if q.ndim == 1:
-            return tuple(np.array(d) for d in pin.computeRNEADerivatives(model, data, q, qd, qdd))  # type: ignore[return-value]
+            parts = [np.array(d) for d in pin.computeRNEADerivatives(model, data, q, qd, qdd)]
+            return tuple(p if E is None else E.T @ p @ E for p in parts)  # type: ignore[return-value]
         out = np.empty((3, q.shape[0], self.dof, self.dof))
         for t in range(q.shape[0]):
             for c, d in enumerate(pin.computeRNEADerivatives(model, data, q[t], qd[t], qdd[t])):
-                out[c, t] = d
+                out[c, t] = d if E is None else E.T @ d @ E
         return out[0], out[1], out[2]
 
     def gravity_torque(self, q: Any) -> np.ndarray:
@@ -320,6 +367,8 @@ class RigidBodyModel:
         """
         q = self._check("q", q)
         model, data = self.pin_model, self._data
+        if self._E is not None:
+            return self.inverse_dynamics(q, np.zeros_like(q), np.zeros_like(q))
         if q.ndim == 1:
             return pin.computeGeneralizedGravity(model, data, q).copy()
         out = np.empty_like(q)
@@ -332,12 +381,14 @@ class RigidBodyModel:
         q = self._check("q", q)
         if q.ndim != 1:
             raise ValueError(f"q must have shape ({self.dof},) for mass_matrix, got {q.shape}")
-        M = pin.crba(self.pin_model, self._data, q)
+        E = self._E
+        M = pin.crba(self.pin_model, self._data, q if E is None else E @ q + self._b)
         M = np.triu(M) + np.triu(M, 1).T  # crba fills the upper triangle only
-        return M
+        return M if E is None else E.T @ M @ E
 
     def __repr__(self) -> str:
         lock = f", locked={self.locked}" if self.locked else ""
+        lock += f", coupled={self.coupled}" if self.coupled else ""
         return f"RigidBodyModel(dof={self.dof}, joints={list(self.joint_names)}{lock}, source={self.source!r})"
 
 
@@ -352,8 +403,8 @@ def _without_sidecar(urdf_path: Path, js: Path, dof: int | None, joints: Sequenc
     """:func:`load_nominal` for a URDF without a sidecar (see its docstring)."""
     rbd = RigidBodyModel.from_urdf(urdf_path, dof=dof, joints=joints, locked=locked)
     model = rbd.pin_model
-    torque = _urdf_limits(model.effortLimit)
-    velocity = _urdf_limits(model.velocityLimit)
+    torque = _urdf_limits(rbd._per_joint(model.effortLimit))
+    velocity = _urdf_limits(rbd._per_joint(model.velocityLimit))
     gravity = rbd.gravity
     assumed = {"sidecar": None, "armature": "zero (not in the URDF)",
                "torque_limits": "URDF <limit effort>" if torque is not None else "unknown",
@@ -406,7 +457,8 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints
         dof: if given, the expected number of joints.
         joints: the model's joints (default: every joint not in ``locked``).
         locked: positions (rad or m) of the joints not in ``joints``, ``{name: q}``; default 0 for each
-            (a mimic joint: what its locked primary gives).
+            (a mimic joint: what its locked primary gives; the mimic joint of a kept joint moves with it,
+            :attr:`RigidBodyModel.coupled`).
 
     Raises:
         FileNotFoundError: the URDF is missing.

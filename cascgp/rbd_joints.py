@@ -16,11 +16,13 @@ Pinocchio model before :class:`cascgp.rbd.RigidBodyModel` uses it:
   locked joint's bodies become rigid parts of their parent body, inertia included.
 * **Mimic joints.** A URDF ``<mimic>`` joint (a gripper's second finger) moves with another joint:
   :math:`q = m\\,q_\\text{primary} + o`. Pinocchio reads it as a joint of its own; :func:`mimic_joints` reads the
-  relation from the URDF, and :func:`check_joint_selection` locks a mimic joint whose primary is locked at the
-  position the relation gives. Locking one whose primary is a joint of the model (it would have to move with a
-  joint of the log, and a locked joint cannot) needs its position given, and a given position that disagrees
-  with the relation is used with a warning (model files saved before mimic joints were followed hold such
-  positions).
+  relation from the URDF, and :func:`joint_selection` locks a mimic joint whose primary is locked at the
+  position the relation gives. A mimic joint of one of the model's joints that ``joints`` leaves out moves with
+  it: it stays in the Pinocchio model, and :class:`cascgp.rbd.RigidBodyModel` sets its position, velocity and
+  acceleration from its primary's and adds its torque to its primary's (the coupling's virtual work: the
+  primary's generalised force is :math:`\\tau_\\text{primary} + m\\,\\tau_\\text{mimic}`), as Pinocchio's own mimic
+  joints do. A mimic joint's position given in ``locked`` is used (with a warning if it disagrees with the
+  relation: model files saved before mimic joints were followed hold such positions).
 
 Spherical, planar and floating joints are refused: the log format gives each joint one position.
 """
@@ -36,7 +38,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["angle_joints", "lock_joints", "check_joint_selection", "mimic_joints"]
+__all__ = ["angle_joints", "lock_joints", "check_joint_selection", "joint_selection", "mimic_joints"]
 
 #: How far (rad or m) a mimic joint's given position may be from the one its relation gives.
 MIMIC_TOL = 1e-9
@@ -138,7 +140,15 @@ def _local(tag: object) -> str:
 def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
                           locked: Mapping[str, float] | None,
                           mimics: Mapping[str, tuple[str, float, float]] | None = None) -> dict[str, float]:
-    """The positions of the joints to lock, ``joints`` and ``locked`` checked against ``model``'s joints.
+    """The positions of the joints to lock: :func:`joint_selection`'s first part."""
+    return joint_selection(model, joints, locked, mimics)[0]
+
+
+def joint_selection(model: pin.Model, joints: Sequence[str] | None, locked: Mapping[str, float] | None,
+                    mimics: Mapping[str, tuple[str, float, float]] | None = None
+                    ) -> tuple[dict[str, float], dict[str, tuple[str, float, float]]]:
+    """The positions of the joints to lock and the mimic joints that move with the model's joints, ``joints`` and
+    ``locked`` checked against ``model``'s joints.
 
     Args:
         model: a model with one position per joint (see :func:`angle_joints`).
@@ -150,12 +160,14 @@ def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
         mimics: :func:`mimic_joints` of the URDF.
 
     Returns:
-        ``{name: position}`` of every joint not in ``joints`` (empty when all are kept).
+        ``(locked, coupled)``: ``{name: position}`` of every joint to lock (empty when all are kept), and
+        ``{name: (joint, multiplier, offset)}`` of the mimic joints left out of ``joints`` and ``locked`` whose
+        primary is one of the model's joints, directly or through other such mimic joints: each stays a joint of
+        the Pinocchio model at :math:`q = m\\,q_\\text{joint} + o` (the relations composed along a chain).
 
     Raises:
         ValueError: naming ``joints`` or ``locked`` and what was expected (a name not in the URDF, another
-            order, a repeated name, a position that is not a finite number or is outside the joint's limits, a
-            mimic joint locked without a position while its primary is kept).
+            order, a repeated name, a position that is not a finite number or is outside the joint's limits).
     """
     names = list(model.names)[1:]
     if isinstance(joints, (str, bytes)):
@@ -185,14 +197,22 @@ def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
                              "other joints are locked")
     values: dict[str, float] = {}
     mimics = {k: v for k, v in mimics.items() if k not in keep}
+    coupled: dict[str, tuple[str, float, float]] = {}
     for name in [n for n in names if n not in keep and n not in mimics] + _primaries_first(mimics):
+        if name in mimics and name not in given and (mimics[name][0] in keep or mimics[name][0] in coupled):
+            primary, mult, offset = mimics[name]  # moves with a joint of the model: stays, coupled to it
+            if primary in coupled:
+                primary, m0, o0 = coupled[primary]
+                mult, offset = mult * m0, mult * o0 + offset
+            coupled[name] = (primary, mult, offset)
+            continue
         value = given.get(name, 0.0)
         try:
             x = float(value)
         except (TypeError, ValueError):
             raise ValueError(f"locked: {name!r}: expected a number (rad or m), got {value!r}") from None
         if name in mimics:
-            x = _mimic_position(name, mimics[name], keep, values, given, x)
+            x = _mimic_position(name, mimics[name], keep, coupled, values, given, x)
         j = model.getJointId(name)
         lo, hi = model.lowerPositionLimit[model.idx_qs[j]], model.upperPositionLimit[model.idx_qs[j]]
         if not np.isfinite(x) or not lo <= x <= hi:
@@ -202,7 +222,7 @@ def check_joint_selection(model: pin.Model, joints: Sequence[str] | None,
             raise ValueError(f"locked: {name!r}: expected a finite position within the joint's limits "
                              f"[{lo:g}, {hi:g}], got {shown}{where}")
         values[name] = x
-    return values
+    return values, coupled
 
 
 def _following(mimics: Mapping[str, tuple[str, float, float]], locked: set[str]) -> set[str]:
@@ -228,20 +248,17 @@ def _primaries_first(mimics: Mapping[str, tuple[str, float, float]]) -> list[str
     return order
 
 
-def _mimic_position(name: str, relation: tuple[str, float, float], keep: Sequence[str],
+def _mimic_position(name: str, relation: tuple[str, float, float], keep: Sequence[str], coupled: Mapping[str, Any],
                     values: Mapping[str, float], given: Mapping[str, Any], x: float) -> float:
-    """The locked position of mimic joint ``name`` (``x``: the one given, if any): its relation applied to its
-    primary's locked position. A position given otherwise is kept, with a warning; without one, a kept primary is
-    a ``ValueError``."""
+    """The locked position of mimic joint ``name``, given as ``x``, or its relation applied to its primary's locked
+    position. A position given otherwise is kept, with a warning (also for a primary that moves: one of ``keep``,
+    or ``coupled`` to one)."""
     primary, mult, offset = relation
-    if primary in keep:
-        if name in given:
-            warnings.warn(f"locked: {name!r} mimics {primary!r}, one of the model's joints, so it moves with it; "
-                          f"it is locked at {x:g} as given", UserWarning, stacklevel=4)
-            return x
-        raise ValueError(f"joints: {name!r} mimics {primary!r}, one of the model's joints, so it moves with it "
-                         f"and cannot be locked: name {name!r} in joints= too (the log then has its position), or "
-                         f"lock {primary!r} as well")
+    if primary in keep or primary in coupled:  # given (left out of locked=, it moves with it: joint_selection)
+        which = "one of the model's joints" if primary in keep else "which moves with one of the model's joints"
+        warnings.warn(f"locked: {name!r} mimics {primary!r}, {which}, so it moves with it; it is locked at {x:g} as "
+                      "given (leave it out of locked= and it moves with it)", UserWarning, stacklevel=4)
+        return x
     follow = mult * values[primary] + offset
     if name in given and not abs(x - follow) <= MIMIC_TOL:
         warnings.warn(f"locked: {name!r} mimics {primary!r} (multiplier {mult:g}, offset {offset:g}), which puts it "

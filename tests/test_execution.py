@@ -255,7 +255,8 @@ def dying_job(x: int) -> int:
 
 
 def test_dead_worker_process_is_a_clear_error(tmp_path: Path) -> None:
-    with pytest.raises(RuntimeError, match=r"a worker process died .* dying_job\(.*\"x\":1.*under if __name__ == \"__main__\""):
+    died = r"a worker process died .* dying_job\(.*\"x\":1.*under if __name__ == \"__main__\""
+    with pytest.raises(RuntimeError, match=died):
         run_jobs(dying_job, [{"x": x} for x in range(2)], workers=2, cache_dir=tmp_path, show_progress=False)
 
 

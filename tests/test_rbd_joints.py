@@ -334,8 +334,6 @@ def test_a_mimic_position_given_otherwise_is_used_with_a_warning(tmp_path: Path,
 
 
 @pytest.mark.parametrize("relation, kwargs, match", [
-    (_HALF, {"joints": ["j1", "j2", "j3", "finger1"]},
-     r"joints: 'finger2' mimics 'finger1', one of the model's joints, so it moves with it and cannot be locked"),
     ('multiplier="1" offset="0.01"', {"joints": ["j1", "j2", "j3"], "locked": {"finger1": 0.035}},  # 0.045 > 0.04
      r"locked: 'finger2': expected a finite position within the joint's limits \[0, 0.04\], got 0.045 \(from "
      r"'finger1', which it mimics\)"),

@@ -92,11 +92,12 @@ def _embedded_rbd(rbd: Any) -> dict[str, np.ndarray]:
 
 
 def _embedded_joints(rbd: Any) -> dict[str, np.ndarray]:
-    """``rbd/joints_json`` (the model's joints and the URDF's locked ones) when the URDF has locked joints."""
+    """``rbd/joints_json`` (the model's joints and the URDF's locked ones) when the URDF has locked joints or mimic
+    joints that move with the model's (not among its joints: rebuilt from the joints and the URDF)."""
     locked = getattr(rbd, "locked", None)
-    if not locked:
+    if not locked and not getattr(rbd, "coupled", None):
         return {}
-    return {"rbd/joints_json": np.array(json.dumps({"joints": list(rbd.joint_names), "locked": dict(locked)}))}
+    return {"rbd/joints_json": np.array(json.dumps({"joints": list(rbd.joint_names), "locked": dict(locked or {})}))}
 
 
 def _rbd_from_file(z: dict[str, np.ndarray], path: str | os.PathLike, dof: int) -> Any:

@@ -117,8 +117,7 @@ def _log_rate(data: Any) -> str:
 def _limits_note(prog: str, rbd: Any, data: Any) -> None:
     """One note naming the joints with rows outside the URDF's position limits by more than a tenth of their span
     (positions in degrees, or another zero, say); joints without limits (continuous) are not checked."""
-    lo = np.asarray(rbd.pin_model.lowerPositionLimit, dtype=float)
-    hi = np.asarray(rbd.pin_model.upperPositionLimit, dtype=float)
+    lo, hi = rbd.position_limits.T
     found = []
     for j in range(rbd.dof):
         if np.isfinite(lo[j]) and np.isfinite(hi[j]) and hi[j] > lo[j]:
@@ -286,6 +285,7 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
             raise _Fail(f"{a.urdf}: {what} has {rbd.dof} joints ({', '.join(rbd.joint_names)}), the log "
                         f"{a.data} has {data.dof}{more}")
         locked = "".join(f"; {n} locked at {q:g}" for n, q in rbd.locked.items())
+        locked += "".join(f"; {n} moves with {j} ({m:g} x {j} + {o:g})" for n, (j, m, o) in rbd.coupled.items())
         _note(prog, f"rigid-body model: {a.urdf} ({rbd.dof} joints: {', '.join(rbd.joint_names)}{locked})")
         _limits_note(prog, rbd, data)
     if a.rate_hz is not None:
