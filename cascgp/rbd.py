@@ -46,7 +46,7 @@ import numpy as np
 import pinocchio as pin
 
 from cascgp.data import F64, all_finite
-from cascgp.rbd_joints import angle_joints, joint_selection, lock_joints, mimic_joints
+from cascgp.rbd_joints import angle_joints, coupling_map, joint_selection, lock_joints, mimic_joints
 from cascgp.urdf_parser_output import parser_output, parser_reason
 
 __all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
@@ -86,7 +86,8 @@ class RigidBodyModel:
 
     Attributes:
         dof: number of joints N (one position each: a continuous joint's is its angle).
-        joint_names: names of the N joints, in URDF/Pinocchio order (the URDF's joints less the locked ones).
+        joint_names: names of the N joints, in URDF/Pinocchio order (the URDF's joints less the locked and the
+            coupled ones).
         locked: the URDF's joints that are not the model's, locked at a position (rad or m), ``{name: q}``;
             empty when the model has every joint.
         coupled: the URDF's mimic joints that move with one of the model's joints (left out of ``joints`` and
@@ -152,18 +153,11 @@ class RigidBodyModel:
         self._kept = np.array([i for i, n in enumerate(names) if n not in coupled], dtype=np.intp)
         self.dof: int = int(self._kept.size)
         self.joint_names: tuple[str, ...] = tuple(names[i] for i in self._kept)
-        # q_full = E q + b for coupled mimic joints (None without: Pinocchio's arrays are the model's). Written
-        # here rather than with Pinocchio's mimic joints (buildModelFromUrdf(mimic=True)) because its RNEA
-        # derivatives refuse them; the torque is the same: E^T tau_full is what Pinocchio's mimic RNEA returns.
+        # q_full = E q + b with coupled mimic joints (None without: Pinocchio's arrays are the model's)
         self._E: np.ndarray | None = None
         self._b: np.ndarray | None = None
         if coupled:
-            E, b = np.zeros((model.nv, self.dof)), np.zeros(model.nq)
-            E[self._kept, np.arange(self.dof)] = 1.0
-            for name, (joint, mult, offset) in coupled.items():
-                E[names.index(name), self.joint_names.index(joint)] = mult
-                b[names.index(name)] = offset
-            self._E, self._b = E, b
+            self._E, self._b = coupling_map(names, self.joint_names, coupled)
         if armature is not None:
             arm = _as_vector("armature", armature, self.dof).copy()
             if np.any(arm < 0):
@@ -377,7 +371,9 @@ class RigidBodyModel:
         return out
 
     def mass_matrix(self, q: Any) -> np.ndarray:
-        """Joint-space inertia ``M(q) + diag(armature)``, (N, N), for a single (N,) configuration."""
+        r"""Joint-space inertia ``M(q) + diag(armature)``, (N, N), for a single (N,) configuration (with
+        :attr:`coupled` joints :math:`E^T (M_\text{full} + \operatorname{diag}(\text{armature}_\text{full})) E`,
+        the coupled joints' inertia included)."""
         q = self._check("q", q)
         if q.ndim != 1:
             raise ValueError(f"q must have shape ({self.dof},) for mass_matrix, got {q.shape}")

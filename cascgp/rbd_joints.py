@@ -38,7 +38,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["angle_joints", "lock_joints", "check_joint_selection", "joint_selection", "mimic_joints"]
+__all__ = ["angle_joints", "lock_joints", "check_joint_selection", "joint_selection", "mimic_joints", "coupling_map"]
 
 #: How far (rad or m) a mimic joint's given position may be from the one its relation gives.
 MIMIC_TOL = 1e-9
@@ -78,7 +78,8 @@ def angle_joints(model: pin.Model) -> pin.Model:
         A new model with one position per joint (``nq == nv``).
 
     Raises:
-        ValueError: a joint has more than one position (spherical, planar, floating); names the joints.
+        ValueError: a joint has more than one position (spherical, planar, floating) or none (a Pinocchio mimic
+            joint); names the joints.
     """
     new_joints = [_with_angle(model.joints[j]) for j in range(1, model.njoints)]
     other = [model.names[j] for j in range(1, model.njoints)
@@ -86,6 +87,11 @@ def angle_joints(model: pin.Model) -> pin.Model:
     if other:
         raise ValueError(f"joints {other} have more than one position (spherical, planar or floating joints); "
                          "only revolute, continuous and prismatic joints are supported")
+    still = [model.names[j] for j in range(1, model.njoints) if model.joints[j].nv == 0]
+    if still:  # Pinocchio's own mimic joints (buildModelFromUrdf(..., mimic=True)): no position of their own
+        raise ValueError(f"joints {still} have no position of their own (Pinocchio mimic joints, a model built with "
+                         "mimic=True): build it without mimic=True and pass urdf_text= (RigidBodyModel.from_urdf "
+                         "does both); the mimic joints then move with their joints")
     if all(jm is None for jm in new_joints):
         return pin.Model(model)
     out = pin.Model()
@@ -266,6 +272,23 @@ def _mimic_position(name: str, relation: tuple[str, float, float], keep: Sequenc
                       stacklevel=4)
         return x
     return x if name in given else follow
+
+
+def coupling_map(names: Sequence[str], joints: Sequence[str], coupled: Mapping[str, tuple[str, float, float]]
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    r"""``(E, b)``: the Pinocchio model's positions from the model's, :math:`q_\text{full} = E q + b` (velocities and
+    accelerations :math:`E \dot q`, :math:`E \ddot q`; torques :math:`E^T \tau_\text{full}`, derivatives
+    :math:`E^T D E`), for the Pinocchio model's joints ``names`` (one position each), the model's ``joints`` and the
+    ``coupled`` mimic joints of :func:`joint_selection`. Written here rather than with Pinocchio's own mimic
+    joints (``buildModelFromUrdf(..., mimic=True)``) because its RNEA derivatives refuse them; the torque is the
+    same."""
+    E, b = np.zeros((len(names), len(joints))), np.zeros(len(names))
+    for k, name in enumerate(joints):
+        E[list(names).index(name), k] = 1.0
+    for name, (joint, mult, offset) in coupled.items():
+        E[list(names).index(name), list(joints).index(joint)] = mult
+        b[list(names).index(name)] = offset
+    return E, b
 
 
 def lock_joints(model: pin.Model, locked: Mapping[str, float]) -> pin.Model:

@@ -321,8 +321,8 @@ def run_jobs(fn: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], *, worke
         jobs: the inputs of each call (keyword arguments).
         workers: parallel jobs (default :func:`default_workers`; 1: in this process). Above 1, a script must call
             this under ``if __name__ == "__main__":`` (each worker process imports the script again).
-        ray_address: run on the Ray cluster at this address (``"local"``: a local instance with
-            ``workers`` CPUs) instead of local processes.
+        ray_address: run on the Ray cluster at this address (``"local"``: a local instance with ``workers`` CPUs)
+            instead of local processes.
         cache_dir: folder of the job cache (resume); ``None``: no cache.
         desc: the progress bar's title.
         units: progress units of each job (default 1 each; see :func:`report_progress`).
@@ -466,8 +466,7 @@ def _drive_pool(pool: ProcessPoolExecutor, fn, jobs, todo, progress, finished) -
                 lost = [i] + [j for j in running.values()]
                 raise RuntimeError(
                     "a worker process died (crashed or killed, e.g. out of memory) while these jobs were "
-                    "running or waiting: " + "; ".join(f"{fn.__name__}({_short(jobs[j], 300)})"
-                                                        for j in lost[:8])
+                    "running or waiting: " + "; ".join(f"{fn.__name__}({_short(jobs[j], 300)})" for j in lost[:8])
                     + ("; ..." if len(lost) > 8 else "")
                     + ". The finished jobs are cached (with a cache folder): run again to resume. (A script that "
                     "runs jobs in worker processes must do so under if __name__ == \"__main__\": each worker "

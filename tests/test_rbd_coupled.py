@@ -105,4 +105,46 @@ def test_a_model_with_a_coupled_joint_saves_loads_and_fits_from_the_command(
     write_log(log, data)
     assert fit_main(["--data", str(log), "--urdf", str(urdf), "--model", "sp-standard", "--restarts", "1",
                      "--out", str(tmp_path / "cli.npz"), "--joints", ",".join(JOINTS)]) == 0
-    assert "finger2 moves with finger1 (0.5 x finger1 + 0.005)" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "finger2 moves with finger1 (0.5 x finger1 + 0.005)" in err and "position limits" not in err
+    (tmp_path / "far").mkdir()
+    far = _mimic_gripper(tmp_path / "far", 'multiplier="1" offset="0.03"')  # finger2 beyond its 0.04 m limit
+    assert fit_main(["--data", str(log), "--urdf", str(far), "--model", "sp-standard", "--restarts", "1",
+                     "--out", str(tmp_path / "far.npz"), "--joints", ",".join(JOINTS)]) == 0
+    note = next(line for line in capsys.readouterr().err.splitlines() if "position limits" in line)
+    assert "finger2 (moving with finger1)" in note and "q4" not in note  # finger1 (q4) is within its own
+
+
+def test_a_mimic_joint_mid_chain_with_armature_and_limits(tmp_path: Path) -> None:
+    """j2 mimics j1 (-0.7 j1 + 0.3) in the middle of the chain and finger2 mimics finger1: the model's joints are
+    j1, j3 and finger1, not the first three of Pinocchio's; armature, limits and the batched derivatives follow."""
+    text = _mimic_gripper(tmp_path).read_text().replace(
+        '<joint name="j2" type="revolute">', '<joint name="j2" type="revolute"><mimic joint="j1" multiplier="-0.7" '
+        'offset="0.3"/>')
+    urdf = tmp_path / "mid.urdf"
+    urdf.write_text(text)
+    kept = ["j1", "j3", "finger1"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # no sidecar
+        rbd = load_nominal(urdf, joints=kept)
+    assert rbd.joint_names == tuple(kept) and set(rbd.coupled) == {"j2", "finger2"}
+    np.testing.assert_array_equal(rbd.torque_limits, [30.0, 30.0, 20.0])  # the kept joints' efforts
+    np.testing.assert_array_equal(rbd.velocity_limits, [2.0, 2.0, 0.2])
+    np.testing.assert_array_equal(rbd.position_limits, [[-np.inf, np.inf], [-3.0, 3.0], [0.0, 0.04]])
+    arm = RigidBodyModel.from_urdf(urdf, joints=kept, armature=[0.1, 0.2, 0.3])
+    np.testing.assert_array_equal(arm.armature, [0.1, 0.2, 0.3])
+    native = pin.buildModelFromXML(text.replace("continuous", "revolute"), mimic=True)
+    native.armature = np.array([0.1, 0.2, 0.3])
+    data = native.createData()
+    rng = np.random.default_rng(9)
+    q = np.column_stack([rng.uniform(-1, 1, (4, 2)), rng.uniform(0.0, 0.03, 4)])
+    qd, qdd = rng.normal(size=(4, 3)), rng.normal(size=(4, 3))
+    tau = arm.inverse_dynamics(q, qd, qdd)
+    derivs = arm.inverse_dynamics_derivatives(q, qd, qdd)
+    for t in range(4):
+        np.testing.assert_allclose(tau[t], pin.rnea(native, data, q[t], qd[t], qdd[t]), rtol=1e-12, atol=1e-12)
+        for batched, single in zip(derivs, arm.inverse_dynamics_derivatives(q[t], qd[t], qdd[t])):
+            np.testing.assert_array_equal(batched[t], single)
+        np.testing.assert_allclose(derivs[2][t], arm.mass_matrix(q[t]), rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match=r"no position of their own \(Pinocchio mimic joints"):
+        RigidBodyModel(native)

@@ -38,7 +38,7 @@ import numpy as np
 import torch
 
 from cascgp.gp.checks import as_list, check_matrix, check_scale, check_vector, json_num
-from cascgp.gp.config import INIT_SPREAD_MAX, GPFitConfig, noise_var
+from cascgp.gp.config import GPFitConfig, noise_var
 from cascgp.gp.kernels import get_kernel, scaled_sqdist
 from cascgp.gp.lbfgs import LBFGSOptions, minimize_batched
 from cascgp.gp.likelihood import DTYPE, fit_threads, nll_and_grad, plan_chunk
@@ -222,13 +222,9 @@ class GPBank:
         thread settings afterwards (:func:`cascgp.gp.likelihood.fit_threads`).
         """
         try:
-            config = replace(self.config)  # a checked copy: a field may have been set after construction
+            self.config = self.config.for_fit()  # a checked copy: a field may have been set after construction
         except (TypeError, ValueError) as exc:
             raise type(exc)(f"config.{exc}") from None
-        if config.init_spread > INIT_SPREAD_MAX:
-            raise ValueError(f"config.init_spread: expected at most {INIT_SPREAD_MAX} (log units) for a fit, got "
-                             f"{config.init_spread!r}")
-        self.config = config
         with fit_threads(self.config.threads):
             return self._fit(X, y, init, shared)
 

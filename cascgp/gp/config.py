@@ -4,7 +4,7 @@ construction; :meth:`GPFitConfig.from_dict` reads the ``asdict`` form stored in 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numpy as np
@@ -132,6 +132,15 @@ class GPFitConfig:
             raise ValueError(f"catch_up_windows: expected a number > 0, got {self.catch_up_windows!r}")
         check_count(self.screen_n, "screen_n", minimum=2, optional=True)
         self.noise_floor_target = check_target_floor(self.noise_floor_target, "noise_floor_target")
+
+    def for_fit(self) -> GPFitConfig:
+        """A copy checked again (a field may have been set after construction), and for a fit: ``init_spread`` at
+        most ``INIT_SPREAD_MAX``; ``ValueError`` naming the field."""
+        config = replace(self)
+        if config.init_spread > INIT_SPREAD_MAX:
+            raise ValueError(f"init_spread: expected at most {INIT_SPREAD_MAX} (log units) for a fit, got "
+                             f"{config.init_spread!r}")
+        return config
 
     def floors(self, y_std: np.ndarray) -> np.ndarray | None:
         r"""Per-GP noise-variance floor in normalised units, ``(B,)``, or ``None`` without ``noise_floor_target``.

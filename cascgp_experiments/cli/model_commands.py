@@ -125,6 +125,16 @@ def _limits_note(prog: str, rbd: Any, data: Any) -> None:
             out = float(((data.q[:, j] < lo[j] - pad) | (data.q[:, j] > hi[j] + pad)).mean())
             if out > 0:
                 found.append(f"q{j + 1} {out:.0%} ([{lo[j]:.4g}, {hi[j]:.4g}])")
+    m = rbd.pin_model
+    for name, (joint, mult, offset) in rbd.coupled.items():  # a mimic joint moved by its joint: its own limits too
+        i = m.idx_qs[m.getJointId(name)]
+        lo_c, hi_c = float(m.lowerPositionLimit[i]), float(m.upperPositionLimit[i])
+        if np.isfinite(lo_c) and np.isfinite(hi_c) and hi_c > lo_c:
+            x = mult * data.q[:, rbd.joint_names.index(joint)] + offset
+            pad = 0.1 * (hi_c - lo_c)
+            out = float(((x < lo_c - pad) | (x > hi_c + pad)).mean())
+            if out > 0:
+                found.append(f"{name} (moving with {joint}) {out:.0%} ([{lo_c:.4g}, {hi_c:.4g}])")
     if found:
         _note(prog, f"note: rows outside the URDF's position limits: {', '.join(found)}; positions must be in rad "
                     "(m for a prismatic joint), 0 at the URDF's zero")
@@ -181,7 +191,8 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
     p.add_argument("--joints", default=None, metavar="NAME,...",
                    help="the URDF joints that are the log's q1..qN, in the order Pinocchio lists the URDF's "
                         "joints (depth first from the base; an error prints it). Default: every joint not in "
-                        "--lock. The others (a gripper's fingers, say) are locked. A continuous joint's q is its "
+                        "--lock. The others (a gripper's fingers, say) are locked, except a URDF mimic joint of one of "
+                        "them, which moves with it. A continuous joint's q is its "
                         "angle (rad, any range)")
     p.add_argument("--lock", default=None, metavar="NAME=Q,...",
                    help="positions (rad or m; 0 is the URDF's zero) at which the joints not in --joints are locked "
@@ -281,7 +292,7 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
         if rbd.dof != data.dof:
             more = ("; name the log's joints with --joints, or lock the others with --lock NAME=Q,..."
                     if rbd.dof > data.dof else "")
-            what = "the rigid-body model" if rbd.locked else "the URDF"
+            what = "the rigid-body model" if rbd.locked or rbd.coupled else "the URDF"
             raise _Fail(f"{a.urdf}: {what} has {rbd.dof} joints ({', '.join(rbd.joint_names)}), the log "
                         f"{a.data} has {data.dof}{more}")
         locked = "".join(f"; {n} locked at {q:g}" for n, q in rbd.locked.items())
