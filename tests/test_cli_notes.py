@@ -5,6 +5,7 @@ history, a --rate-hz above the log's rate), and :mod:`cascgp.models.coverage` un
 from __future__ import annotations
 
 import csv
+import json
 from pathlib import Path
 
 import numpy as np
@@ -99,8 +100,10 @@ def test_evaluate_and_predict_note_a_log_far_outside_the_training_positions(logs
     far = "far outside the positions the model was trained on"
     r = cascgp("evaluate", "--model", "np.npz", "--data", "test.csv", cwd=logs)
     assert r.returncode == 0 and far not in r.stderr and "in-sample" not in r.stderr, r.stderr  # no note
-    r = cascgp("evaluate", "--model", "np.npz", "--data", "train.csv", cwd=logs)  # 60 of its 400 rows were fitted
-    assert r.returncode == 0 and "note: 15% of the rows are the model's training rows" in r.stderr, r.stderr
+    r = cascgp("evaluate", "--model", "np.npz", "--data", "train.csv", "--json", "in.json", cwd=logs)
+    assert r.returncode == 0 and "note: 15% of the rows are the model's training rows" in r.stderr, r.stderr  # 60/400
+    notes = json.loads((logs / "in.json").read_text())["notes"]  # the scores' file keeps what was noted
+    assert len(notes) == 1 and notes[0].startswith("15% of the rows are the model's training rows")
     for command, out in (("evaluate", ()), ("predict", ("--out", "pred.csv"))):
         r = cascgp(command, "--model", "np.npz", "--data", "test_deg.csv", *out, cwd=logs)
         assert r.returncode == 0, r.stderr

@@ -138,6 +138,7 @@ def test_fit_evaluate_predict_commands(robot: Path) -> None:
     assert np.all(sp < nominal), (sp, nominal)  # learning the payload and friction helps on every joint ...
     assert sp.mean() < 0.5 * nominal.mean(), (sp, nominal)  # ... and by a wide margin overall
     assert scores["data"]["n_scored"] == 600 and scores["model"]["name"] == "sp-inward"
+    assert scores["notes"] == []  # a held-out log in the training log's units: nothing noted
     assert scores["command"][:2] == ["cascgp", "evaluate"] and scores["cascgp_version"]
     assert "mean" in ev.stdout.splitlines()[-1]
 

@@ -140,9 +140,10 @@ def _limits_note(prog: str, rbd: Any, data: Any) -> None:
                     "(m for a prismatic joint), 0 at the URDF's zero")
 
 
-def _coverage_note(prog: str, model: Any, data: Any) -> None:
+def _coverage_note(prog: str, model: Any, data: Any) -> str | None:
     """One note naming the joints with at least 5 % of the rows far outside the positions the model was trained on:
-    more than the training range's width beyond it (ordinary extrapolation near the range is not noted)."""
+    more than the training range's width beyond it (ordinary extrapolation near the range is not noted); returns
+    it (``None``: no note)."""
     from cascgp.models.coverage import fraction_outside, training_position_range
 
     out = fraction_outside(model, data.q, margin=1.0)
@@ -151,19 +152,26 @@ def _coverage_note(prog: str, model: Any, data: Any) -> None:
     if found:
         fades = ("it gives the rigid-body torque plus the training data's mean residual" if model.rbd is not None
                  else "it gives each joint's mean torque of the training log")
-        _note(prog, f"note: rows far outside the positions the model was trained on (more than the range's width "
-                    f"beyond it): {', '.join(found)}; the model knows nothing there ({fades}). A log in another unit, "
-                    "or in another range of turns of a continuous joint, than the training log?")
+        msg = (f"rows far outside the positions the model was trained on (more than the range's width beyond it): "
+               f"{', '.join(found)}; the model knows nothing there ({fades}). A log in another unit, or in another "
+               "range of turns of a continuous joint, than the training log?")
+        _note(prog, f"note: {msg}")
+        return msg
+    return None
 
 
-def _in_sample_note(prog: str, model: Any, data: Any) -> None:
-    """A note when at least 5 % of a test log's rows are the model's training rows (their positions bit for bit)."""
+def _in_sample_note(prog: str, model: Any, data: Any) -> str | None:
+    """A note when at least 5 % of a test log's rows are the model's training rows (their positions bit for bit);
+    returns it (``None``: no note)."""
     from cascgp.models.coverage import fraction_in_training
 
     share = fraction_in_training(model, data.q)
     if share >= 0.05:
-        _note(prog, f"note: {share:.0%} of the rows are the model's training rows (the same positions, bit for bit): "
-                    "scores on them are in-sample, not a test; evaluate on a log the model was not fitted to")
+        msg = (f"{share:.0%} of the rows are the model's training rows (the same positions, bit for bit): scores on "
+               "them are in-sample, not a test; evaluate on a log the model was not fitted to")
+        _note(prog, f"note: {msg}")
+        return msg
+    return None
 
 
 def _few_rows_note(prog: str, model: Any, data: Any, thinned: bool) -> None:
@@ -364,8 +372,7 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         if rows.sum() < 2:
             raise _Fail(f"{a.data}: fewer than 2 rows have the {2 * model.df_delta:g} s of history the -df model "
                         "needs")
-    _coverage_note(prog, model, data)
-    _in_sample_note(prog, model, data)
+    notes = [n for n in (_coverage_note(prog, model, data), _in_sample_note(prog, model, data)) if n]
     tau = data.tau[rows]
     scores = {model.name: nrmse(mean[rows], tau)}
     if model.rbd is not None:
@@ -397,6 +404,7 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
                       "nominal": None if nominal is None else nominal.tolist()},
             "mean_nrmse": {"model": float(scores[model.name].mean()),
                            "nominal": None if nominal is None else float(nominal.mean())},
+            "notes": notes,  # what the command noted about the log (in-sample rows, positions far outside)
         })
         _note(prog, f"wrote {a.json}")
     return 0
