@@ -117,24 +117,19 @@ def _log_rate(data: Any) -> str:
 def _limits_note(prog: str, rbd: Any, data: Any) -> None:
     """One note naming the joints with rows outside the URDF's position limits by more than a tenth of their span
     (positions in degrees, or another zero, say); joints without limits (continuous) are not checked."""
-    lo, hi = rbd.position_limits.T
-    found = []
-    for j in range(rbd.dof):
-        if np.isfinite(lo[j]) and np.isfinite(hi[j]) and hi[j] > lo[j]:
-            pad = 0.1 * (hi[j] - lo[j])
-            out = float(((data.q[:, j] < lo[j] - pad) | (data.q[:, j] > hi[j] + pad)).mean())
-            if out > 0:
-                found.append(f"q{j + 1} {out:.0%} ([{lo[j]:.4g}, {hi[j]:.4g}])")
     m = rbd.pin_model
+    checks = [(f"q{j + 1}", data.q[:, j], lo, hi) for j, (lo, hi) in enumerate(rbd.position_limits)]
     for name, (joint, mult, offset) in rbd.coupled.items():  # a mimic joint moved by its joint: its own limits too
         i = m.idx_qs[m.getJointId(name)]
-        lo_c, hi_c = float(m.lowerPositionLimit[i]), float(m.upperPositionLimit[i])
-        if np.isfinite(lo_c) and np.isfinite(hi_c) and hi_c > lo_c:
-            x = mult * data.q[:, rbd.joint_names.index(joint)] + offset
-            pad = 0.1 * (hi_c - lo_c)
-            out = float(((x < lo_c - pad) | (x > hi_c + pad)).mean())
+        checks.append((f"{name} (moving with {joint})", mult * data.q[:, rbd.joint_names.index(joint)] + offset,
+                       m.lowerPositionLimit[i], m.upperPositionLimit[i]))
+    found = []
+    for label, x, lo, hi in checks:
+        if np.isfinite(lo) and np.isfinite(hi) and hi > lo:
+            pad = 0.1 * (hi - lo)
+            out = float(((x < lo - pad) | (x > hi + pad)).mean())
             if out > 0:
-                found.append(f"{name} (moving with {joint}) {out:.0%} ([{lo_c:.4g}, {hi_c:.4g}])")
+                found.append(f"{label} {out:.0%} ([{lo:.4g}, {hi:.4g}])")
     if found:
         _note(prog, f"note: rows outside the URDF's position limits: {', '.join(found)}; positions must be in rad "
                     "(m for a prismatic joint), 0 at the URDF's zero")
