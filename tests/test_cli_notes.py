@@ -91,6 +91,12 @@ def test_fit_notes_degrees_and_a_rate_above_the_logs(logs: Path) -> None:
     r = cascgp("fit", "--data", "train.csv", "--urdf", "robot.urdf", "--model", "sp-inward", "--out", "rad.npz",
                "--max-samples", "60", "--restarts", "1", cwd=logs)
     assert r.returncode == 0 and "position limits" not in r.stderr and "note: --rate" not in r.stderr, r.stderr
+    r = cascgp("evaluate", "--model", "rad.npz", "--data", "test_deg.csv", "--json", "deg.json", cwd=logs)
+    assert r.returncode == 0, r.stderr  # a test log in degrees against a model fitted in radians: both notes
+    notes = json.loads((logs / "deg.json").read_text())["notes"]
+    assert [n.split(":")[0] for n in notes] == ["rows outside the URDF's position limits",
+                                                "rows far outside the positions the model was trained on (more than "
+                                                "the range's width beyond it)"]
 
 
 def test_evaluate_and_predict_note_a_log_far_outside_the_training_positions(logs: Path) -> None:

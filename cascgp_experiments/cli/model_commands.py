@@ -114,9 +114,12 @@ def _log_rate(data: Any) -> str:
     return f"about {1.0 / np.median(steps):.4g} Hz" if steps.size and np.median(steps) > 0 else "unknown"
 
 
-def _limits_note(prog: str, rbd: Any, data: Any) -> None:
+def _limits_note(prog: str, rbd: Any, data: Any) -> str | None:
     """One note naming the joints with rows outside the URDF's position limits by more than a tenth of their span
-    (positions in degrees, or another zero, say); joints without limits (continuous) are not checked."""
+    (positions in degrees, or another zero, say); joints without limits (continuous) are not checked. Returns it
+    (``None``: no note, or a rigid-body model without URDF limits)."""
+    if not hasattr(rbd, "position_limits"):  # a model's own inverse-dynamics object, not a RigidBodyModel
+        return None
     m = rbd.pin_model
     checks = [(f"q{j + 1}", data.q[:, j], lo, hi) for j, (lo, hi) in enumerate(rbd.position_limits)]
     for name, (joint, mult, offset) in rbd.coupled.items():  # a mimic joint moved by its joint: its own limits too
@@ -131,8 +134,11 @@ def _limits_note(prog: str, rbd: Any, data: Any) -> None:
             if out > 0:
                 found.append(f"{label} {out:.0%} ([{lo:.4g}, {hi:.4g}])")
     if found:
-        _note(prog, f"note: rows outside the URDF's position limits: {', '.join(found)}; positions must be in rad "
-                    "(m for a prismatic joint), 0 at the URDF's zero")
+        msg = (f"rows outside the URDF's position limits: {', '.join(found)}; positions must be in rad (m for a "
+               "prismatic joint), 0 at the URDF's zero")
+        _note(prog, f"note: {msg}")
+        return msg
+    return None
 
 
 def _coverage_note(prog: str, model: Any, data: Any) -> str | None:
@@ -367,7 +373,8 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         if rows.sum() < 2:
             raise _Fail(f"{a.data}: fewer than 2 rows have the {2 * model.df_delta:g} s of history the -df model "
                         "needs")
-    notes = [n for n in (_coverage_note(prog, model, data), _in_sample_note(prog, model, data)) if n]
+    notes = [n for n in (_limits_note(prog, model.rbd, data) if model.rbd is not None else None,
+                         _coverage_note(prog, model, data), _in_sample_note(prog, model, data)) if n]
     tau = data.tau[rows]
     scores = {model.name: nrmse(mean[rows], tau)}
     if model.rbd is not None:
@@ -429,6 +436,8 @@ def _predict(a: argparse.Namespace, prog: str) -> int:
     _describe(prog, data, a.data)
     _check_dof(model, data, a.data)
     mean, var = model.predict_data(data)
+    if model.rbd is not None:
+        _limits_note(prog, model.rbd, data)
     _coverage_note(prog, model, data)
     if model.feature_kind == "df":
         short = int((~history_from_data(data, model.df_delta)[1]).sum())
