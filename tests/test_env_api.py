@@ -239,6 +239,33 @@ def test_unstable_simulation_truncates_without_nan(pour_env):
     assert trunc and info["unstable"] and np.all(np.isfinite(obs)) and np.isfinite(r)
 
 
+@pytest.mark.parametrize("env_id", ["JacoPour-v0", "JacoPayload-v0"])
+def test_an_unstable_step_reports_the_last_finite_state(env_id):
+    """The unstable step returns the last finite observation with that step's time and, for the pour, its tracking
+    error, marble counts and tracking cost as the reward (a reward of 0 there paid a learner to go unstable)."""
+    env = gym.make(env_id, **({"n_marbles": 5} if env_id == "JacoPour-v0" else {}))
+    try:
+        env.reset(seed=0)
+        for _ in range(3):
+            last_obs, last_r, _, _, last = env.step(np.full(6, 2.0))
+        u = env.unwrapped
+        u.data.qvel[u.arm_dof_adr] = 1e6
+        for _ in range(2):  # the unstable step, and a step after it
+            obs, r, term, trunc, info = env.step(np.zeros(6))
+            assert trunc and not term and info["unstable"]
+            np.testing.assert_array_equal(obs, last_obs)
+            assert info["time"] == last["time"] == obs[jaco_env.OBS_TIME]
+            if env_id == "JacoPour-v0":
+                assert info["tracking_error"] == last["tracking_error"] > 0
+                assert r == info["reward_tracking"] == last["reward_tracking"] < 0 and info["reward_pour"] == 0
+                for k in ("marbles_in_jar", "marbles_in_bottle", "marbles_spilled"):
+                    assert info[k] == last[k]
+            else:
+                assert r == 0.0 and np.isnan(info["qacc"]).all()
+    finally:
+        env.close()
+
+
 def test_velocity_mode_tracks_command():
     env = gym.make("JacoPayload-v0", control_mode="velocity", sensor_noise=None)
     env.reset(seed=0)

@@ -62,7 +62,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
     ## Episode End
     Never terminates; truncated by the time limit (``max_episode_steps=2400``, 60 s at 40 Hz;
     pass ``max_episode_steps`` to ``gym.make`` for longer runs) or on an unstable simulation
-    (``info["unstable"] = True``).
+    (``info["unstable"] = True``; the last finite observation and its time are returned, ``info["qacc"]`` is NaN).
 
     ## Arguments
     ``gym.make("JacoPayload-v0", control_mode="torque", control_freq=40.0,
@@ -147,11 +147,14 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
         if self._last_obs is None:
             raise error.ResetNeeded("Cannot call `env.step()` before calling `env.reset()`")
         if not self._unstable:
-            self._step_count += 1
             if self._simulate(a):
-                self._unstable = True
+                self._unstable = True  # the last finite observation and its time; its qacc is not known: NaN
             else:
+                self._step_count += 1
                 self._last_obs = self._get_obs()
         if self.render_mode == "human":
             self.render()
-        return self._last_obs.copy(), 0.0, False, self._unstable, self._info()
+        info = self._info()
+        if self._unstable:
+            info["qacc"] = np.full(6, np.nan)
+        return self._last_obs.copy(), 0.0, False, self._unstable, info

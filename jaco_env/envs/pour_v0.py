@@ -134,7 +134,10 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
       and keeps simulating (the final pose is held by the reference); call ``reset``.
     - Truncation: the registered time limit (``max_episode_steps=2400``, 60 s at 40 Hz), or an
       unstable simulation (NaN, joint speed > 50 rad/s, marble speed > 20 m/s or a MuJoCo
-      warning): then ``info["unstable"] = True`` and the last finite observation is returned.
+      warning): then ``info["unstable"] = True`` and the last finite observation is returned, with its
+      time, tracking error and marble counts in ``info``, and its tracking cost as the step's reward.
+      In torque mode, random torques spin the light wrist joints past 50 rad/s within a few seconds
+      (nothing limits a joint's speed in the simulation).
 
     ## Info
     ``time, payload_mass, marbles_in_jar, marbles_spilled, marbles_in_bottle, n_marbles,
@@ -334,7 +337,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         return self._start_episode()
 
     def _get_reset_info(self) -> dict[str, Any]:
-        return self._info({"reward_tracking": 0.0, "reward_pour": 0.0}, tracking_error=0.0)
+        self._last_err, self._last_counts = 0.0, self.marble_counts()  # what an unstable first step reports
+        return self._info({"reward_tracking": 0.0, "reward_pour": 0.0}, 0.0, self._last_counts)
 
     def _get_obs(self) -> np.ndarray:
         return np.concatenate([self._measure(), self.task.jar_pos])
@@ -367,19 +371,20 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         if self._last_obs is None:
             raise error.ResetNeeded("Cannot call `env.step()` before calling `env.reset()`")
         self._warn_if_terminated()
-        no_reward = {"reward_tracking": 0.0, "reward_pour": 0.0}
-        if self._unstable:
-            return self._last_obs.copy(), 0.0, False, True, self._info(no_reward, 0.0)
-        unstable = self._simulate(a)
-        self._step_count += 1
-        if unstable:
+        if self._unstable or self._simulate(a):
+            # The last finite observation, its time and marble counts, charged its tracking cost (a step of the
+            # episode like the others: a reward of 0 here paid a learner to make the simulation unstable)
             self._unstable = True
-            return self._last_obs.copy(), 0.0, False, True, self._info(no_reward, 0.0)
+            r_track = -self._tracking_cost_weight * self.control_dt * self._last_err
+            info = self._info({"reward_tracking": r_track, "reward_pour": 0.0}, self._last_err, self._last_counts)
+            return self._last_obs.copy(), r_track, False, True, info
+        self._step_count += 1
         e = self.task.reference_position(self.time) - self._q_arm
         err = math.hypot(*e)  # not e.dot(e): BLAS rounds differently from one CPU to another (see _place_marbles)
         counts = self.marble_counts()
         reward, reward_info = self._get_rew(err, counts[0])
         self._in_jar = counts[0]
+        self._last_err, self._last_counts = err, counts
         obs = self._get_obs()
         self._last_obs = obs
         terminated = self.time >= self.task.duration - 1e-9
