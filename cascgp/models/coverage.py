@@ -29,10 +29,10 @@ def training_positions(model: Any) -> np.ndarray:
     """
     model._require_fitted()
     out = np.full((model.n_train, model.dof), np.nan)
+    inputs = {k: model.banks[k].training_data()[0] for k in {k for k, _ in model.where}}  # each bank copied once
     for j, (k, b) in enumerate(model.where):
-        X = model.banks[k].training_data()[0][b]
         for i, s in enumerate(model.specs[j][0]):
-            out[:, s] = X[:, 3 * i]
+            out[:, s] = inputs[k][b][:, 3 * i]
     return out
 
 

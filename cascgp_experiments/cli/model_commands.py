@@ -148,9 +148,10 @@ def _coverage_note(prog: str, model: Any, data: Any) -> str | None:
     from cascgp.models.coverage import fraction_outside, training_position_range
 
     out = fraction_outside(model, data.q, margin=1.0)
-    r = training_position_range(model)
-    found = [f"q{j + 1} {out[j]:.0%} ([{r[j, 0]:.4g}, {r[j, 1]:.4g}])" for j in np.flatnonzero(out >= 0.05)]
-    if found:
+    far = np.flatnonzero(out >= 0.05)
+    if far.size:
+        r = training_position_range(model)
+        found = [f"q{j + 1} {out[j]:.0%} ([{r[j, 0]:.4g}, {r[j, 1]:.4g}])" for j in far]
         fades = ("it gives the rigid-body torque plus the training data's mean residual" if model.rbd is not None
                  else "it gives each joint's mean torque of the training log")
         msg = (f"rows far outside the positions the model was trained on (more than the range's width beyond it): "
