@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from jaco_env import robot, scene
+from jaco_env.checks import is_real_number, real_array
 
 #: Home pose target: bottle mouth position (m) and approach axis; bottle upright.
 HOME_MOUTH = np.array([0.45, 0.0, 0.40])
@@ -45,9 +46,13 @@ def kinematic_model():
 
 
 def bottle_pose(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Forward kinematics: (mouth position (3,), bottle rotation matrix (3, 3)) at joint angles q."""
+    """Forward kinematics: (mouth position (3,), bottle rotation matrix (3, 3)) at joint angles q.
+
+    ``q`` must be 6 finite joint angles (rad): ``ValueError``/``TypeError`` naming it otherwise.
+    """
     import mujoco
 
+    q = real_array(q, (_N,), "q")
     m = kinematic_model()
     d = mujoco.MjData(m)
     d.qpos[:_N] = q
@@ -59,9 +64,18 @@ def target_rotation(approach: np.ndarray, tilt: float) -> np.ndarray:
     """Bottle frame for a horizontal approach axis and a tilt (rad) from upright about it.
 
     Bottle frame: z = bottle axis (towards the mouth), x = minus the hand approach axis.
+    ``approach`` must be a finite, nonzero, horizontal 3-vector and ``tilt`` a finite angle: ``ValueError``/
+    ``TypeError`` naming the argument otherwise.
     """
-    a = np.asarray(approach, float)
-    a = a / math.hypot(*a)
+    a = real_array(approach, (3,), "approach")
+    if not is_real_number(tilt):
+        raise TypeError(f"tilt must be a real number (rad), got {type(tilt).__name__} {tilt!r}")
+    if not math.isfinite(tilt):
+        raise ValueError(f"tilt must be finite (rad), got {tilt!r}")
+    norm = math.hypot(*a)
+    if norm == 0.0 or abs(a[2]) > 1e-12 * norm:
+        raise ValueError(f"approach must be a nonzero horizontal vector (z = 0), got {a.tolist()}")
+    a = a / norm
     up = np.array([0.0, 0.0, 1.0])
     side = np.cross(a, up)
     z = np.cos(tilt) * up + np.sin(tilt) * side
@@ -75,10 +89,14 @@ def solve_ik(p_target: np.ndarray, R_target: np.ndarray, q0: np.ndarray, *, iter
     """Damped-least-squares IK for the mouth position and bottle orientation.
 
     Returns (q, residual) with residual = |position error| + |orientation error| at the end.
-    Joints 2 and 3 are kept inside their ranges.
+    Joints 2 and 3 are kept inside their ranges. Every array must be finite and of its shape (``p_target``
+    (3,), ``R_target`` (3, 3), ``q0`` (6,)): ``ValueError``/``TypeError`` naming it otherwise.
     """
     import mujoco
 
+    p_target = real_array(p_target, (3,), "p_target")
+    R_target = real_array(R_target, (3, 3), "R_target")
+    q0 = real_array(q0, (_N,), "q0")
     m = kinematic_model()
     d = mujoco.MjData(m)
     sid = m.site(scene.MOUTH_SITE).id

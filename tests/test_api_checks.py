@@ -9,7 +9,7 @@ import pytest
 
 import jaco_env  # noqa: F401  (registers the envs)
 from cascgp.learning import Feedback, RetrainConfig, attempt_plan, make_controller, run_controller
-from jaco_env.kinematics import home_pose
+from jaco_env.kinematics import HOME_APPROACH, HOME_MOUTH, bottle_pose, home_pose, solve_ik, target_rotation
 from jaco_env.oracle import OracleController, PDController
 from jaco_env.robot import TORQUE_LIMITS
 from jaco_env.tasks import DEFAULT_TASKS
@@ -25,6 +25,32 @@ def test_home_pose_is_a_new_array_each_call():
         np.testing.assert_allclose(env.unwrapped.arm_state()[0], home_pose())
     finally:
         env.close()
+
+
+@pytest.mark.parametrize("call, exc, match", [
+    (lambda: bottle_pose([0.0] * 5), ValueError, r"q must have shape \(6,\)"),
+    (lambda: bottle_pose([np.nan] + [0.0] * 5), ValueError, r"q must be finite; entries \[0\]"),
+    (lambda: bottle_pose(["a"] * 6), TypeError, "q must be an array of real numbers"),
+    (lambda: target_rotation([0.0, 0.0, 1.0], 0.0), ValueError, "approach must be a nonzero horizontal vector"),
+    (lambda: target_rotation([0.0, 0.0, 0.0], 0.0), ValueError, "approach must be a nonzero horizontal vector"),
+    (lambda: target_rotation([0.0, 1.0], 0.0), ValueError, r"approach must have shape \(3,\)"),
+    (lambda: target_rotation(HOME_APPROACH, np.inf), ValueError, "tilt must be finite"),
+    (lambda: target_rotation(HOME_APPROACH, "0.1"), TypeError, "tilt must be a real number"),
+    (lambda: solve_ik(HOME_MOUTH[:2], np.eye(3), home_pose()), ValueError, r"p_target must have shape \(3,\)"),
+    (lambda: solve_ik(HOME_MOUTH, np.full((3, 3), np.nan), home_pose()), ValueError, "R_target must be finite"),
+    (lambda: solve_ik(HOME_MOUTH, np.eye(3), home_pose()[:5]), ValueError, r"q0 must have shape \(6,\)"),
+])
+def test_the_kinematics_helpers_check_their_arguments(call, exc, match):
+    with pytest.raises(exc, match=match):
+        call()
+
+
+def test_the_kinematics_helpers_agree_with_each_other():
+    # the home pose's IK solution puts the mouth at its target with the target's orientation (forward kinematics)
+    p, R = bottle_pose(home_pose())
+    np.testing.assert_allclose(p, HOME_MOUTH, atol=1e-6)
+    np.testing.assert_allclose(R, target_rotation(HOME_APPROACH, 0.0), atol=1e-6)
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
 
 
 def test_payload_start_pose_within_the_joint_ranges():
