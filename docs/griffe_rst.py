@@ -9,9 +9,15 @@ Markdown, so this extension rewrites that markup before the docstrings are parse
   code otherwise); ``:math:`` becomes ``$...$`` and ``.. math::`` a ``$$`` block (pymdownx.arithmatex);
 - simple tables become pipe tables, underlined titles bold lines, ``Foo::`` blocks fenced code;
 - the body of a bullet item is indented by four columns (Python-Markdown) instead of two (reST);
-- ``[1]_`` / ``.. [1]`` become Markdown footnotes.
+- ``[1]_`` / ``.. [1]`` become Markdown footnotes;
+- a path of a page of the site (``docs/<page>.md``) becomes a link to it;
+- an ``Example:`` section becomes a bold title over its body, and doctest lines (``>>>``) fenced ``pycon`` blocks;
+- an ``a, b: text`` item of ``Args:`` or ``Attributes:`` becomes one item per name;
+- the ``#:`` comments above an attribute become its docstring, and a submodule's re-export of a name defined in
+  another of the packages' modules is not rendered again (the name is documented where it is defined).
 
-``quiet`` (an option in ``mkdocs.yml``) names objects whose docstrings griffe parses without warnings.
+Returns sections are read as one block of prose (``returns_multiple_items: false`` in ``mkdocs.yml``). ``quiet``
+(an option in ``mkdocs.yml``) names objects whose docstrings griffe parses without warnings.
 
 Loaded by ``mkdocs.yml`` (``plugins: mkdocstrings: handlers: python: options: extensions``); part of the docs
 build only, never imported by the packages.
@@ -115,9 +121,30 @@ def _block_end(lines: list[str], i: int, indent: int) -> int:
     return j
 
 
+_EXAMPLE_TITLE = re.compile(r"^(\s*)(Examples?):\s*$")
+
+
+def _open_examples(lines: list[str]) -> list[str]:
+    """An ``Example:`` title with its indented body as a bold line and the body at the title's indent (griffe's
+    Google parser reads ``Example:`` as plain text, and Markdown would read the indented body as one code block)."""
+    out: list[str] = []
+    i = 0
+    while i < len(lines):
+        m = _EXAMPLE_TITLE.match(lines[i])
+        end = _block_end(lines, i + 1, len(m[1])) if m else i + 1
+        if m and end > i + 1:
+            body = textwrap.dedent("\n".join(lines[i + 1:end])).splitlines()
+            out += ["", f"{m[1]}**{m[2]}:**", "", *(m[1] + b if b.strip() else "" for b in body)]
+            i = end
+            continue
+        out.append(lines[i])
+        i += 1
+    return out
+
+
 def convert_blocks(text: str) -> str:
-    """Tables, math blocks, literal blocks, underlined titles and footnote definitions of a docstring."""
-    lines = text.splitlines()
+    """Tables, math blocks, literal blocks, underlined titles, footnote definitions and examples of a docstring."""
+    lines = _open_examples(text.splitlines())
     out: list[str] = []
     i = 0
     while i < len(lines):
@@ -143,6 +170,19 @@ def convert_blocks(text: str) -> str:
             out.append(f"{m[1]}[^{m[2]}]: {m[3]}")
             i += 1
             continue
+        if line.lstrip().startswith(">>>"):  # a doctest block: to the next blank line or a smaller indent
+            ind = _indent(line)
+            end = i + 1
+            while end < len(lines) and lines[end].strip() and _indent(lines[end]) >= ind:
+                end += 1
+            body = [b[ind:] for b in lines[i:end]]
+            # fenced at the indent of the text it follows (an indented fence under a heading would be a code block
+            # holding the fence)
+            above = next((_indent(b) for b in reversed(out) if b.strip()), 0)
+            pad = " " * min(ind, above)
+            out += ["", pad + "```pycon", *(pad + b for b in body), pad + "```", ""]
+            i = end
+            continue
         m = _LITERAL.match(line)
         if m and not line.lstrip().startswith(".."):
             pad = m[1]
@@ -158,6 +198,43 @@ def convert_blocks(text: str) -> str:
             out += ["", " " * _indent(line) + f"**{line.strip()}**", ""]
             i += 2
             continue
+        out.append(line)
+        i += 1
+    return "\n".join(out)
+
+
+_ITEM_SECTION = re.compile(r"^(\s*)(Args|Arguments|Parameters|Attributes|Keyword Args|Other Parameters):\s*$")
+_GROUPED_ITEM = re.compile(r"^(\s*)([A-Za-z_]\w*(?:\s*,\s*[A-Za-z_]\w*)+)((?:\s*\([^()]*\))?:(?:\s.*)?)$")
+
+
+def split_grouped_items(text: str) -> str:
+    """One item per name in ``Args:`` and ``Attributes:`` sections: ``a, b: text`` becomes ``a: text`` and
+    ``b: text`` (with the item's continuation lines), which griffe's Google parser then matches to the signature
+    (it reads ``a, b`` as one name)."""
+    lines = text.splitlines()
+    out: list[str] = []
+    section: int | None = None  # the indent of the open section's title
+    item = -1  # the indent of its items (its first line's)
+    i = 0
+    while i < len(lines):
+        line = lines[i]
+        if line.strip():
+            m = _ITEM_SECTION.match(line)
+            if m:
+                section, item = len(m[1]), -1
+            elif section is not None and _indent(line) <= section:
+                section = None
+            elif section is not None and item < 0:
+                item = _indent(line)
+            g = _GROUPED_ITEM.match(line) if section is not None and _indent(line) == item else None
+            if g:
+                end = i + 1
+                while end < len(lines) and lines[end].strip() and _indent(lines[end]) > len(g[1]):
+                    end += 1
+                for name in (n.strip() for n in g[2].split(",")):
+                    out += [f"{g[1]}{name}{g[3]}", *lines[i + 1:end]]
+                i = end
+                continue
         out.append(line)
         i += 1
     return "\n".join(out)
@@ -226,8 +303,18 @@ def _resolver(obj: griffe.Object) -> Any:
     return resolve
 
 
+_DOC_PATH = re.compile(r"(``)?(?<![\w/])docs/([\w/.-]+?)\.md\b(?(1)``)")
+
+
+def _doc_link(m: re.Match[str]) -> str:
+    """A ``docs/<page>.md`` path as a link to that page of the site, relative to an API page (``api/<name>/``)."""
+    page = m[2].removesuffix("index").rstrip("/")
+    url = "../../" + (page + "/" if page else "")
+    return f"[`docs/{m[2]}.md`]({url})"
+
+
 def convert_inline(text: str, obj: griffe.Object) -> str:
-    """Roles, math roles and footnote references of a docstring."""
+    """Roles, math roles, footnote references and paths of the documentation's pages of a docstring."""
     resolve = _resolver(obj)
 
     def role(m: re.Match[str]) -> str:
@@ -245,9 +332,30 @@ def convert_inline(text: str, obj: griffe.Object) -> str:
         code = f"<code>{title}</code>"
         return f'<autoref identifier="{path}" optional>{code}</autoref>' if path else f"`{title}`"
 
+    text = _DOC_PATH.sub(_doc_link, text)
     text = _MATH_ROLE.sub(lambda m: f"${m[1]}$", text)
     text = _ROLE.sub(role, text)
     return re.sub(r"\[(\d+)\]_", r"[^\1]", text)
+
+
+def _docstring_from_comments(attr: griffe.Object) -> None:
+    """The ``#:`` comment lines right above a module or class attribute (Sphinx's convention for documenting one)
+    as its docstring; griffe reads only a string literal after the assignment."""
+    path = attr.filepath
+    if not attr.lineno or isinstance(path, list) or path not in attr.lines_collection:
+        return
+    lines = attr.lines_collection[path]
+    k = attr.lineno - 2  # the line above the assignment (lineno counts from 1)
+    comments: list[str] = []
+    while k >= 0 and lines[k].lstrip().startswith("#:"):
+        comments.insert(0, lines[k].lstrip()[2:].removeprefix(" "))
+        k -= 1
+    if comments:
+        module_doc = attr.module.docstring
+        attr.docstring = griffe.Docstring(
+            "\n".join(comments), lineno=k + 2, endlineno=attr.lineno - 1, parent=attr,
+            parser=module_doc.parser if module_doc else None,
+            parser_options=module_doc.parser_options if module_doc else None)
 
 
 class RstToMarkdown(griffe.Extension):
@@ -270,9 +378,18 @@ class RstToMarkdown(griffe.Extension):
             if id(obj) in seen:
                 continue
             seen.add(id(obj))
+            if obj.is_attribute and obj.docstring is None:
+                _docstring_from_comments(obj)
             if obj.docstring is not None:
-                obj.docstring.value = convert_inline(indent_list_items(convert_blocks(obj.docstring.value)), obj)
+                text = split_grouped_items(convert_blocks(obj.docstring.value))
+                obj.docstring.value = convert_inline(indent_list_items(text), obj)
                 if obj.path in self.quiet:
                     options = {**obj.docstring.parser_options, "warnings": False}  # a copy: the loader shares one dict
                     obj.docstring.parser_options = cast(Any, options)
+            if obj.is_module and obj.parent is not None:
+                # a submodule's re-export of a name defined in another of our modules is documented there once
+                # (an explicit ``members:`` list in a page still renders it)
+                for member in obj.members.values():
+                    if member.is_alias and member.target_path.split(".", 1)[0] in _TOP_PACKAGES:
+                        member.public = False
             stack += [m for m in obj.members.values() if not m.is_alias]  # type: ignore[misc]

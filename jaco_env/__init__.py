@@ -88,7 +88,8 @@ __all__ = ["__version__", "NOMINAL_URDF", "nominal_urdf", "robot", "SensorNoise"
            "DEFAULT_KD", "split_obs", "OBS_Q", "OBS_QD", "OBS_TAU", "OBS_TIME", "OBS_JAR", "MEASUREMENT_DIM",
            "POUR_OBS_DIM"]
 
-#: 60 s at the default 40 Hz control rate.
+#: The registered envs' time limit (Gymnasium's ``max_episode_steps``) in control steps, whatever ``control_freq``:
+#: 60 s at the default 40 Hz.
 MAX_EPISODE_STEPS = 2400
 
 for _id, _entry in (("JacoPour-v0", "jaco_env.envs.pour_v0:JacoPourEnv"),

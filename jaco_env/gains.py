@@ -15,8 +15,12 @@ from __future__ import annotations
 
 from jaco_env.robot import DESIGN_INERTIA
 
-#: Closed-loop natural frequency (rad/s) and damping ratio of the recommended PD.
+#: Closed-loop natural frequency (rad/s) of the recommended PD.
 NATURAL_FREQUENCY = 10.0
+#: Closed-loop damping ratio of the recommended PD.
 DAMPING_RATIO = 0.7
+#: Recommended proportional gains (N m/rad), one per joint: ``DESIGN_INERTIA * NATURAL_FREQUENCY**2``.
 DEFAULT_KP = NATURAL_FREQUENCY**2 * DESIGN_INERTIA
+#: Recommended derivative gains (N m s/rad), one per joint: ``2 * DAMPING_RATIO * NATURAL_FREQUENCY *
+#: DESIGN_INERTIA``.
 DEFAULT_KD = 2.0 * DAMPING_RATIO * NATURAL_FREQUENCY * DESIGN_INERTIA

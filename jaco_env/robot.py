@@ -85,25 +85,34 @@ from numpy.typing import ArrayLike
 
 from jaco_env import link_inertials as link_inertials_module
 
+#: Number of arm joints (the fingers are welded).
 N_JOINTS = 6
+#: Names of the arm joints in the MJCF, base to wrist.
 JOINT_NAMES: tuple[str, ...] = tuple(f"joint_{i}" for i in range(1, N_JOINTS + 1))
+#: Peak joint torques (N m), the actuators' limits (datasheet; module docstring): the torque action's bounds.
 TORQUE_LIMITS = np.array([30.5, 30.5, 30.5, 6.8, 6.8, 6.8])
+#: Maximum joint speeds (rad/s): 36 deg/s for joints 1-3, 48 deg/s for joints 4-6 (datasheet).
 VELOCITY_LIMITS = np.deg2rad([36.0, 36.0, 36.0, 48.0, 48.0, 48.0])
 
+#: Gear ratios of the harmonic drives (module docstring's table).
 GEAR_RATIO = np.array([160.0, 160.0, 160.0, 110.0, 110.0, 110.0])
+#: Rotor and wave-generator inertia on the motor side (kg m^2), an estimate (module docstring's table).
 MOTOR_INERTIA = np.array([1.3e-5, 1.3e-5, 1.3e-5, 4.0e-6, 4.0e-6, 4.0e-6])
 #: Reflected rotor inertia (kg m^2), open loop: MOTOR_INERTIA * GEAR_RATIO**2.
 ROTOR_INERTIA = MOTOR_INERTIA * GEAR_RATIO**2
 #: Gear friction referred to the output, open loop: dry (N m) and viscous (N m s/rad).
 GEAR_FRICTION = 0.05 * TORQUE_LIMITS
+#: Gear viscous friction referred to the output, open loop (N m s/rad).
 GEAR_DAMPING = np.array([0.5, 0.5, 0.5, 0.1, 0.1, 0.1])
 #: Proportional gain of the firmware torque loop on the torque-sensor error (dimensionless).
 TORQUE_LOOP_GAIN = 4.0
 #: Time constant of the closed torque loop (s): about 30 Hz bandwidth.
 TORQUE_LOOP_TAU = 0.005
-#: Residual joint properties seen by the links with the torque loop closed (module docstring).
+#: Residual rotor inertia seen by the links with the torque loop closed (kg m^2; module docstring).
 ARMATURE = ROTOR_INERTIA / (1.0 + TORQUE_LOOP_GAIN)
+#: Residual dry friction seen by the links with the torque loop closed (N m).
 FRICTIONLOSS = GEAR_FRICTION / (1.0 + TORQUE_LOOP_GAIN)
+#: Residual viscous friction seen by the links with the torque loop closed (N m s/rad).
 DAMPING = GEAR_DAMPING / (1.0 + TORQUE_LOOP_GAIN)
 #: Diagonal of the links' joint-space inertia (kg m^2) at the home pose with a 1 kg payload in the
 #: hand (MuJoCo ``mj_fullM``), plus the residual armature: the inertia each joint's feedback loops

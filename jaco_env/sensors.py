@@ -28,12 +28,17 @@ from jaco_env.checks import is_real_number
 
 from jaco_env.robot import N_JOINTS
 
+#: Where an observation holds the measured joint positions (rad): ``obs[OBS_Q]``.
 OBS_Q = slice(0, N_JOINTS)
+#: Where an observation holds the measured joint velocities (rad/s).
 OBS_QD = slice(N_JOINTS, 2 * N_JOINTS)
+#: Where an observation holds the measured joint torques (N m).
 OBS_TAU = slice(2 * N_JOINTS, 3 * N_JOINTS)
+#: The index of the observation's time (s since the reset).
 OBS_TIME = 3 * N_JOINTS
 #: Length of the measured part ``[q, qd, tau, t]``: the whole ``JacoPayload-v0`` observation.
 MEASUREMENT_DIM = 3 * N_JOINTS + 1
+#: Where a ``JacoPour-v0`` observation holds the jar's position (m; bottom centre, world frame).
 OBS_JAR = slice(MEASUREMENT_DIM, MEASUREMENT_DIM + 3)
 #: Length of the ``JacoPour-v0`` observation (measurement + jar position).
 POUR_OBS_DIM = MEASUREMENT_DIM + 3

@@ -48,11 +48,17 @@ class CascadedGPModel:
     """One of the twelve variants (build with :func:`make_model`).
 
     Attributes:
-        name, dof, parametric (``"np"``/``"sp"``), structure, feature_kind (``"db"``/``"df"``),
-        rbd (SP only), gp_config, df_delta (s), train_on_predicted,
+        name: the variant's name, one of :data:`MODEL_NAMES` (``"sp-inward"``, ...).
+        dof: number of joints N.
+        parametric: ``"np"`` (the GPs model the torque) or ``"sp"`` (the residual to :attr:`rbd`).
+        structure: ``"standard"``, ``"inward"`` or ``"outward"``.
+        feature_kind: ``"db"`` (derivative-based inputs) or ``"df"`` (derivative-free: positions only).
+        rbd: the rigid-body mean function of an SP model (:class:`cascgp.rbd.RigidBodyModel`); ``None`` for NP.
+        gp_config: the :class:`cascgp.gp.GPFitConfig` of the fits.
+        df_delta: the history step of ``-df`` features (s).
+        train_on_predicted: cascades only: each joint trained on its neighbour's predicted torque (not measured).
         order: joints (0-based) in prediction order (inward: N-1 .. 0, else 0 .. N-1).
-        banks: the fitted :class:`cascgp.gp.GPBank` objects; ``where[j] = (bank, b)`` locates
-            joint j's GP.
+        banks: the fitted :class:`cascgp.gp.GPBank` objects; ``where[j] = (bank, b)`` locates joint j's GP.
     """
 
     def __init__(self, name: str, dof: int, rbd: Any = None, *, gp_config: Any = None,
