@@ -1,11 +1,13 @@
 """Loaders for the SARCOS inverse-dynamics data (7-DOF anthropomorphic arm).
 
-Two public formats (see ``../shared/data/sarcos/SOURCE.txt``):
+Two public formats:
 
-* GPML (``sarcos_inv.mat`` / ``sarcos_inv_test.mat``): one ``T x 28`` matrix; columns 1-7
-  positions, 8-14 velocities, 15-21 accelerations, 22-28 torques.  :func:`load_gpml`.
-* IAS (``ias_sarcos_data.mat``): ``X_train``/``X_test`` (``T x 21``: positions, velocities,
-  accelerations) and ``Y_train``/``Y_test`` (``T x 7`` torques).  :func:`load_ias`.
+* GPML (``sarcos_inv.mat`` / ``sarcos_inv_test.mat``, from the GPML book's data page,
+  http://www.gaussianprocess.org/gpml/data/): one ``T x 28`` matrix; columns 1-7 positions, 8-14 velocities,
+  15-21 accelerations, 22-28 torques.  :func:`load_gpml`.
+* IAS (``ias_sarcos_data.mat``, :data:`IAS_SOURCE`; sha256 ``8f6eec5f...de17f3``, 4,147,276 bytes):
+  ``X_train``/``X_test`` (``T x 21``: positions, velocities, accelerations) and ``Y_train``/``Y_test``
+  (``T x 7`` torques).  :func:`load_ias`.  The study's SARCOS part reads this file.
 
 Torque units: the IAS torques are one third of GPML's (for the one input row both files
 share, GPML = 3 x IAS).  Every loader takes ``torque_scale``, a factor applied to the file's
@@ -38,9 +40,11 @@ import numpy as np
 from .checks import check_positive
 from .data import DynamicsData
 
-__all__ = ["IAS_TO_GPML_TORQUE", "SARCOS_DOF", "SARCOS_RATE_HZ", "check_ias", "load_ias", "load_gpml",
+__all__ = ["IAS_SOURCE", "IAS_TO_GPML_TORQUE", "SARCOS_DOF", "SARCOS_RATE_HZ", "check_ias", "load_ias", "load_gpml",
            "duplicate_rows", "detect_segments"]
 
+#: Where to get the IAS SARCOS file (``ias_sarcos_data.mat``): a public repository that holds a copy.
+IAS_SOURCE = "https://github.com/hanyas/mimo (datasets/Sarcos/ias_sarcos_data.mat)"
 #: GPML torque = IAS torque * IAS_TO_GPML_TORQUE.
 IAS_TO_GPML_TORQUE = 3.0
 SARCOS_DOF = 7

@@ -155,29 +155,56 @@ def _have(rows: dict, names: list[str]) -> bool:
     return all(n in rows for n in names)
 
 
+def _present(rows: dict) -> np.ndarray:
+    """Per interval: True where the table has numbers (a grid point in the interval)."""
+    return np.isfinite(np.asarray(next(iter(rows.values())), float)).all(axis=0)
+
+
+def _per_interval(values, present: np.ndarray, fmt) -> str:
+    """``a/b/c`` over the three intervals, ``-`` for an interval without grid points."""
+    return "/".join(fmt(v) if ok else "-" for v, ok in zip(values, present))
+
+
+def _cells(won: np.ndarray, present: np.ndarray) -> str:
+    """``k of n`` (joint, interval) cells, counting only the intervals with grid points."""
+    won = won[:, present]
+    return f"{int(won.sum())} of {won.size}"
+
+
+def _missing_intervals(rows: dict) -> str:
+    """A line naming the intervals without grid points ('' when every interval has some)."""
+    gone = [iv for iv, ok in zip(IV, _present(rows)) if not ok]
+    return (f"No grid point in {', '.join(gone)}: those intervals are `-` and not counted.\n" if gone else "")
+
+
 def claims_markdown(res: dict[str, Any]) -> str:
     """Markdown list of claims with measured (and paper) statistics."""
     L = ["# The paper's claims, checked (generated from results.json)\n"]
     jaco = res.get("jaco")
     paper = PAPER_TABLE
+    skipped = res.get("meta", {}).get("sarcos_skipped")
+    if skipped:
+        L.append(f"The SARCOS part was not run ({skipped}): the claims checked on SARCOS are missing.\n")
     if jaco:
         rows = jaco["table"]["rows"]
         N = len(next(iter(rows.values())))
+        have = _present(rows)
         npdb = [model_name("np", s, False) for s in ("inward", "outward", "standard")]
         spdb = [model_name("sp", s, False) for s in ("inward", "outward", "standard")]
         L.append(f"Simulated Jaco, {jaco['n_subsets']} subsets; intervals {', '.join(IV)}.\n")
+        L.append(_missing_intervals(rows))
         for p, ms in (("np", npdb), ("sp", spdb)):
             if _have(rows, ms):
                 c, g = cascade_vs_standard(rows, p), rel_gain(rows, p)
                 cp, gp = cascade_vs_standard(paper, p), rel_gain(paper, p)
                 L.append(f"- **{p.upper()}: a cascade (inward or outward) beats the standard model** on "
-                         f"{'/'.join(map(str, c))} of {N} joints ({', '.join(IV)}); mean relative gain "
-                         f"{'/'.join(f'{100 * x:+.0f}%' for x in g)}. Paper: {'/'.join(map(str, cp))} of 6 joints, "
-                         f"gain {'/'.join(f'{100 * x:+.0f}%' for x in gp)}.")
+                         f"{_per_interval(c, have, str)} of {N} joints ({', '.join(IV)}); mean relative gain "
+                         f"{_per_interval(g, have, lambda x: f'{100 * x:+.0f}%')}. Paper: "
+                         f"{'/'.join(map(str, cp))} of 6 joints, gain {'/'.join(f'{100 * x:+.0f}%' for x in gp)}.")
         if _have(rows, npdb):
             iw = inward_vs_outward(rows, "np")
             iwp = inward_vs_outward(paper, "np")
-            L.append(f"- **NP: inward more accurate than outward**: inward wins {int(iw.sum())} of {iw.size} "
+            L.append(f"- **NP: inward more accurate than outward**: inward wins {_cells(iw, have)} "
                      f"(joint, interval) cells (paper: {int(iwp.sum())} of {iwp.size}).")
             for j in (3, 5):
                 if j < N:
@@ -200,7 +227,7 @@ def claims_markdown(res: dict[str, Any]) -> str:
         if _have(rows, all12):
             f, fp = df_vs_db(rows), df_vs_db(paper)
             L.append(f"- **Derivative-free features help in the first seconds, not later**: the -df twin wins "
-                     f"{'/'.join(f'{100 * x:.0f}%' for x in f)} of cells ({', '.join(IV)}); paper: "
+                     f"{_per_interval(f, have, lambda x: f'{100 * x:.0f}%')} of cells ({', '.join(IV)}); paper: "
                      f"{'/'.join(f'{100 * x:.0f}%' for x in fp)}.")
     if jaco and all("nrmse_all" in v for v in jaco["models"].values()):
         L += pooled_markdown(jaco, JACO_FAMILIES, "simulated Jaco")
@@ -213,9 +240,11 @@ def claims_markdown(res: dict[str, Any]) -> str:
         N = len(t["np-standard"])
         c = cascade_vs_standard(t, "np")
         iw = inward_vs_outward(t, "np")
+        have_s = _present(t)
         L.append(f"\nSARCOS ({s['n_subsets']} subsets, {s['n_test_rows']} de-duplicated test rows):\n")
-        L.append(f"- **Cascade beats standard NP** on {'/'.join(map(str, c))} of {N} joints ({', '.join(IV)}); "
-                 f"inward beats outward in {int(iw.sum())} of {iw.size} cells.")
+        L.append(_missing_intervals(t))
+        L.append(f"- **Cascade beats standard NP** on {_per_interval(c, have_s, str)} of {N} joints "
+                 f"({', '.join(IV)}); inward beats outward in {_cells(iw, have_s)} cells.")
         L.append("- **Outward beats inward on the last joint (7)**: inward/outward "
                  + ", ".join(f"{IV[k]} {_f(t['np-inward'][N - 1][k])}/{_f(t['np-outward'][N - 1][k])}"
                              for k in range(3)) + ".")

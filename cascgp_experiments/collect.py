@@ -427,9 +427,18 @@ def data_path(folder: str | Path, split: str) -> Path:
     return Path(folder) / f"jaco_{split}.npz"
 
 
+class OtherCollectionError(ValueError):
+    """The output folder of :func:`collect` holds files of other settings (``replace_other=False``)."""
+
+
 def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: bool = False, workers: int | None = None,
-            ray_address: str | None = None, vector_env: bool = False) -> tuple[DynamicsData, DynamicsData, dict]:
+            ray_address: str | None = None, vector_env: bool = False,
+            replace_other: bool = True) -> tuple[DynamicsData, DynamicsData, dict]:
     """Collect (or reuse) ``<out>/jaco_train.npz`` and ``<out>/jaco_test.npz``.
+
+    Files of the same settings are reused unless ``force``; files of other settings are replaced, or, with
+    ``replace_other=False`` (``cascgp collect``), refused with a ``ValueError`` that names the settings that differ
+    (:class:`OtherCollectionError`; ``force`` replaces them).
 
     ``workers``: motions simulated at once (``None``: every core), one job per motion on local processes
     or, with ``ray_address``, on a Ray cluster (:mod:`cascgp_experiments.execution`); ``vector_env``:
@@ -448,6 +457,14 @@ def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: boo
         loaded = {s: DynamicsData.load(p) for s, p in paths.items()}
         if all(same_collection(d.meta.get("collection"), cfg) for d in loaded.values()):
             return loaded["train"], loaded["test"], {"reused": True, "wall_s": 0.0, "jobs": None}
+        if not replace_other:
+            stored = loaded["train"].meta.get("collection")
+            want = asdict(cfg)
+            diff = ({k: (stored.get(k, _LATER_FIELDS.get(k)), v) for k, v in want.items()
+                     if stored.get(k, _LATER_FIELDS.get(k)) != v} if isinstance(stored, dict) else {})
+            what = ", ".join(f"{k} {old!r} (now {new!r})" for k, (old, new) in diff.items()) or "unknown settings"
+            raise OtherCollectionError(f"{out} holds a collection with other settings: {what}; pass --force to "
+                                       f"replace it, or choose another --out")
     t0 = time.perf_counter()
     parts, jobs = _record_all(cfg, workers, ray_address, vector_env)
     data = {}

@@ -1,6 +1,7 @@
 """Figures, tables and CSVs of the data-efficiency study, regenerated from ``results.json`` alone.
 
-Reads only the JSON written by :func:`cascgp_experiments.study.run_study` (no data files, no models;
+Reads only the JSON written by :func:`cascgp_experiments.study.run_study` (or ``cascgp sarcos``'s, whose figure,
+CSV and claims are the SARCOS rows below; no data files, no models;
 of ``cascgp`` only :mod:`cascgp.io`, no ``jaco_env`` or torch import) and writes into ``out``:
 
 ======================  =====================================================================
@@ -20,7 +21,7 @@ iterations.csv          iteration counts per model and joint
 claims.md               which of the paper's claims hold here (:mod:`cascgp_experiments.claims`)
 ======================  =====================================================================
 
-Command line: ``python -m scripts.study_plots --json out/study/results.json --out out/study``.
+Command line: ``cascgp plots --json out/study/results.json --out DIR``.
 """
 
 from __future__ import annotations
@@ -170,8 +171,9 @@ def table_markdown(table: dict[str, Any], models: list[str], title: str,
 def _table_legend(block: dict[str, Any]) -> str:
     """What the numbers of Table I are, its marks, and how the shared cells were made."""
     g = np.asarray(block["grid_s"], float)
-    pts = "; ".join(f"{lo:g}-{hi:g} s: " + ", ".join(f"{t:g}" for t in g[(g >= lo - 1e-9) & (g <= hi + 1e-9)])
-                    for lo, hi in ((1, 2), (4, 5), (9, 10)))
+    pts = "; ".join(f"{lo:g}-{hi:g} s: " + (", ".join(f"{t:g}" for t in inside) if inside.size else "none, '-'")
+                    for lo, hi in ((1, 2), (4, 5), (9, 10))
+                    for inside in [g[(g >= lo - 1e-9) & (g <= hi + 1e-9)]])
     sh = block.get("shared")
     how = ("fitted once, in the standard model's job, and shared (exactly equal)" if sh else
            "fitted separately in this run, not shared (largest difference from the standard model's per-subset "
@@ -218,9 +220,30 @@ def write_csv(block: dict[str, Any], path: Path, dataset: str) -> Path:
     return _write_rows(path, rows)
 
 
+def as_results(run: Any) -> dict[str, Any] | None:
+    """A study's ``results.json`` as it is, ``cascgp sarcos``'s ``sarcos.json`` as its ``"sarcos"`` block, else
+    ``None`` (neither)."""
+    if not isinstance(run, dict):
+        return None
+    if {"jaco", "sarcos"} & set(run):
+        return run
+    if {"models", "grid_s", "n_subsets"} <= set(run):
+        return {"sarcos": run}
+    return None
+
+
 def render(json_path: str | Path, out: str | Path) -> list[Path]:
-    """Write every figure/table/CSV above from ``json_path`` into ``out``; returns the paths."""
-    res = read_json(json_path)
+    """Write every figure/table/CSV above from ``json_path`` (a study's ``results.json`` or ``cascgp sarcos``'s
+    ``sarcos.json``) into ``out``; returns the paths."""
+    res = as_results(read_json(json_path))
+    if res is None:
+        raise ValueError(f"{json_path}: expected a study's results.json or a sarcos.json (no 'jaco' or 'sarcos' "
+                         f"results)")
+    return render_results(res, out)
+
+
+def render_results(res: dict[str, Any], out: str | Path) -> list[Path]:
+    """Write every figure/table/CSV above from the results dict ``res`` into ``out``; returns the paths."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []

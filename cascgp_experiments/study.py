@@ -129,7 +129,8 @@ PRESETS: dict[str, Settings] = {
 
 def cached_iteration_counts(out: Path, train, settings: Settings) -> dict[str, Any]:
     """Iteration counts (step 3) on the first training subset at 10 Hz, cached in
-    ``<out>/cache/iterations.json`` (keyed by the settings that matter)."""
+    ``<out>/cache/iterations.json`` (keyed by the settings that matter); ``"reused"`` says whether they came from
+    that cache (their ``"wall_s"`` is then the time of the run that computed them)."""
     from cascgp_experiments.analyses import iteration_counts
 
     key = {"n": settings.iter_n, "n_restarts": settings.iter_restarts, "seed": settings.seed,
@@ -138,7 +139,7 @@ def cached_iteration_counts(out: Path, train, settings: Settings) -> dict[str, A
     if path.exists():
         cached = read_json(path)
         if cached.get("key") == key:
-            return cached
+            return {**cached, "reused": True}
     t0 = time.perf_counter()
     d10 = train.subsample(10.0)
     first = d10.take(d10.segment == d10.segments[0])
@@ -148,7 +149,23 @@ def cached_iteration_counts(out: Path, train, settings: Settings) -> dict[str, A
     res["key"] = key
     res["wall_s"] = time.perf_counter() - t0
     write_json(path, res)
-    return res
+    return {**res, "reused": False}
+
+
+def reuse_note(meta: dict[str, Any]) -> str | None:
+    """What a study run took from an earlier run's files in its folder, as one line (``None``: nothing)."""
+    reused = meta.get("reused", {})
+    parts = ["the collection"] if reused.get("collection") else []
+    for key, what in (("jaco_jobs", "Jaco jobs"), ("sarcos_jobs", "SARCOS jobs")):
+        done, total = reused.get(key, (0, 0))
+        if done:
+            parts.append(f"{done} of {total} {what}")
+    if reused.get("iterations"):
+        parts.append("the iteration counts")
+    if not parts:
+        return None
+    return (f"reused from an earlier run in this folder: {', '.join(parts)}; the timings are this run's (a job's "
+            f"own time stays in results.json)")
 
 
 def run_study(out: str | Path, settings: Settings, *, models: list[str] | None = None, workers: int | None = None,
@@ -184,6 +201,10 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
     ccfg = replace(col.PRESETS[settings.collection], seed=settings.seed, sensor_pipeline=settings.sensor_pipeline)
     train, test, cinfo = col.collect(out / "data", ccfg, workers=workers, ray_address=ray_address)
     timings["collect_s"] = cinfo["wall_s"]
+    # what this run took from an earlier run's files (a resumed or repeated run): its timings are its own
+    reused: dict[str, Any] = {"collection": bool(cinfo["reused"])}
+    results["meta"]["reused"] = reused
+    results["meta"]["complete"] = False  # until every part is written
     results["meta"]["collection"] = {**asdict(ccfg), "reused": cinfo["reused"],
                                      "train_rows": train.n_samples, "test_rows": test.n_samples,
                                      "train_total_seconds": train.duration, "test_total_seconds": test.duration,
@@ -200,6 +221,7 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
     jaco = run_curves(spec, models + [RBD], workers=workers, ray_address=ray_address, cache_dir=out / "cache" / "jaco",
                       desc="Jaco fits")
     timings["jaco_curves_s"] = jaco["wall_s"]
+    reused["jaco_jobs"] = [jaco["n_cached_jobs"], jaco["jobs"]["n_jobs"]]
     jaco["dof"] = train.dof
     jaco["labels"] = {m: label(m) for m in jaco["models"]}
     # Table I: per grid point the median over subsets (errors are heavy-tailed), averaged over the interval's
@@ -216,10 +238,12 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
     results["paper_table"] = {"intervals": [[1, 2], [4, 5], [9, 10]], "rows": PAPER_TABLE}
     write_json(out / "results.json", results)
 
-    # 3. iteration counts
+    # 3. iteration counts (timings are this run's; a count from the cache keeps its own wall_s)
     if do_iterations:
+        t0 = time.perf_counter()
         results["iterations"] = cached_iteration_counts(out, train, settings)
-        timings["iterations_s"] = results["iterations"]["wall_s"]
+        timings["iterations_s"] = time.perf_counter() - t0
+        reused["iterations"] = results["iterations"]["reused"]
         write_json(out / "results.json", results)
 
     # 4. correlation
@@ -234,10 +258,14 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
                        n_restarts=settings.n_restarts, workers=workers, ray_address=ray_address, seed=settings.seed)
         results["sarcos"] = s
         timings["sarcos_s"] = s["wall_s_total"]
+        reused["sarcos_jobs"] = [s["n_cached_jobs"], s["jobs"]["n_jobs"]]
+    results["meta"]["sarcos_skipped"] = None if "sarcos" in results else (
+        "no SARCOS file given, or --no-sarcos" if sarcos is None else "no SARCOS grid point within the grid")
 
     timings["total_s"] = time.perf_counter() - t_all
     results["meta"]["timings"] = timings
     results["meta"]["finished"] = time.strftime("%Y-%m-%d %H:%M:%S")
+    results["meta"]["complete"] = True
     write_json(out / "results.json", results)
 
     # 6. tables, figures, claims (from the JSON alone)

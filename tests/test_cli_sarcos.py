@@ -73,11 +73,13 @@ def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_pat
     def fake_run(path, out, **kw):
         seen.append(kw)
         scores = (("np-standard", 0.1), ("np-inward", 0.2))
-        return {"grid_s": list(kw["grid"]),
+        return {"grid_s": list(kw["grid"]), "n_cached_jobs": 0, "jobs": {"n_jobs": 9},
                 "models": {m: {"nrmse_median": np.full((len(kw["grid"]), 7), v)} for m, v in scores}}
 
+    rendered: list[dict] = []
     monkeypatch.setattr(cli, "run_sarcos", fake_run)
     monkeypatch.setattr(cli, "limit_threads", lambda n=1: None)  # the command's; not for the rest of the session
+    monkeypatch.setattr("cascgp_experiments.plots.render_results", lambda res, out: rendered.append(res) or [])
     mat = write_tiny_ias(tmp_path / "x.mat")
     for args, preset in ((["--quick"], PRESETS["quick"]), ([], PRESETS["full"])):
         cli.main(["--sarcos", str(mat), "--out", str(tmp_path / "o"), "--workers", "1", *args])
@@ -86,7 +88,13 @@ def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_pat
             preset.sarcos_grid, preset.sarcos_subsets, preset.n_restarts, preset.seed)
         out = capsys.readouterr().out
         assert f"| {preset.sarcos_grid[-1]:g} | 0.1000 | 0.2000 |" in out
-        assert json.loads((tmp_path / "o" / "sarcos.json").read_text())["grid_s"] == list(preset.sarcos_grid)
+        written = json.loads((tmp_path / "o" / "sarcos.json").read_text())
+        assert written["grid_s"] == list(preset.sarcos_grid)
+        # provenance like the study's results.json, the table as a file, the figure and claims from the block
+        assert {"command", "versions", "machine", "started", "finished"} <= set(written["meta"])
+        assert written["meta"]["reused_jobs"] == [0, 9]
+        assert f"| {preset.sarcos_grid[-1]:g} | 0.1000 | 0.2000 |" in (tmp_path / "o" / "sarcos_table.md").read_text()
+        assert rendered[-1]["sarcos"]["grid_s"] == list(preset.sarcos_grid)
     cli.main(["--sarcos", str(mat), "--out", str(tmp_path / "o"), "--workers", "1", "--restarts", "2", "--seed", "7"])
     assert (seen[-1]["n_restarts"], seen[-1]["seed"]) == (2, 7)
 
@@ -102,6 +110,7 @@ def test_sarcos_command_without_a_path_names_the_option_and_the_variable(monkeyp
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "--sarcos: expected the path of ias_sarcos_data.mat" in err and f"${SARCOS_ENV}" in err
+    assert "github.com/hanyas/mimo" in err  # where to get it
     assert not (tmp_path / "o").exists()
 
 

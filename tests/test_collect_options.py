@@ -103,6 +103,23 @@ def test_collect_reuses_files_written_before_the_options(arms, tmp_path: Path) -
     assert collect(tmp_path, TINY, workers=1)[2]["reused"]
 
 
+def test_a_collection_of_other_settings_is_refused_unless_forced(arms, tmp_path: Path) -> None:
+    """``replace_other=False`` (``cascgp collect``): files of other settings are refused, named and left as they
+    were; ``force`` replaces them; the default (the study) replaces them."""
+    from cascgp_experiments.collect import OtherCollectionError
+
+    train, test = arms["noisy"]
+    for split, d in (("train", train), ("test", test)):
+        d.save(tmp_path / f"jaco_{split}.npz")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    other = replace(TINY, seed=TINY.seed + 1)
+    with pytest.raises(OtherCollectionError, match=r"other settings: seed 0 \(now 1\); pass --force"):
+        collect(tmp_path, other, workers=1, replace_other=False)
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    assert collect(tmp_path, TINY, workers=1, replace_other=False)[2]["reused"]  # the same settings: reused
+    assert not collect(tmp_path, other, workers=1, replace_other=False, force=True)[2]["reused"]
+
+
 def test_study_data_rejects_collection_options_with_a_folder(tmp_path: Path) -> None:
     from cascgp_experiments.collect import study_data
 

@@ -372,6 +372,8 @@ def test_smoke_end_to_end(tmp_path: Path) -> None:
     res = read_json(out / "results.json")
     _check_results(out, res)
     assert res["meta"]["settings"]["grid"] == [1.0, 2.0]
+    assert res["meta"]["complete"] is True
+    assert res["meta"]["reused"]["collection"] is False and res["meta"]["reused"]["jaco_jobs"][0] == 0
     # the default sensing, and the SP models' nominal URDF of the simulated arm's link inertials
     assert res["meta"]["collection"]["sensor_pipeline"] == "jaco2"
     assert res["meta"]["nominal_urdf"] == "jaco2_nominal_kinova.urdf"
@@ -382,6 +384,35 @@ def test_smoke_end_to_end(tmp_path: Path) -> None:
         assert set(res["sarcos"]["models"]) == {"np-standard", "np-inward", "np-outward"}
         assert (out / "fig_sarcos.png").exists()
     _regenerate_from_json_alone(out, tmp_path)
+    # the same command again: everything from the first run's files, said so; the timings are this run's
+    again = subprocess.run([str(Path(sys.executable).with_name("cascgp")), "study", "--out", str(out), "--smoke"],
+                           check=True, env=_env(), cwd=tmp_path, timeout=600, capture_output=True, text=True)
+    res2 = read_json(out / "results.json")
+    n_jobs = res["meta"]["reused"]["jaco_jobs"][1]
+    assert res2["meta"]["reused"]["collection"] is True and res2["meta"]["reused"]["jaco_jobs"] == [n_jobs, n_jobs]
+    assert res2["meta"]["reused"]["iterations"] is True
+    assert res2["meta"]["timings"]["iterations_s"] < res2["iterations"]["wall_s"]  # the cached count kept its time
+    assert "reused from an earlier run in this folder: the collection" in again.stdout
+    assert res2["jaco"]["models"] == res["jaco"]["models"]
+
+
+def test_claims_with_intervals_without_grid_points() -> None:
+    """A grid that ends at 2 s leaves the 4-5 s and 9-10 s intervals empty: they are '-' and not counted, and
+    claims.md says so (it printed +nan% and counted cells that do not exist)."""
+    from cascgp_experiments.claims import claims_markdown
+
+    rng = np.random.default_rng(0)
+    rows = {m: [[float(rng.uniform(0.1, 0.2)), float("nan"), float("nan")] for _ in range(6)]
+            for m in list(VARIANTS) + [RBD]}
+    md = claims_markdown({"jaco": {"table": {"rows": rows}, "n_subsets": 3, "models": {m: {} for m in rows}},
+                          "meta": {"sarcos_skipped": "no SARCOS file given, or --no-sarcos"}})
+    assert "nan" not in md.lower()
+    assert "No grid point in 4-5 s, 9-10 s" in md
+    assert "The SARCOS part was not run (no SARCOS file given" in md
+    inward = re.search(r"inward wins (\d+) of (\d+) \(joint, interval\) cells", md)
+    assert inward and int(inward[2]) == 6  # six joints, one interval
+    gain = re.search(r"mean relative gain ([^.]*)\.", md)
+    assert gain and gain[1].endswith("/-/-")
 
 
 @pytest.mark.slow

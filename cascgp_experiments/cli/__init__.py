@@ -10,6 +10,7 @@ subcommand              what it does
 ``cascgp study``        the paper's data-efficiency study (simulated Jaco data, SARCOS)
 ``cascgp sarcos``       the SARCOS block of the study alone
 ``cascgp collect``      the simulated Jaco data collection of the study
+``cascgp plots``        a study's figures, tables and claims, redrawn from its ``results.json``
 ======================  ==========================================================================
 
 Each subcommand is a function ``f(argv, prog) -> int | None`` in a module of this package; this module only
@@ -35,7 +36,12 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "study": ("cascgp_experiments.cli.study:main", "the paper's data-efficiency study (Jaco data, SARCOS)"),
     "sarcos": ("cascgp_experiments.cli.sarcos:main", "SARCOS data-efficiency curves (NP models)"),
     "collect": ("cascgp_experiments.cli.collect:main", "collect the simulated Jaco data set of the study"),
+    "plots": ("cascgp_experiments.cli.plots:main", "redraw a study's figures and tables from its results.json"),
 }
+
+
+#: The subcommands that resume from their output folder.
+_RESUMABLE = ("transfer", "study", "sarcos")
 
 
 def _usage() -> str:
@@ -66,6 +72,12 @@ def main(argv: Sequence[str] | None = None) -> int:
               file=sys.stderr)
         return 2
     module, func = COMMANDS[name][0].split(":")
-    status = getattr(importlib.import_module(module), func)(args[1:], prog=f"cascgp {name}")
+    try:
+        status = getattr(importlib.import_module(module), func)(args[1:], prog=f"cascgp {name}")
+    except KeyboardInterrupt:  # Ctrl-C: one line instead of a traceback through the job runner
+        hint = (": run the same command again to resume (finished jobs are kept in --out)" if name in _RESUMABLE
+                else "")
+        print(f"\ncascgp {name}: interrupted{hint}", file=sys.stderr)
+        return 130
     return int(status or 0)
 

@@ -15,7 +15,7 @@ import argparse
 from dataclasses import asdict
 
 from cascgp_experiments.cli.options import check_output, settings_error
-from cascgp_experiments.collect import PRESETS, CollectConfig, collect, data_path
+from cascgp_experiments.collect import PRESETS, CollectConfig, OtherCollectionError, collect, data_path
 from cascgp_experiments.execution import add_execution_args, check_args, session
 
 
@@ -44,7 +44,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     ap.add_argument("--link-inertials", default=None, choices=LINK_INERTIALS,
                     help="the arm's link inertials (default: kinova under jaco2, else dm_control); "
                          "fit with the nominal URDF of the same inertials")
-    ap.add_argument("--force", action="store_true", help="collect again even if files exist")
+    ap.add_argument("--force", action="store_true",
+                    help="collect again even if files exist (also over files of other settings)")
     ap.add_argument("--vector-env", action="store_true",
                     help="run the motions of a split --workers at a time in one Gymnasium AsyncVectorEnv instead of "
                          "one job per motion (same data; slower here, the env steps are cheap)")
@@ -63,9 +64,12 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     except (ValueError, TypeError) as e:
         settings_error(ap, e, {"seed": "--seed", "payload_mass": "--payload-mass",
                                "sensor_pipeline": "--sensor-pipeline"})
-    with session(a.ray, a.workers):
-        train, test, info = collect(a.out, cfg, force=a.force, workers=a.workers, ray_address=a.ray,
-                                    vector_env=a.vector_env)
+    try:
+        with session(a.ray, a.workers):
+            train, test, info = collect(a.out, cfg, force=a.force, workers=a.workers, ray_address=a.ray,
+                                        vector_env=a.vector_env, replace_other=False)
+    except OtherCollectionError as exc:  # an --out folder of another collection: an argument error
+        ap.error(str(exc))
     for split, d in (("train", train), ("test", test)):
         print(f"{data_path(a.out, split)}: {d.n_samples} samples, {len(d.segments)} motion(s), {d.dof} "
               f"joints, dt {d.dt:g} s")

@@ -34,6 +34,8 @@ def check_sarcos_file(parser: argparse.ArgumentParser, path: str, source: str = 
     ``source`` names where the path came from (the option, or the environment variable that set its default)."""
     from cascgp.sarcos import check_ias
 
+    if Path(path).is_dir():
+        parser.error(f"{source}: {path} is a folder; expected the file ias_sarcos_data.mat")
     try:
         check_ias(path)
     except FileNotFoundError:

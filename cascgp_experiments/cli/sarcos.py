@@ -8,18 +8,23 @@ Usage::
 The SARCOS block of ``cascgp study`` (its preset's grid, subsets, restarts and seed: ``--quick`` the quick
 preset's; the pooled tests included); data, subsets and models: :mod:`cascgp_experiments.study` (SARCOS block).
 Writes ``<out>/sarcos.json`` (per model the nRMSE of every subset, grid point and joint, their summaries, the
-pooled tests) and prints each model's nRMSE per grid point (median over subsets, mean over the 7 joints).
+pooled tests, and ``meta``: the command, versions and machine), ``sarcos_table.md`` (each model's nRMSE per grid
+point, median over subsets, mean over the 7 joints; also printed), ``fig_sarcos.png``, ``curves_sarcos.csv`` and
+``claims.md`` (the paper's SARCOS claims), as ``cascgp study`` writes its SARCOS part.
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
 
-from cascgp.io import write_json
-from cascgp_experiments.common import SARCOS_ENV, default_sarcos, default_sarcos_source, limit_threads, median_curves
+from cascgp.io import atomic_write_text, write_json
+from cascgp_experiments.common import (SARCOS_ENV, default_sarcos, default_sarcos_source, limit_threads,
+                                       machine_info, median_curves, package_versions)
 from cascgp_experiments.cli.options import check_output, check_sarcos_file, require_at_least
 from cascgp_experiments.execution import add_execution_args, check_args
 from cascgp_experiments.study import PRESETS, Settings, run_sarcos
@@ -32,7 +37,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     ap.add_argument("--sarcos", default=None if found is None else str(found),
                     help=f"path of ias_sarcos_data.mat (default: ${SARCOS_ENV}, or a source checkout's ../shared copy)")
     ap.add_argument("--out", required=True, metavar="DIR",
-                    help="output folder: sarcos.json, the prepared data and the job cache (a rerun resumes)")
+                    help="output folder: sarcos.json, its table, figure and claims, the prepared data and the job "
+                         "cache (a rerun resumes)")
     full, quick = PRESETS["full"], PRESETS["quick"]
     ap.add_argument("--quick", action="store_true",
                     help=f"the study's quick preset: {_preset(quick)}; default: the full preset: {_preset(full)}")
@@ -44,7 +50,10 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     add_execution_args(ap)
     a = ap.parse_args(argv)
     if a.sarcos is None:
-        ap.error(f"--sarcos: expected the path of ias_sarcos_data.mat (or set ${SARCOS_ENV})")
+        from cascgp.sarcos import IAS_SOURCE
+
+        ap.error(f"--sarcos: expected the path of ias_sarcos_data.mat (or set ${SARCOS_ENV}); the file is not "
+                 f"shipped: {IAS_SOURCE}")
     check_sarcos_file(ap, a.sarcos, "--sarcos" if a.sarcos != ap.get_default("sarcos") else default_sarcos_source())
     require_at_least(ap, a, 1, "restarts")
     require_at_least(ap, a, 0, "seed")
@@ -52,12 +61,26 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     check_args(ap, a)
     limit_threads(1)
     preset = PRESETS["quick" if a.quick else "full"]
-    block = run_sarcos(a.sarcos, a.out, grid=preset.sarcos_grid, n_subsets=preset.sarcos_subsets,
+    out = Path(a.out)
+    meta = {"command": " ".join([prog or "cascgp sarcos"] + (argv if argv is not None else sys.argv[1:])),
+            "versions": package_versions(), "machine": machine_info(), "started": time.strftime("%Y-%m-%d %H:%M:%S")}
+    block = run_sarcos(a.sarcos, out, grid=preset.sarcos_grid, n_subsets=preset.sarcos_subsets,
                        n_restarts=preset.n_restarts if a.restarts is None else a.restarts,
                        seed=preset.seed if a.seed is None else a.seed, workers=a.workers, ray_address=a.ray)
-    write_json(Path(a.out) / "sarcos.json", block)
-    print(summary_table(block))
-    print(f"wrote {Path(a.out) / 'sarcos.json'}")
+    meta["finished"] = time.strftime("%Y-%m-%d %H:%M:%S")
+    meta["reused_jobs"] = [block["n_cached_jobs"], block["jobs"]["n_jobs"]]  # from an earlier run in --out
+    block["meta"] = meta
+    write_json(out / "sarcos.json", block)
+    table = summary_table(block)
+    atomic_write_text(out / "sarcos_table.md", table + "\n")
+    from cascgp_experiments.plots import render_results
+
+    render_results({"sarcos": block}, out)  # fig_sarcos.png, curves_sarcos.csv, claims.md
+    print(table)
+    print(f"wrote {out / 'sarcos.json'}, {out / 'sarcos_table.md'}, {out / 'fig_sarcos.png'}, "
+          f"{out / 'curves_sarcos.csv'} and {out / 'claims.md'}")
+    if block["n_cached_jobs"]:
+        print(f"({block['n_cached_jobs']} of {block['jobs']['n_jobs']} jobs came from an earlier run in this folder)")
 
 
 def _preset(p: Settings) -> str:

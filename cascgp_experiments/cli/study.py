@@ -20,7 +20,7 @@ from typing import Any
 from cascgp_experiments.cli.options import check_output, check_sarcos_file, settings_error
 from cascgp_experiments.common import SARCOS_ENV, VARIANTS, default_sarcos, default_sarcos_source, limit_threads
 from cascgp_experiments.execution import add_execution_args, check_args
-from cascgp_experiments.study import PRESETS, run_study
+from cascgp_experiments.study import PRESETS, reuse_note, run_study
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> None:
@@ -87,7 +87,10 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
         if sarcos is not None and st.sarcos_grid:
             check_sarcos_file(ap, sarcos, "--sarcos" if a.sarcos else default_sarcos_source())
         if sarcos is None:
-            print(f"no SARCOS file (--sarcos or ${SARCOS_ENV}): the SARCOS part is skipped", file=sys.stderr)
+            from cascgp.sarcos import IAS_SOURCE
+
+            print(f"no SARCOS file (--sarcos or ${SARCOS_ENV}): the SARCOS part is skipped (the file: {IAS_SOURCE})",
+                  file=sys.stderr)
         elif not st.sarcos_grid:
             print(f"--max-seconds {a.max_seconds:g} is below every SARCOS grid point: the SARCOS part is skipped",
                   file=sys.stderr)
@@ -99,6 +102,11 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                     command=" ".join([prog or "cascgp study"] + (argv if argv is not None else sys.argv[1:])))
     t = res["meta"]["timings"]
     print("timings (s): " + ", ".join(f"{k}={v:.1f}" for k, v in t.items()))
+    note = reuse_note(res["meta"])
+    if note:
+        print(note)
+    if res["meta"]["sarcos_skipped"]:
+        print(f"SARCOS part skipped ({res['meta']['sarcos_skipped']}): claims.md has no SARCOS claims")
     print(f"results: {Path(a.out) / 'results.json'}; table: {Path(a.out) / 'table1.md'}")
 
 

@@ -142,6 +142,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
         print(f"videos:  {a.video}/*.mp4")
     print(f"results: {out / 'results.json'}\nplot:    {out / 'transfer.png'}\n"
           f"wall time {time.perf_counter() - t0:.0f} s")
+    if jobs.get("n_cached"):
+        print(f"({jobs['n_cached']} of {jobs['n_jobs']} controllers came from an earlier run in this folder; the wall "
+              f"time is this run's, each controller's own is in results.json's jobs.job_seconds)")
 
 
 if __name__ == "__main__":

@@ -1,0 +1,43 @@
+"""``cascgp plots``: a study's figures, tables, CSVs and claims, redrawn from its ``results.json`` alone.
+
+Usage::
+
+    cascgp plots --json out/study/results.json --out DIR     # or a `cascgp sarcos` run's sarcos.json
+
+What is written: :mod:`cascgp_experiments.plots`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from cascgp_experiments.cli.options import check_input, check_output
+
+
+def main(argv: list[str] | None = None, prog: str | None = None) -> None:
+    """``cascgp plots``: parse ``argv`` (``sys.argv[1:]`` when ``None``) and redraw."""
+    ap = argparse.ArgumentParser(prog=prog, description="Redraw a study's figures, tables, CSVs and claims from its "
+                                                        "results.json (or a cascgp sarcos run's sarcos.json)")
+    ap.add_argument("--json", required=True, help="the run's results.json (cascgp study) or sarcos.json")
+    ap.add_argument("--out", required=True, metavar="DIR", help="folder for the figures and tables")
+    a = ap.parse_args(argv)
+    check_input(ap, a.json, "--json", "file")
+    check_output(ap, a.out, "--out", "folder")
+    from cascgp_experiments.plots import as_results, render_results
+
+    try:
+        run = json.loads(Path(a.json).read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        ap.error(f"--json: {a.json}: expected a study's results.json ({exc})")
+    res = as_results(run)
+    if res is None:
+        ap.error(f"--json: {a.json}: expected a study's results.json or a sarcos.json (no 'jaco' or 'sarcos' "
+                 f"results)")
+    for p in render_results(res, a.out):
+        print(p)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,49 @@
+"""The ``cascgp`` dispatcher: Ctrl-C ends a command with one line (and, for the experiments, how to resume), and
+``cascgp plots`` redraws the figures and claims of a study's ``results.json`` or of a ``sarcos.json``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+import cascgp_experiments.cli as cli
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.mark.parametrize("command, resumes", [("study", True), ("fit", False)])
+def test_ctrl_c_is_one_line_and_names_the_resume(command: str, resumes: bool, monkeypatch, capsys) -> None:
+    module, func = cli.COMMANDS[command][0].split(":")
+
+    def interrupted(argv, prog=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(f"{module}.{func}", interrupted)
+    assert cli.main([command, "--out", "x"]) == 130
+    err = capsys.readouterr().err
+    assert err.strip().startswith(f"cascgp {command}: interrupted") and "Traceback" not in err
+    assert ("run the same command again to resume" in err) == resumes
+
+
+def test_plots_redraws_a_sarcos_json(tmp_path: Path, capsys) -> None:
+    """A ``cascgp sarcos`` run's ``sarcos.json`` (here the SARCOS block of the documented study run) gives the
+    study's SARCOS figure, CSV and claims."""
+    block = json.loads((REPO / "docs" / "results.json").read_text())["sarcos"]
+    (tmp_path / "sarcos.json").write_text(json.dumps(block))
+    cli.main(["plots", "--json", str(tmp_path / "sarcos.json"), "--out", str(tmp_path / "out")])
+    out = tmp_path / "out"
+    assert {p.name for p in out.iterdir()} == {"fig_sarcos.png", "curves_sarcos.csv", "claims.md"}
+    claims = (out / "claims.md").read_text()
+    assert "Outward beats inward on the last joint (7)" in claims and "Simulated Jaco" not in claims
+    assert str(out / "fig_sarcos.png") in capsys.readouterr().out
+
+
+def test_plots_refuses_a_json_of_something_else(tmp_path: Path, capsys) -> None:
+    (tmp_path / "other.json").write_text(json.dumps({"config": {}, "controllers": {}}))
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["plots", "--json", str(tmp_path / "other.json"), "--out", str(tmp_path / "out")])
+    assert exc.value.code == 2
+    assert "expected a study's results.json or a sarcos.json" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
