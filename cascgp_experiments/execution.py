@@ -133,7 +133,7 @@ def check_args(parser: Any, args: Any) -> None:
         try:
             import ray  # noqa: F401
         except ImportError:
-            parser.error(f"--ray needs Ray, an optional extra: {install_hint('ray')}")
+            parser.error(f"--ray needs Ray, which is not installed: {install_hint('ray')}")
         if args.ray != "local":
             try:
                 ray_connect(args.ray, check_workers(args.workers))

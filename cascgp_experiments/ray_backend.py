@@ -44,7 +44,7 @@ def import_ray():
     try:
         import ray
     except ImportError as exc:
-        raise ImportError(f"--ray needs Ray, an optional extra: {install_hint('ray')}") from exc
+        raise ImportError(f"--ray needs Ray, which is not installed: {install_hint('ray')}") from exc
     return ray
 
 

@@ -424,7 +424,7 @@ def plot(results: dict[str, Any], path: Path) -> None:
     axes[0].set_ylabel("tracking RMSE (rad)")
     axes[1].set_ylabel("fraction of marbles in jar")
     axes[1].set_ylim(-0.05, 1.05)
-    axes[1].set_xlabel("attempt")
+    axes[1].set_xlabel("attempt (results.json's \"attempt\" + 1)")
     axes[0].legend(fontsize=8, ncol=3)
     fig.suptitle(f"Task transfer, unknown payload {results['config']['payload_mass']} kg")
     fig.tight_layout()
