@@ -43,8 +43,8 @@ from .data import DynamicsData
 __all__ = ["IAS_SOURCE", "IAS_TO_GPML_TORQUE", "SARCOS_DOF", "SARCOS_RATE_HZ", "check_ias", "load_ias", "load_gpml",
            "duplicate_rows", "detect_segments"]
 
-#: Where to get the IAS SARCOS file (``ias_sarcos_data.mat``): a public repository that holds a copy.
-IAS_SOURCE = "https://github.com/hanyas/mimo (datasets/Sarcos/ias_sarcos_data.mat)"
+#: Where to get the IAS SARCOS file (``ias_sarcos_data.mat``): a public repository's copy, at the commit read here.
+IAS_SOURCE = "https://github.com/hanyas/mimo/blob/b1c3331da98c/datasets/Sarcos/ias_sarcos_data.mat"
 #: GPML torque = IAS torque * IAS_TO_GPML_TORQUE.
 IAS_TO_GPML_TORQUE = 3.0
 SARCOS_DOF = 7

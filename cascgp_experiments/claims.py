@@ -12,7 +12,7 @@ their power is low (stated in the generated text, :func:`~cascgp_experiments.poo
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -155,12 +155,12 @@ def _have(rows: dict, names: list[str]) -> bool:
     return all(n in rows for n in names)
 
 
-def _present(rows: dict) -> np.ndarray:
-    """Per interval: True where the table has numbers (a grid point in the interval)."""
+def _present(rows: dict[str, Any]) -> np.ndarray:
+    """Per interval: True where the table has numbers (a grid point in the interval), shape (3,)."""
     return np.isfinite(np.asarray(next(iter(rows.values())), float)).all(axis=0)
 
 
-def _per_interval(values, present: np.ndarray, fmt) -> str:
+def _per_interval(values: Any, present: np.ndarray, fmt: Callable[[Any], str]) -> str:
     """``a/b/c`` over the three intervals, ``-`` for an interval without grid points."""
     return "/".join(fmt(v) if ok else "-" for v, ok in zip(values, present))
 
@@ -171,17 +171,20 @@ def _cells(won: np.ndarray, present: np.ndarray) -> str:
     return f"{int(won.sum())} of {won.size}"
 
 
-def _missing_intervals(rows: dict) -> str:
+def _missing_intervals(rows: dict[str, Any]) -> str:
     """A line naming the intervals without grid points ('' when every interval has some)."""
     gone = [iv for iv, ok in zip(IV, _present(rows)) if not ok]
     return (f"No grid point in {', '.join(gone)}: those intervals are `-` and not counted.\n" if gone else "")
 
 
-def claims_markdown(res: dict[str, Any]) -> str:
-    """Markdown list of claims with measured (and paper) statistics."""
-    L = ["# The paper's claims, checked (generated from results.json)\n"]
+def claims_markdown(res: dict[str, Any], source: str = "results.json") -> str:
+    """Markdown list of claims with measured (and paper) statistics; ``source``: the JSON's name, for the title."""
+    L = [f"# The paper's claims, checked (generated from {source})\n"]
     jaco = res.get("jaco")
     paper = PAPER_TABLE
+    if res.get("meta", {}).get("complete") is False:
+        L.append("**This run did not finish** (`meta.complete` is false): the parts it had not reached are missing. "
+                 "Run its command again to complete it.\n")
     skipped = res.get("meta", {}).get("sarcos_skipped")
     if skipped:
         L.append(f"The SARCOS part was not run ({skipped}): the claims checked on SARCOS are missing.\n")
@@ -192,7 +195,7 @@ def claims_markdown(res: dict[str, Any]) -> str:
         npdb = [model_name("np", s, False) for s in ("inward", "outward", "standard")]
         spdb = [model_name("sp", s, False) for s in ("inward", "outward", "standard")]
         L.append(f"Simulated Jaco, {jaco['n_subsets']} subsets; intervals {', '.join(IV)}.\n")
-        L.append(_missing_intervals(rows))
+        L += [line for line in [_missing_intervals(rows)] if line]
         for p, ms in (("np", npdb), ("sp", spdb)):
             if _have(rows, ms):
                 c, g = cascade_vs_standard(rows, p), rel_gain(rows, p)
@@ -242,7 +245,7 @@ def claims_markdown(res: dict[str, Any]) -> str:
         iw = inward_vs_outward(t, "np")
         have_s = _present(t)
         L.append(f"\nSARCOS ({s['n_subsets']} subsets, {s['n_test_rows']} de-duplicated test rows):\n")
-        L.append(_missing_intervals(t))
+        L += [line for line in [_missing_intervals(t)] if line]
         L.append(f"- **Cascade beats standard NP** on {_per_interval(c, have_s, str)} of {N} joints "
                  f"({', '.join(IV)}); inward beats outward in {_cells(iw, have_s)} cells.")
         L.append("- **Outward beats inward on the last joint (7)**: inward/outward "

@@ -436,8 +436,8 @@ def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: boo
             replace_other: bool = True) -> tuple[DynamicsData, DynamicsData, dict]:
     """Collect (or reuse) ``<out>/jaco_train.npz`` and ``<out>/jaco_test.npz``.
 
-    Files of the same settings are reused unless ``force``; files of other settings are replaced, or, with
-    ``replace_other=False`` (``cascgp collect``), refused with a ``ValueError`` that names the settings that differ
+    Files of the same settings are reused unless ``force``; files of other settings are replaced, or with
+    ``replace_other=False`` (``cascgp collect``) refused, naming the settings that differ
     (:class:`OtherCollectionError`; ``force`` replaces them).
 
     ``workers``: motions simulated at once (``None``: every core), one job per motion on local processes
@@ -453,18 +453,19 @@ def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: boo
     workers = check_workers(workers)
     out = Path(out)
     paths = {s: data_path(out, s) for s in ("train", "test")}
-    if not force and all(p.exists() for p in paths.values()):
-        loaded = {s: DynamicsData.load(p) for s, p in paths.items()}
-        if all(same_collection(d.meta.get("collection"), cfg) for d in loaded.values()):
-            return loaded["train"], loaded["test"], {"reused": True, "wall_s": 0.0, "jobs": None}
-        if not replace_other:
-            stored = loaded["train"].meta.get("collection")
-            want = asdict(cfg)
-            diff = ({k: (stored.get(k, _LATER_FIELDS.get(k)), v) for k, v in want.items()
-                     if stored.get(k, _LATER_FIELDS.get(k)) != v} if isinstance(stored, dict) else {})
-            what = ", ".join(f"{k} {old!r} (now {new!r})" for k, (old, new) in diff.items()) or "unknown settings"
-            raise OtherCollectionError(f"{out} holds a collection with other settings: {what}; pass --force to "
-                                       f"replace it, or choose another --out")
+    loaded = {} if force else {s: DynamicsData.load(p) for s, p in paths.items() if p.exists()}
+    other = {s: d.meta.get("collection") for s, d in loaded.items()
+             if not same_collection(d.meta.get("collection"), cfg)}
+    if len(loaded) == 2 and not other:
+        return loaded["train"], loaded["test"], {"reused": True, "wall_s": 0.0, "jobs": None}
+    if other and not replace_other:
+        want = {**_LATER_FIELDS, **asdict(cfg)}
+        split, stored = next(iter(other.items()))
+        have = {**_LATER_FIELDS, **stored} if isinstance(stored, dict) else {}
+        what = ", ".join(f"{k} {have.get(k)!r} (now {want.get(k)!r})" for k in sorted(set(have) | set(want))
+                         if have.get(k) != want.get(k)) if have else "settings not recorded"
+        raise OtherCollectionError(f"{out} holds a collection with other settings ({paths[split].name}: {what}); "
+                                   f"pass --force to replace it, or choose another --out")
     t0 = time.perf_counter()
     parts, jobs = _record_all(cfg, workers, ray_address, vector_env)
     data = {}

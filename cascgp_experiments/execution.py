@@ -15,10 +15,10 @@ Backends (the same jobs, the same results):
   torch / BLAS thread (``OMP_NUM_THREADS`` ... and :func:`cascgp_experiments.common.limit_threads`);
 * ``ray_address``: the jobs become Ray tasks of one CPU each on the cluster at that address
   (``ray.init(address=...)``); ``"local"`` starts a new local Ray instance with ``num_cpus=workers``
-  (never a cluster already running here, nor ``RAY_ADDRESS``); ``"auto"``: the cluster this machine
-  belongs to. Ray is an optional extra (``ray``); nothing else imports it. On a
-  cluster, every node needs the project installed and the jobs' input files (and the transfer's buffer
-  folders) at the same paths, e.g. on a shared file system; only this process writes the cache.
+  (never a cluster already running here, nor ``RAY_ADDRESS``); ``"auto"``: the cluster this machine belongs to.
+  Ray is an optional extra (``ray``); nothing else imports it. On a cluster, every node needs the project installed
+  and the jobs' input files (and the transfer's buffer folders) at the same paths, e.g. on a shared file system;
+  only this process writes the cache.
 
 Ray token authentication: see :mod:`cascgp_experiments.ray_backend`.
 
@@ -30,9 +30,10 @@ Failures: a job that raises is reported on stderr with its inputs and the error,
 more; if it fails again :class:`JobError` is raised naming the inputs (local processes: after the jobs
 already running have finished and been cached, jobs not yet started are cancelled; Ray: ``ray.cancel``
 interrupts the running jobs too, so only those that had finished are cached). Any other exception in
-this process (Ctrl-C, a cache write that fails) cancels the jobs not yet started at once. A worker process that
-dies (a crash in native code, the out-of-memory killer) ends the run with a ``RuntimeError`` naming a
-job it was running; the finished jobs are in the cache, so running the command again resumes.
+this process (Ctrl-C, a cache write that fails) cancels the jobs not yet started at once; Ctrl-C ends the pool
+processes too, without a word. A worker process that dies (a crash in native code, the out-of-memory killer) ends
+the run with a ``RuntimeError`` naming a job it was running; the finished jobs are in the cache, so running the
+command again resumes.
 
 Cache: with ``cache_dir``, every finished job's result is kept (:mod:`cascgp_experiments.job_cache`), and a run
 started again with the same inputs skips the jobs already there.
@@ -43,6 +44,7 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import queue as queue_mod
+import signal
 import sys
 import threading
 import time
@@ -69,8 +71,7 @@ THREAD_ENV = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THRE
 
 
 class JobError(RuntimeError):
-    """A job failed twice (its first failure was retried once). ``inputs``: the job's inputs;
-    ``error``: the last error's text (with the worker's traceback)."""
+    """A job failed twice (retried once). ``inputs``: its inputs; ``error``: the last error's text and traceback."""
 
     def __init__(self, message: str, inputs: Mapping[str, Any], error: str) -> None:
         super().__init__(message)
@@ -123,11 +124,10 @@ def add_execution_args(parser: Any) -> None:
 def check_args(parser: Any, args: Any) -> None:
     """Validate ``--workers`` / ``--ray`` (``parser.error`` on a bad value or a missing Ray).
 
-    With a cluster address (``--ray HOST:PORT`` or ``auto``, not ``local``) this also connects to the
-    cluster, so that an unreachable cluster or a refused token ends the command at once with a one-line
-    ``error:`` (exit status 2) naming the fix, before any work and without Ray's traceback. The
-    connection stays open for the run (:func:`run_jobs` and :func:`session` use it and leave it open;
-    Ray closes it at exit)."""
+    With a cluster address (``--ray HOST:PORT`` or ``auto``, not ``local``) this also connects to the cluster, so
+    that an unreachable cluster or a refused token ends the command at once with a one-line ``error:`` (exit status
+    2) naming the fix, before any work and without Ray's traceback. The connection stays open for the run
+    (:func:`run_jobs` and :func:`session` use it and leave it open; Ray closes it at exit)."""
     require_at_least(parser, args, 1, "workers")
     if args.ray is not None:
         try:
@@ -150,15 +150,14 @@ def check_workers(workers: int | None) -> int:
     return check_count(workers, "workers")
 
 
-# --------------------------------------------------------------------------- keys and cache
 # --------------------------------------------------------------------------- inside a worker
 _CHANNEL: Any = None          # where report_progress sends (a queue, or a callable in-process)
 _CURRENT: tuple[int, int] | None = None  # (job index, attempt) of the job running in this process
 
 
 def report_progress(units: int = 1, note: str = "") -> None:
-    """Called by a running job: ``units`` more of its work are done (``note``: shown beside the bar).
-    Does nothing when the job is not run by :func:`run_jobs`."""
+    """Called by a running job: ``units`` more of its work are done (``note``: shown beside the bar); a no-op
+    outside :func:`run_jobs`."""
     if _CHANNEL is None or _CURRENT is None:
         return
     msg = (_CURRENT[0], _CURRENT[1], int(units), str(note))
@@ -185,10 +184,10 @@ def _limit_threads() -> None:
 
 
 def _exit_with_parent(parent_pid: int, period_s: float = 0.5) -> None:
-    """Leave this worker process as soon as the process that started it is gone. A run killed with SIGKILL
-    or SIGTERM sent to its main process alone (``kill PID``, a batch scheduler) runs no cleanup, and the pool
-    processes went on with their jobs as orphans, holding a core and ~0.5 GB each. Polling the parent id is
-    the portable check (Linux's PR_SET_PDEATHSIG is not); the job's result would have nowhere to go."""
+    """Leave this worker process as soon as the process that started it is gone. A run killed with SIGKILL or
+    SIGTERM sent to its main process alone (``kill PID``, a batch scheduler) runs no cleanup, and the pool processes
+    went on with their jobs as orphans, holding a core and ~0.5 GB each. Polling the parent id is the portable check
+    (Linux's PR_SET_PDEATHSIG is not); the job's result would have nowhere to go."""
     while True:
         time.sleep(period_s)
         if os.getppid() != parent_pid:
@@ -196,10 +195,12 @@ def _exit_with_parent(parent_pid: int, period_s: float = 0.5) -> None:
 
 
 def _init_process(channel: Any, parent_pid: int | None = None) -> None:
-    """Initializer of every pool process: one thread, the progress channel, exit with the parent
-    (``parent_pid``: the run's process id, passed by it, so that a parent already gone is noticed too)."""
+    """Initializer of every pool process: one thread, the progress channel, exit with the parent (``parent_pid``:
+    the run's id, passed by it, so that a parent already gone is noticed too), and on Ctrl-C (sent to every process
+    of the terminal's group) exit without a traceback: the run's main process reports it."""
     global _CHANNEL
     _limit_threads()
+    signal.signal(signal.SIGINT, lambda *_: os._exit(130))
     _CHANNEL = channel
     pid = os.getppid() if parent_pid is None else int(parent_pid)
     threading.Thread(target=_exit_with_parent, args=(pid,), name="exit-with-parent", daemon=True).start()
@@ -225,9 +226,8 @@ def _call(fn: Callable, inputs: dict, index: int, attempt: int, channel: Any = N
 @contextmanager
 def _one_thread_here() -> Iterator[None]:
     """Hold torch and BLAS to one thread in this process (as in a worker); restore afterwards."""
-    from threadpoolctl import threadpool_limits
-
     import torch
+    from threadpoolctl import threadpool_limits
 
     prev = torch.get_num_threads()
     torch.set_num_threads(1)

@@ -242,8 +242,9 @@ def render(json_path: str | Path, out: str | Path) -> list[Path]:
     return render_results(res, out)
 
 
-def render_results(res: dict[str, Any], out: str | Path) -> list[Path]:
-    """Write every figure/table/CSV above from the results dict ``res`` into ``out``; returns the paths."""
+def render_results(res: dict[str, Any], out: str | Path, claims: str = "claims.md") -> list[Path]:
+    """Write every figure/table/CSV above from the results dict ``res`` into ``out`` (the claims into the file
+    ``claims``); returns the paths."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
@@ -309,5 +310,6 @@ def render_results(res: dict[str, Any], out: str | Path) -> list[Path]:
         written.append(_write_rows(out / "iterations.csv", rows))
     if res.get("correlation"):
         written.append(correlation_figure(res["correlation"], out / "fig_correlation.png"))
-    written.append(atomic_write_text(out / "claims.md", claims_markdown(res)))
+    source = "sarcos.json" if set(res) == {"sarcos"} else "results.json"
+    written.append(atomic_write_text(out / claims, claims_markdown(res, source)))
     return written

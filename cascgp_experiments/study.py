@@ -157,7 +157,7 @@ def reuse_note(meta: dict[str, Any]) -> str | None:
     reused = meta.get("reused", {})
     parts = ["the collection"] if reused.get("collection") else []
     for key, what in (("jaco_jobs", "Jaco jobs"), ("sarcos_jobs", "SARCOS jobs")):
-        done, total = reused.get(key, (0, 0))
+        done, total = reused.get(key) or (0, 0)
         if done:
             parts.append(f"{done} of {total} {what}")
     if reused.get("iterations"):
@@ -199,10 +199,13 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
 
     # 1. data
     ccfg = replace(col.PRESETS[settings.collection], seed=settings.seed, sensor_pipeline=settings.sensor_pipeline)
+    t0 = time.perf_counter()
     train, test, cinfo = col.collect(out / "data", ccfg, workers=workers, ray_address=ray_address)
-    timings["collect_s"] = cinfo["wall_s"]
-    # what this run took from an earlier run's files (a resumed or repeated run): its timings are its own
-    reused: dict[str, Any] = {"collection": bool(cinfo["reused"])}
+    timings["collect_s"] = time.perf_counter() - t0
+    # what this run took from an earlier run's files (a resumed or repeated run; None: a part not run): the
+    # timings are this run's own
+    reused: dict[str, Any] = {"collection": bool(cinfo["reused"]), "jaco_jobs": None, "iterations": None,
+                              "sarcos_jobs": None}
     results["meta"]["reused"] = reused
     results["meta"]["complete"] = False  # until every part is written
     results["meta"]["collection"] = {**asdict(ccfg), "reused": cinfo["reused"],
@@ -243,7 +246,7 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
         t0 = time.perf_counter()
         results["iterations"] = cached_iteration_counts(out, train, settings)
         timings["iterations_s"] = time.perf_counter() - t0
-        reused["iterations"] = results["iterations"]["reused"]
+        reused["iterations"] = results["iterations"].pop("reused")
         write_json(out / "results.json", results)
 
     # 4. correlation

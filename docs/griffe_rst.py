@@ -121,7 +121,7 @@ def _block_end(lines: list[str], i: int, indent: int) -> int:
     return j
 
 
-_EXAMPLE_TITLE = re.compile(r"^(\s*)(Examples?):\s*$")
+_EXAMPLE_TITLE = re.compile(r"^(\s*)(Example):\s*$")  # "Examples:" is a section of griffe's own
 
 
 def _open_examples(lines: list[str]) -> list[str]:
@@ -176,10 +176,10 @@ def convert_blocks(text: str) -> str:
             while end < len(lines) and lines[end].strip() and _indent(lines[end]) >= ind:
                 end += 1
             body = [b[ind:] for b in lines[i:end]]
-            # fenced at the indent of the text it follows (an indented fence under a heading would be a code block
-            # holding the fence)
-            above = next((_indent(b) for b in reversed(out) if b.strip()), 0)
-            pad = " " * min(ind, above)
+            # under a heading, fenced at the heading's indent (an indented fence there would be a code block
+            # holding the fence); elsewhere (a list item, an argument) at its own
+            prev = next((b for b in reversed(out) if b.strip()), "")
+            pad = " " * (min(ind, _indent(prev)) if prev.lstrip().startswith("#") else ind)
             out += ["", pad + "```pycon", *(pad + b for b in body), pad + "```", ""]
             i = end
             continue
@@ -203,7 +203,8 @@ def convert_blocks(text: str) -> str:
     return "\n".join(out)
 
 
-_ITEM_SECTION = re.compile(r"^(\s*)(Args|Arguments|Parameters|Attributes|Keyword Args|Other Parameters):\s*$")
+_ITEM_SECTION = re.compile(r"^(\s*)(Args|Arguments|Params|Parameters|Attributes|Keyword Args|Keyword Arguments|"
+                           r"Other Args|Other Arguments|Other Params|Other Parameters):\s*$")
 _GROUPED_ITEM = re.compile(r"^(\s*)([A-Za-z_]\w*(?:\s*,\s*[A-Za-z_]\w*)+)((?:\s*\([^()]*\))?:(?:\s.*)?)$")
 
 
@@ -303,14 +304,25 @@ def _resolver(obj: griffe.Object) -> Any:
     return resolve
 
 
-_DOC_PATH = re.compile(r"(``)?(?<![\w/])docs/([\w/.-]+?)\.md\b(?(1)``)")
+_DOC_PATH = re.compile(r"(?<![\w/`])(``)?docs/([\w/.-]+?)\.md(#[\w-]+)?(?![\w/])(?(1)``)")
+_FENCED = re.compile(r"^(\s*)```.*?^\1```[ \t]*$", re.MULTILINE | re.DOTALL)
 
 
 def _doc_link(m: re.Match[str]) -> str:
     """A ``docs/<page>.md`` path as a link to that page of the site, relative to an API page (``api/<name>/``)."""
-    page = m[2].removesuffix("index").rstrip("/")
-    url = "../../" + (page + "/" if page else "")
-    return f"[`docs/{m[2]}.md`]({url})"
+    page = m[2]
+    page = "" if page == "index" else page.removesuffix("/index")
+    url = "../../" + (page + "/" if page else "") + (m[3] or "")
+    return f"[`docs/{m[2]}.md{m[3] or ''}`]({url})"
+
+
+def _link_doc_paths(text: str) -> str:
+    """:func:`_doc_link` for every page path outside fenced code blocks (a path in code stays as written)."""
+    out, last = [], 0
+    for fence in _FENCED.finditer(text):
+        out += [_DOC_PATH.sub(_doc_link, text[last:fence.start()]), fence[0]]
+        last = fence.end()
+    return "".join(out + [_DOC_PATH.sub(_doc_link, text[last:])])
 
 
 def convert_inline(text: str, obj: griffe.Object) -> str:
@@ -332,7 +344,7 @@ def convert_inline(text: str, obj: griffe.Object) -> str:
         code = f"<code>{title}</code>"
         return f'<autoref identifier="{path}" optional>{code}</autoref>' if path else f"`{title}`"
 
-    text = _DOC_PATH.sub(_doc_link, text)
+    text = _link_doc_paths(text)
     text = _MATH_ROLE.sub(lambda m: f"${m[1]}$", text)
     text = _ROLE.sub(role, text)
     return re.sub(r"\[(\d+)\]_", r"[^\1]", text)

@@ -68,6 +68,8 @@ def target_rotation(approach: np.ndarray, tilt: float) -> np.ndarray:
     ``TypeError`` naming the argument otherwise.
     """
     a = real_array(approach, (3,), "approach")
+    if isinstance(tilt, np.ndarray) and tilt.shape == () and tilt.dtype.kind in "iuf":
+        tilt = tilt.item()  # a 0-d array of a real number
     if not is_real_number(tilt):
         raise TypeError(f"tilt must be a real number (rad), got {type(tilt).__name__} {tilt!r}")
     if not math.isfinite(tilt):

@@ -100,7 +100,7 @@ GEAR_RATIO = np.array([160.0, 160.0, 160.0, 110.0, 110.0, 110.0])
 MOTOR_INERTIA = np.array([1.3e-5, 1.3e-5, 1.3e-5, 4.0e-6, 4.0e-6, 4.0e-6])
 #: Reflected rotor inertia (kg m^2), open loop: MOTOR_INERTIA * GEAR_RATIO**2.
 ROTOR_INERTIA = MOTOR_INERTIA * GEAR_RATIO**2
-#: Gear friction referred to the output, open loop: dry (N m) and viscous (N m s/rad).
+#: Gear dry friction referred to the output, open loop (N m).
 GEAR_FRICTION = 0.05 * TORQUE_LIMITS
 #: Gear viscous friction referred to the output, open loop (N m s/rad).
 GEAR_DAMPING = np.array([0.5, 0.5, 0.5, 0.1, 0.1, 0.1])

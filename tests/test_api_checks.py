@@ -51,6 +51,7 @@ def test_the_kinematics_helpers_agree_with_each_other():
     np.testing.assert_allclose(p, HOME_MOUTH, atol=1e-6)
     np.testing.assert_allclose(R, target_rotation(HOME_APPROACH, 0.0), atol=1e-6)
     np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+    assert np.array_equal(target_rotation(HOME_APPROACH, np.array(0.3)), target_rotation(HOME_APPROACH, 0.3))
 
 
 def test_payload_start_pose_within_the_joint_ranges():

@@ -79,7 +79,7 @@ def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_pat
     rendered: list[dict] = []
     monkeypatch.setattr(cli, "run_sarcos", fake_run)
     monkeypatch.setattr(cli, "limit_threads", lambda n=1: None)  # the command's; not for the rest of the session
-    monkeypatch.setattr("cascgp_experiments.plots.render_results", lambda res, out: rendered.append(res) or [])
+    monkeypatch.setattr("cascgp_experiments.plots.render_results", lambda res, out, claims: rendered.append(res) or [])
     mat = write_tiny_ias(tmp_path / "x.mat")
     for args, preset in ((["--quick"], PRESETS["quick"]), ([], PRESETS["full"])):
         cli.main(["--sarcos", str(mat), "--out", str(tmp_path / "o"), "--workers", "1", *args])
@@ -92,7 +92,7 @@ def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_pat
         assert written["grid_s"] == list(preset.sarcos_grid)
         # provenance like the study's results.json, the table as a file, the figure and claims from the block
         assert {"command", "versions", "machine", "started", "finished"} <= set(written["meta"])
-        assert written["meta"]["reused_jobs"] == [0, 9]
+        assert written["meta"]["reused"] == {"sarcos_jobs": [0, 9]}
         assert f"| {preset.sarcos_grid[-1]:g} | 0.1000 | 0.2000 |" in (tmp_path / "o" / "sarcos_table.md").read_text()
         assert rendered[-1]["sarcos"]["grid_s"] == list(preset.sarcos_grid)
     cli.main(["--sarcos", str(mat), "--out", str(tmp_path / "o"), "--workers", "1", "--restarts", "2", "--seed", "7"])

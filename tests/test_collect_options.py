@@ -113,9 +113,16 @@ def test_a_collection_of_other_settings_is_refused_unless_forced(arms, tmp_path:
         d.save(tmp_path / f"jaco_{split}.npz")
     before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
     other = replace(TINY, seed=TINY.seed + 1)
-    with pytest.raises(OtherCollectionError, match=r"other settings: seed 0 \(now 1\); pass --force"):
+    refused = r"other settings \(jaco_train.npz: seed 0 \(now 1\)\); pass --force"
+    with pytest.raises(OtherCollectionError, match=refused):
         collect(tmp_path, other, workers=1, replace_other=False)
     assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
+    lone = tmp_path / "lone"  # one file of another collection (the other missing) is refused too
+    lone.mkdir()
+    train.save(lone / "jaco_train.npz")
+    with pytest.raises(OtherCollectionError, match="jaco_train.npz: seed 0"):
+        collect(lone, other, workers=1, replace_other=False)
+    assert [p.name for p in lone.iterdir()] == ["jaco_train.npz"]
     assert collect(tmp_path, TINY, workers=1, replace_other=False)[2]["reused"]  # the same settings: reused
     assert not collect(tmp_path, other, workers=1, replace_other=False, force=True)[2]["reused"]
 

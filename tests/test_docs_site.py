@@ -50,11 +50,22 @@ def test_grouped_names_become_one_item_each():
 
 
 def test_a_page_path_becomes_a_link_relative_to_an_api_page():
+    link = _hook()._link_doc_paths
+    assert link("see docs/studies/index.md.") == "see [`docs/studies/index.md`](../../studies/)."
+    assert link("in ``docs/sensing-sources.md``)") == "in [`docs/sensing-sources.md`](../../sensing-sources/))"
+    assert link("``docs/performance.md#the-fit``") == "[`docs/performance.md#the-fit`](../../performance/#the-fit)"
+    assert link("docs/reindex.md") == "[`docs/reindex.md`](../../reindex/)"
+    # code stays as written: a code span, a fenced block, a URL
+    for text in ("`docs/a.md`", "```text\ndocs/a.md\n```", "https://example.org/docs/a.md"):
+        assert link(text) == text
+
+
+def test_a_doctest_in_a_list_item_or_an_argument_keeps_its_indent():
     hook = _hook()
-    assert hook._DOC_PATH.sub(hook._doc_link, "see docs/studies/index.md.") == \
-        "see [`docs/studies/index.md`](../../studies/)."
-    assert hook._DOC_PATH.sub(hook._doc_link, "in ``docs/sensing-sources.md``)") == \
-        "in [`docs/sensing-sources.md`](../../sensing-sources/))"
+    assert "\n  ```pycon\n  >>> f(1)\n  2\n  ```" in hook.convert_blocks("* item, e.g.\n\n  >>> f(1)\n  2\n* next")
+    out = hook.convert_blocks("Args:\n    x: the value, e.g.\n\n        >>> x = 1\n")
+    assert "\n        ```pycon\n        >>> x = 1\n        ```" in out
+    assert "**Examples:**" not in hook.convert_blocks("Examples:\n    >>> 1\n")  # griffe's own section
 
 
 @pytest.fixture(scope="module")

@@ -64,6 +64,14 @@ def endless_job(x: int, pid_dir: str) -> int:
         time.sleep(0.1)
 
 
+def endless_or_quick_job(x: int, pid_dir: str) -> int:
+    """Job 0 waits for ever; the others write their process id and return (their worker then waits idle)."""
+    if x == 0:
+        endless_job(x, pid_dir)
+    (Path(pid_dir) / f"{x}.pid").write_text(str(os.getpid()))
+    return x
+
+
 def uncacheable_job(x: int, log_dir: str) -> Any:
     """Job 0 returns what JSON cannot hold (the run fails in this process, not in the job); the others
     take a while and leave a mark that they ran."""
@@ -245,6 +253,50 @@ def test_pool_workers_exit_when_the_run_is_killed_alone(tmp_path: Path) -> None:
                 os.kill(pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
+
+
+_CTRL_C_SCRIPT = """
+import sys
+from cascgp_experiments.execution import run_jobs
+from test_execution import endless_or_quick_job
+try:
+    run_jobs(endless_or_quick_job, [{"x": x, "pid_dir": sys.argv[1]} for x in range(2)], workers=2,
+             show_progress=False)
+except KeyboardInterrupt:
+    print("interrupted", file=sys.stderr)
+    sys.exit(130)
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process states from /proc")
+def test_ctrl_c_ends_the_pool_processes_without_a_traceback(tmp_path: Path) -> None:
+    """Ctrl-C reaches every process of the terminal's group: the run's main process reports it, and its pool
+    processes, one busy and one idle, leave without printing a traceback of their own."""
+    p = subprocess.Popen([sys.executable, "-c", _CTRL_C_SCRIPT, str(tmp_path)], env=subprocess_env(), cwd=REPO,
+                         start_new_session=True, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    pids: list[int] = []
+    try:
+        while len(pids) < 2:  # job 0 running, job 1 done: one busy worker and one idle
+            assert p.poll() is None, "the run ended before its workers started"
+            pids = [int(f.read_text()) for f in tmp_path.glob("*.pid") if f.read_text()]
+            time.sleep(0.05)
+        time.sleep(0.5)  # job 1's result back, its worker waiting for work
+        os.killpg(p.pid, signal.SIGINT)
+        _, err = p.communicate(timeout=60)
+        assert p.returncode == 130 and err.strip() == "interrupted", err
+        deadline = time.monotonic() + 60  # a hang guard, not a speed limit
+        while any(_alive(pid) for pid in pids) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not any(_alive(pid) for pid in pids)
+    finally:
+        for pid in pids:
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
 
 
 def dying_job(x: int) -> int:

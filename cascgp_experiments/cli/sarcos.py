@@ -10,7 +10,7 @@ preset's; the pooled tests included); data, subsets and models: :mod:`cascgp_exp
 Writes ``<out>/sarcos.json`` (per model the nRMSE of every subset, grid point and joint, their summaries, the
 pooled tests, and ``meta``: the command, versions and machine), ``sarcos_table.md`` (each model's nRMSE per grid
 point, median over subsets, mean over the 7 joints; also printed), ``fig_sarcos.png``, ``curves_sarcos.csv`` and
-``claims.md`` (the paper's SARCOS claims), as ``cascgp study`` writes its SARCOS part.
+``sarcos_claims.md`` (the paper's SARCOS claims), as ``cascgp study`` writes its SARCOS part.
 """
 
 from __future__ import annotations
@@ -68,17 +68,17 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                        n_restarts=preset.n_restarts if a.restarts is None else a.restarts,
                        seed=preset.seed if a.seed is None else a.seed, workers=a.workers, ray_address=a.ray)
     meta["finished"] = time.strftime("%Y-%m-%d %H:%M:%S")
-    meta["reused_jobs"] = [block["n_cached_jobs"], block["jobs"]["n_jobs"]]  # from an earlier run in --out
+    meta["reused"] = {"sarcos_jobs": [block["n_cached_jobs"], block["jobs"]["n_jobs"]]}  # an earlier run's, in --out
     block["meta"] = meta
     write_json(out / "sarcos.json", block)
     table = summary_table(block)
     atomic_write_text(out / "sarcos_table.md", table + "\n")
     from cascgp_experiments.plots import render_results
 
-    render_results({"sarcos": block}, out)  # fig_sarcos.png, curves_sarcos.csv, claims.md
+    render_results({"sarcos": block}, out, claims="sarcos_claims.md")  # fig_sarcos.png, curves_sarcos.csv
     print(table)
     print(f"wrote {out / 'sarcos.json'}, {out / 'sarcos_table.md'}, {out / 'fig_sarcos.png'}, "
-          f"{out / 'curves_sarcos.csv'} and {out / 'claims.md'}")
+          f"{out / 'curves_sarcos.csv'} and {out / 'sarcos_claims.md'}")
     if block["n_cached_jobs"]:
         print(f"({block['n_cached_jobs']} of {block['jobs']['n_jobs']} jobs came from an earlier run in this folder)")
 

@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     note = reuse_note(res["meta"])
     if note:
         print(note)
-    if res["meta"]["sarcos_skipped"]:
+    if res["meta"].get("sarcos_skipped"):
         print(f"SARCOS part skipped ({res['meta']['sarcos_skipped']}): claims.md has no SARCOS claims")
     print(f"results: {Path(a.out) / 'results.json'}; table: {Path(a.out) / 'table1.md'}")
 
