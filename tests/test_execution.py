@@ -229,6 +229,22 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
+def _all_gone(pids: list[int]) -> bool:
+    """Whether the processes ``pids`` have all exited; waits up to 60 s (a hang guard, not a speed limit)."""
+    deadline = time.monotonic() + 60
+    while any(_alive(pid) for pid in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return not any(_alive(pid) for pid in pids)
+
+
+def _kill_all(pids: list[int]) -> None:
+    for pid in pids:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process states from /proc")
 def test_pool_workers_exit_when_the_run_is_killed_alone(tmp_path: Path) -> None:
     """SIGKILL to the run's main process only (not its group, as `kill PID` or a scheduler does): the pool
@@ -243,16 +259,9 @@ def test_pool_workers_exit_when_the_run_is_killed_alone(tmp_path: Path) -> None:
             time.sleep(0.05)
         os.kill(p.pid, signal.SIGKILL)
         p.wait(timeout=60)
-        deadline = time.monotonic() + 60  # a hang guard, not a speed limit: without the fix they never exit
-        while any(_alive(pid) for pid in pids) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert not any(_alive(pid) for pid in pids), "pool workers outlived the killed run"
+        assert _all_gone(pids), "pool workers outlived the killed run"
     finally:
-        for pid in pids:
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+        _kill_all(pids)
 
 
 _CTRL_C_SCRIPT = """
@@ -285,16 +294,9 @@ def test_ctrl_c_ends_the_pool_processes_without_a_traceback(tmp_path: Path) -> N
         os.killpg(p.pid, signal.SIGINT)
         _, err = p.communicate(timeout=60)
         assert p.returncode == 130 and err.strip() == "interrupted", err
-        deadline = time.monotonic() + 60  # a hang guard, not a speed limit
-        while any(_alive(pid) for pid in pids) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        assert not any(_alive(pid) for pid in pids)
+        assert _all_gone(pids), "pool workers outlived the interrupted run"
     finally:
-        for pid in pids:
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
+        _kill_all(pids)
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
 
