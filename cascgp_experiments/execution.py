@@ -200,7 +200,7 @@ def _init_process(channel: Any, parent_pid: int | None = None) -> None:
     of the terminal's group) exit without a traceback: the run's main process reports it."""
     global _CHANNEL
     _limit_threads()
-    signal.signal(signal.SIGINT, lambda *_: os._exit(130))
+    signal.signal(signal.SIGINT, lambda *_: sys.exit(130))  # SystemExit: no traceback, finalizers run
     _CHANNEL = channel
     pid = os.getppid() if parent_pid is None else int(parent_pid)
     threading.Thread(target=_exit_with_parent, args=(pid,), name="exit-with-parent", daemon=True).start()
