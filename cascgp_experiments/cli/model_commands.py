@@ -118,7 +118,7 @@ def _limits_note(prog: str, rbd: Any, data: Any) -> str | None:
     """One note naming the joints with rows outside the URDF's position limits by more than a tenth of their span
     (positions in degrees, or another zero, say); joints without limits (continuous) are not checked. Returns it
     (``None``: no note, or a rigid-body model without URDF limits)."""
-    if not hasattr(rbd, "position_limits"):  # a model's own inverse-dynamics object, not a RigidBodyModel
+    if not hasattr(rbd, "position_limits"):  # None (an NP model), or an inverse-dynamics object without URDF limits
         return None
     m = rbd.pin_model
     checks = [(f"q{j + 1}", data.q[:, j], lo, hi) for j, (lo, hi) in enumerate(rbd.position_limits)]
@@ -374,8 +374,8 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         if rows.sum() < 2:
             raise _Fail(f"{a.data}: fewer than 2 rows have the {2 * model.df_delta:g} s of history the -df model "
                         "needs")
-    notes = [n for n in (_limits_note(prog, model.rbd, data) if model.rbd is not None else None,
-                         _coverage_note(prog, model, data), _in_sample_note(prog, model, data)) if n]
+    notes = [n for n in (_limits_note(prog, model.rbd, data), _coverage_note(prog, model, data),
+                         _in_sample_note(prog, model, data)) if n]
     tau = data.tau[rows]
     scores = {model.name: nrmse(mean[rows], tau)}
     if model.rbd is not None:
@@ -437,8 +437,7 @@ def _predict(a: argparse.Namespace, prog: str) -> int:
     _describe(prog, data, a.data)
     _check_dof(model, data, a.data)
     mean, var = model.predict_data(data)
-    if model.rbd is not None:
-        _limits_note(prog, model.rbd, data)
+    _limits_note(prog, model.rbd, data)
     _coverage_note(prog, model, data)
     if model.feature_kind == "df":
         short = int((~history_from_data(data, model.df_delta)[1]).sum())

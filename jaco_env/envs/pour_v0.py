@@ -375,9 +375,9 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
             # The last finite observation, its time and marble counts, charged its tracking cost (a step of the
             # episode like the others: a reward of 0 here paid a learner to make the simulation unstable)
             self._unstable = True
-            r_track = -self._tracking_cost_weight * self.control_dt * self._last_err
-            info = self._info({"reward_tracking": r_track, "reward_pour": 0.0}, self._last_err, self._last_counts)
-            return self._last_obs.copy(), r_track, False, True, info
+            reward, reward_info = self._get_rew(self._last_err, self._last_counts[0])  # no marble moved: no pour term
+            return (self._last_obs.copy(), reward, False, True,
+                    self._info(reward_info, self._last_err, self._last_counts))
         self._step_count += 1
         e = self.task.reference_position(self.time) - self._q_arm
         err = math.hypot(*e)  # not e.dot(e): BLAS rounds differently from one CPU to another (see _place_marbles)
