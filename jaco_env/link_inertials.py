@@ -67,8 +67,12 @@ def cylinder_inertia(height: float, radius: float, axis: str, mass: float) -> np
 
 
 def check_link_inertials(value: object) -> str:
-    """``value`` if it is one of :data:`LINK_INERTIALS`; ``ValueError`` naming ``link_inertials`` otherwise."""
-    if not isinstance(value, str) or value not in LINK_INERTIALS:
+    """``value`` if it is one of :data:`LINK_INERTIALS`; naming ``link_inertials`` otherwise, ``TypeError`` (not a
+    string) or ``ValueError`` (another name)."""
+    if not isinstance(value, str):
+        raise TypeError(f"link_inertials must be one of {LINK_INERTIALS} or None, got {type(value).__name__} "
+                        f"{value!r}")
+    if value not in LINK_INERTIALS:
         raise ValueError(f"link_inertials must be one of {LINK_INERTIALS}, got {value!r}")
     return value
 

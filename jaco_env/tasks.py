@@ -108,6 +108,21 @@ class PouringTask:
             if not 0 < getattr(self, f) <= 1:
                 raise ValueError(f"PouringTask.{f} must be in (0, 1], got {getattr(self, f)}")
 
+    def __eq__(self, other: object) -> bool:
+        """Equal fields (the generated ``__eq__`` compared ``jar_pos`` as a tuple item, which NumPy refuses)."""
+        if other.__class__ is not self.__class__:
+            return NotImplemented
+        fields = [f.name for f in dataclasses.fields(self) if f.compare]
+        return all(np.array_equal(getattr(self, f), getattr(other, f)) if f == "jar_pos"
+                   else getattr(self, f) == getattr(other, f) for f in fields)
+
+    def __getstate__(self) -> dict:
+        """Pickled without the cached reference (its paths are closures, which ``pickle`` cannot store);
+        the copy rebuilds it on first use, bit for bit the same."""
+        state = self.__dict__.copy()
+        state["_segments"] = state["_bounds"] = None
+        return state
+
     def replace(self, **changes) -> "PouringTask":
         """A copy with some fields changed (the reference is recomputed lazily)."""
         return dataclasses.replace(self, **changes)

@@ -127,12 +127,17 @@ def test_a_pouring_task_checks_its_fields(change, exc, match):
 
 
 @pytest.mark.parametrize("kwargs, exc, match", [
-    ({"width": "480"}, ValueError, r"width must be an integer number of pixels in \[1, 16384\], got '480'"),
+    ({"width": "480"}, TypeError, r"width must be an integer number of pixels in \[1, 16384\], got str '480'"),
+    ({"width": 480.0}, TypeError, "width must be an integer"),
+    ({"height": True}, TypeError, "height must be an integer"),
+    ({"control_mode": None}, TypeError, "control_mode must be 'torque' or 'velocity', got NoneType"),
+    ({"link_inertials": 3}, TypeError, "link_inertials must be one of"),
+    ({"link_inertials": "urdf"}, ValueError, "link_inertials must be one of"),
     ({"height": -5}, ValueError, "height must be an integer"),
     ({"camera_name": "nope"}, ValueError, r"camera_name: the scene has no camera 'nope'; its cameras are \["),
     ({"camera_name": 3}, TypeError, "camera_name must be a camera's name or None"),
 ])
-def test_render_settings_are_checked_at_construction(kwargs, exc, match):
+def test_settings_are_checked_at_construction_with_their_type(kwargs, exc, match):
     with pytest.raises(exc, match=match):
         gym.make("JacoPour-v0", n_marbles=5, render_mode="rgb_array", **kwargs)
 

@@ -242,7 +242,8 @@ def test_unstable_simulation_truncates_without_nan(pour_env):
 @pytest.mark.parametrize("env_id", ["JacoPour-v0", "JacoPayload-v0"])
 def test_an_unstable_step_reports_the_last_finite_state(env_id):
     """The unstable step returns the last finite observation with that step's time and, for the pour, its tracking
-    error, marble counts and tracking cost as the reward (a reward of 0 there paid a learner to go unstable)."""
+    error, marble counts and tracking cost as the reward (a reward of 0 there paid a learner to go unstable); a step
+    after it returns the same and warns once per episode."""
     env = gym.make(env_id, **({"n_marbles": 5} if env_id == "JacoPour-v0" else {}))
     try:
         env.reset(seed=0)
@@ -250,8 +251,12 @@ def test_an_unstable_step_reports_the_last_finite_state(env_id):
             last_obs, last_r, _, _, last = env.step(np.full(6, 2.0))
         u = env.unwrapped
         u.data.qvel[u.arm_dof_adr] = 1e6
-        for _ in range(2):  # the unstable step, and a step after it
-            obs, r, term, trunc, info = env.step(np.zeros(6))
+        for k in range(3):  # the unstable step, a step after it (warned) and one more (not warned again)
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                obs, r, term, trunc, info = env.step(np.zeros(6))
+            warned = [str(w.message) for w in caught if "unstable simulation" in str(w.message)]
+            assert len(warned) == (k == 1) and "Call 'reset()'" in "".join(warned or ["Call 'reset()'"])
             assert trunc and not term and info["unstable"]
             np.testing.assert_array_equal(obs, last_obs)
             assert info["time"] == last["time"] == obs[jaco_env.OBS_TIME]
@@ -341,3 +346,46 @@ def test_excitation_within_limits():
             assert r[0] < q[:, j].min() and q[:, j].max() < r[1]
     assert np.allclose(np.gradient(q, t, axis=0)[1:-1], qd[1:-1], atol=1e-3)
     assert not np.allclose(SumOfSinusoids(q0, seed=5).amplitudes, gen.amplitudes)
+
+
+def test_an_env_with_its_own_task_object_pickles():
+    """A task's reference is cached as closures; a pickled task (and an env holding one, Gymnasium's ``EzPickle``)
+    drops the cache and rebuilds it, the same bit for bit."""
+    task = PouringTask("mine", jar_pos=np.array([0.5, 0.1, 0.0]))
+    t = np.linspace(0.0, task.duration, 7)  # the duration builds the cache
+    twin = pickle.loads(pickle.dumps(task))
+    for a, b in zip(task.reference(t), twin.reference(t)):
+        np.testing.assert_array_equal(a, b)
+    env = gym.make("JacoPour-v0", n_marbles=5, task=task)
+    env.reset(seed=1)
+    env2 = pickle.loads(pickle.dumps(env))
+    shared = gym.make("JacoPour-v0", n_marbles=5, task=DEFAULT_TASKS["front"])  # a module-level task, used
+    shared.reset(seed=1)
+    pickle.loads(pickle.dumps(shared)).close()
+    try:
+        obs = [e.reset(seed=1)[0] for e in (env, env2)]
+        obs += [e.step(np.full(6, 0.5))[0] for e in (env, env2)]
+        np.testing.assert_array_equal(obs[0], obs[1])
+        np.testing.assert_array_equal(obs[2], obs[3])
+        assert env2.unwrapped.task == task and task != task.replace(jar_pos=np.array([0.5, 0.1, 0.01]))
+    finally:
+        for e in (env, env2, shared):
+            e.close()
+
+
+@pytest.mark.parametrize("env_id, options", [
+    ("JacoPour-v0", {"task": None, "payload_mass": None}),
+    ("JacoPayload-v0", {"payload_mass": None, "q0": None}),
+])
+def test_reset_options_given_as_none_are_as_if_absent(env_id, options):
+    kw = {"n_marbles": 5, "task": "left"} if env_id == "JacoPour-v0" else {"payload_mass": 0.5}
+    env = gym.make(env_id, **kw)
+    try:
+        a, info_a = env.reset(seed=2)
+        b, info_b = env.reset(seed=2, options=options)
+        np.testing.assert_array_equal(a, b)
+        assert info_a.keys() == info_b.keys()
+        for key in info_a:
+            np.testing.assert_array_equal(info_a[key], info_b[key])
+    finally:
+        env.close()

@@ -109,8 +109,8 @@ def test_env_option(env_id):
         b4 = u.model.body_mass[u.model.body("jaco_arm/b_4").id]
         assert b4 == pytest.approx(0.426367 if expected == "kinova" else 0.221432)
         env.close()
-    for bad in ("urdf", 1, ""):
-        with pytest.raises(ValueError, match="link_inertials must be one of"):
+    for bad, exc in (("urdf", ValueError), ("", ValueError), (1, TypeError)):
+        with pytest.raises(exc, match="link_inertials must be one of"):
             gym.make(env_id, link_inertials=bad, **kw)
 
 

@@ -204,7 +204,9 @@ def _no_display_message(reason: str) -> str:
 
 
 def check_options(options: dict | None, allowed: tuple[str, ...]) -> dict:
-    """The reset options as a dict (``{}`` for None); unknown keys raise ``ValueError``."""
+    """The reset options as a dict (``{}`` for None) without the options given as ``None``, which leave the
+    env's own setting as if they were absent (one options dict can then fix a setting in some envs of a vector env
+    and not in others); unknown keys raise ``ValueError``."""
     if options is None:
         return {}
     if not isinstance(options, dict):
@@ -212,7 +214,7 @@ def check_options(options: dict | None, allowed: tuple[str, ...]) -> dict:
     unknown = sorted(set(options) - set(allowed))
     if unknown:
         raise ValueError(f"unknown reset option(s) {unknown}; allowed: {list(allowed)}")
-    return options
+    return {key: value for key, value in options.items() if value is not None}
 
 
 class JacoMujocoEnv(MujocoEnv):
@@ -235,6 +237,9 @@ class JacoMujocoEnv(MujocoEnv):
                  render_mode: str | None, width: int, height: int, camera_name: str | None,
                  sensor_pipeline: str | SignalPipeline, link_inertials: str | None):
         # No defaults here: each environment's signature holds the public defaults.
+        if not isinstance(control_mode, str):
+            raise TypeError(f"control_mode must be 'torque' or 'velocity', got {type(control_mode).__name__} "
+                            f"{control_mode!r}")
         if control_mode not in ("torque", "velocity"):
             raise ValueError(f"control_mode must be 'torque' or 'velocity', got {control_mode!r}")
         if not is_real_number(control_freq):
@@ -253,7 +258,10 @@ class JacoMujocoEnv(MujocoEnv):
         if render_mode == "human" and (reason := no_display_reason()) is not None:
             raise NoDisplayError(_no_display_message(reason))
         for name, size in (("width", width), ("height", height)):
-            if isinstance(size, bool) or not isinstance(size, (int, np.integer)) or not 1 <= size <= 16384:
+            if isinstance(size, bool) or not isinstance(size, (int, np.integer)):
+                raise TypeError(f"{name} must be an integer number of pixels in [1, 16384], got "
+                                f"{type(size).__name__} {size!r}")
+            if not 1 <= size <= 16384:
                 raise ValueError(f"{name} must be an integer number of pixels in [1, 16384], got {size!r}")
         if camera_name is not None and not isinstance(camera_name, str):
             raise TypeError(f"camera_name must be a camera's name or None, got {type(camera_name).__name__}")
@@ -324,7 +332,7 @@ class JacoMujocoEnv(MujocoEnv):
         self._unstable = False
         self._last_obs: np.ndarray | None = None
         self._terminated = False
-        self._warned_terminated = False
+        self._warned_over = False
         self._options: dict = {}
         self.marble_dof_adr = np.zeros(0, dtype=int)
         self.payload_mass = 0.0
@@ -422,20 +430,27 @@ class JacoMujocoEnv(MujocoEnv):
     def _start_episode(self) -> np.ndarray:
         """End of ``reset_model``: the first observation, recorded (``step`` and ``render`` need a reset)."""
         self._terminated = False
-        self._warned_terminated = False
+        self._warned_over = False
         if self._signal is not None:  # after the episode's draws (task, payload, marbles): the same for any pipeline
             self._signal.reset(self.np_random)
         self._last_obs = self._get_obs()
         return self._last_obs
 
-    def _warn_if_terminated(self) -> None:
-        """Gymnasium's convention (as ``CartPole``): warn once when ``step`` is called after ``terminated``."""
-        if self._terminated and not self._warned_terminated:
+    def _warn_if_over(self) -> None:
+        """Gymnasium's convention (as ``CartPole``): warn once per episode when ``step`` is called after
+        ``terminated``, or after the truncation of an unstable simulation (whose state no step changes)."""
+        if self._warned_over or not (self._terminated or self._unstable):
+            return
+        if self._terminated:
             logger.warn("You are calling 'step()' even though this environment has already returned terminated = "
                         "True. You should always call 'reset()' once you receive 'terminated = True' -- the "
                         "simulation goes on, but the episode is over (its reward and termination no longer "
                         "mean anything).")
-            self._warned_terminated = True
+        else:
+            logger.warn("You are calling 'step()' even though this environment has already returned truncated = "
+                        "True on an unstable simulation (info['unstable']). Call 'reset()': every further step "
+                        "returns the same last finite observation, info and reward, and changes nothing.")
+        self._warned_over = True
 
     def render(self):
         """Render a frame (Gymnasium's ``MujocoEnv.render``); ``ResetNeeded`` before the first ``reset``;

@@ -52,7 +52,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
     ## Starting State
     At rest at the home pose ``jaco_env.kinematics.home_pose()`` or ``options["q0"]`` (6 finite
     real angles, joints 2 and 3 within their ranges ``jaco_env.excitation.JOINT_RANGES``). A rejected option raises
-    before the simulation is touched.
+    before the simulation is touched; an option given as ``None`` is as if absent.
 
     ## Info
     ``time, payload_mass, unstable`` and ``qacc``: the true joint accelerations at the sample
@@ -62,7 +62,8 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
     ## Episode End
     Never terminates; truncated by the time limit (``max_episode_steps=2400``, 60 s at 40 Hz;
     pass ``max_episode_steps`` to ``gym.make`` for longer runs) or on an unstable simulation
-    (``info["unstable"] = True``; the last finite observation and its time are returned, ``info["qacc"]`` is NaN).
+    (``info["unstable"] = True``; the last finite observation and its time are returned, ``info["qacc"]`` is NaN;
+    a step after that returns the same again, with a Gymnasium warning once per episode: call ``reset``).
 
     ## Arguments
     ``gym.make("JacoPayload-v0", control_mode="torque", control_freq=40.0,
@@ -146,6 +147,7 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
         a = self._validate_action(action)
         if self._last_obs is None:
             raise error.ResetNeeded("Cannot call `env.step()` before calling `env.reset()`")
+        self._warn_if_over()
         if not self._unstable:
             if self._simulate(a):
                 self._unstable = True  # the last finite observation and its time; its qacc is not known: NaN

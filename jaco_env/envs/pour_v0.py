@@ -137,7 +137,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
       warning): then ``info["unstable"] = True`` and the last finite observation is returned, with its
       time, tracking error and marble counts in ``info``, and its tracking cost as the step's reward.
       In torque mode, random torques spin the light wrist joints past 50 rad/s within a few seconds
-      (nothing limits a joint's speed in the simulation).
+      (nothing limits a joint's speed in the simulation). A step after that returns the same again, with a
+      Gymnasium warning (once per episode); call ``reset``.
 
     ## Info
     ``time, payload_mass, marbles_in_jar, marbles_spilled, marbles_in_bottle, n_marbles,
@@ -152,8 +153,10 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
     ``"jaco2"`` or a :class:`jaco_env.SignalPipeline` (see Observation Space). ``link_inertials``: the arm's
     link inertials, ``"dm_control"`` or ``"kinova"`` (Kinova's URDF values, :mod:`jaco_env.link_inertials`);
     ``None`` follows the pipeline (``"kinova"`` under ``"jaco2"``). ``task``: default task name or
-    ``PouringTask``; ``None`` draws one of ``DEFAULT_TASKS`` per reset. ``reset(options=
-    {"task": name_or_task, "payload_mass": kg})`` overrides both for one episode. Every option is
+    ``PouringTask``; ``None`` draws one of ``DEFAULT_TASKS`` per reset (``env.unwrapped.task`` is the episode's
+    task from ``reset`` on; before the first one it is only a placeholder). ``reset(options=
+    {"task": name_or_task, "payload_mass": kg})`` overrides both for one episode (an option given as ``None``
+    is as if absent). Every option is
     checked before the simulation is touched (a rejected ``reset`` changes no state): unknown keys
     and out-of-range or unreachable values raise ``ValueError``, wrong types (e.g. a mass given as
     a string or bool) ``TypeError``; a task's reference is built (IK) at that check.
@@ -370,7 +373,7 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         a = self._validate_action(action)
         if self._last_obs is None:
             raise error.ResetNeeded("Cannot call `env.step()` before calling `env.reset()`")
-        self._warn_if_terminated()
+        self._warn_if_over()
         if self._unstable or self._simulate(a):
             # The last finite observation, its time and marble counts, charged its tracking cost (a step of the
             # episode like the others: a reward of 0 here paid a learner to make the simulation unstable)
