@@ -5,6 +5,10 @@ VENV := .venv
 EXTRAS ?= test
 comma := ,
 STAMP := $(VENV)/.installed-$(subst $(comma),-,$(EXTRAS))
+# The suites run on TEST_JOBS processes (pytest-xdist), each test file in one of them (its module fixtures run
+# once); the tests are single-threaded, so 2 halves the time on 2 cores. TEST_JOBS=0: one process, no xdist.
+TEST_JOBS ?= 2
+PYTEST := $(VENV)/bin/python -m pytest -n $(TEST_JOBS) --dist loadfile
 export MUJOCO_GL ?= egl
 
 .PHONY: setup demo test test-slow test-all test-studies wheel
@@ -23,20 +27,20 @@ $(STAMP): pyproject.toml
 demo: $(STAMP)
 	$(VENV)/bin/cascgp transfer --quick --overwrite --out out/demo --video out/demo/video
 
-# The default suite (about 5-9 min on 2 cores): everything but the tests marked slow.
+# The default suite (about 4-9 min on 2 cores): everything but the tests marked slow.
 test: $(STAMP)
-	$(VENV)/bin/python -m pytest
+	$(PYTEST)
 
 # The long tests alone (full policy runs, multi-worker end-to-end runs, audits).
 test-slow: $(STAMP)
-	$(VENV)/bin/python -m pytest -m slow
+	$(PYTEST) -m slow
 
 # The research studies' tests (studies/, not part of the installed distribution); `-m slow` adds their end-to-end runs.
 test-studies: $(STAMP)
-	$(VENV)/bin/python -m pytest studies/tests
+	$(PYTEST) studies/tests
 
 test-all: $(STAMP)
-	$(VENV)/bin/python -m pytest -m ''
+	$(PYTEST) -m ''
 
 # The installable distribution: the wheel, in dist/.
 wheel: $(STAMP)
