@@ -6,7 +6,8 @@ EXTRAS ?= test
 comma := ,
 STAMP := $(VENV)/.installed-$(subst $(comma),-,$(EXTRAS))
 # The suites run on TEST_JOBS processes (pytest-xdist), each test file in one of them (its module fixtures run
-# once); the tests are single-threaded, so 2 halves the time on 2 cores. TEST_JOBS=0: one process, no xdist.
+# once); the tests are mostly single-threaded: on 2 cores, 2 took a third off the default suite's time.
+# TEST_JOBS=0: all in one process.
 TEST_JOBS ?= 2
 PYTEST := $(VENV)/bin/python -m pytest -n $(TEST_JOBS) --dist loadfile
 export MUJOCO_GL ?= egl

@@ -70,8 +70,7 @@ def check_link_inertials(value: object) -> str:
     """``value`` if it is one of :data:`LINK_INERTIALS`; naming ``link_inertials`` otherwise, ``TypeError`` (not a
     string) or ``ValueError`` (another name)."""
     if not isinstance(value, str):
-        raise TypeError(f"link_inertials must be one of {LINK_INERTIALS} or None, got {type(value).__name__} "
-                        f"{value!r}")
+        raise TypeError(f"link_inertials must be one of {LINK_INERTIALS}, got {type(value).__name__} {value!r}")
     if value not in LINK_INERTIALS:
         raise ValueError(f"link_inertials must be one of {LINK_INERTIALS}, got {value!r}")
     return value
@@ -82,6 +81,9 @@ def resolve(value: object, sensor_pipeline: object) -> str:
     pipeline's own: ``"kinova"`` under the full ``"jaco2"`` preset (a name or the equal ``SignalPipeline``),
     ``"dm_control"`` otherwise."""
     if value is not None:
+        if not isinstance(value, str):
+            raise TypeError(f"link_inertials must be one of {LINK_INERTIALS} or None, got {type(value).__name__} "
+                            f"{value!r}")
         return check_link_inertials(value)
     from jaco_env.signal_pipeline import SignalPipeline
 

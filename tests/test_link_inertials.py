@@ -85,6 +85,8 @@ def test_shipped_nominal_urdfs():
     assert "link_inertials='kinova'" in kin.meta["source"] and kin.meta["calibration_error"] == 0.1
     with pytest.raises(ValueError, match="link_inertials must be one of"):
         jaco_env.nominal_urdf("urdf")
+    with pytest.raises(TypeError, match=r"link_inertials must be one of \('dm_control', 'kinova'\), got NoneType"):
+        jaco_env.nominal_urdf(None)  # no "or None" here: only the envs take None
 
 
 def test_experiments_name_the_same_nominal_urdfs():

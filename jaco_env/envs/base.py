@@ -204,9 +204,8 @@ def _no_display_message(reason: str) -> str:
 
 
 def check_options(options: dict | None, allowed: tuple[str, ...]) -> dict:
-    """The reset options as a dict (``{}`` for None) without the options given as ``None``, which leave the
-    env's own setting as if they were absent (one options dict can then fix a setting in some envs of a vector env
-    and not in others); unknown keys raise ``ValueError``."""
+    """The reset options as a new dict (``{}`` for None) without the options given as ``None``, which leave the
+    env's own setting as if they were absent; unknown keys raise ``ValueError``."""
     if options is None:
         return {}
     if not isinstance(options, dict):
