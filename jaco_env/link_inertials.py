@@ -66,13 +66,15 @@ def cylinder_inertia(height: float, radius: float, axis: str, mass: float) -> np
     return np.array([along if a == axis else across for a in "xyz"])
 
 
-def check_link_inertials(value: object) -> str:
+def check_link_inertials(value: object, none_allowed: bool = False) -> str:
     """``value`` if it is one of :data:`LINK_INERTIALS`; naming ``link_inertials`` otherwise, ``TypeError`` (not a
-    string) or ``ValueError`` (another name)."""
+    string) or ``ValueError`` (another name). ``none_allowed`` only adds "or None" to the message, for callers that
+    take ``None`` before they check."""
+    expected = f"{LINK_INERTIALS} or None" if none_allowed else f"{LINK_INERTIALS}"
     if not isinstance(value, str):
-        raise TypeError(f"link_inertials must be one of {LINK_INERTIALS}, got {type(value).__name__} {value!r}")
+        raise TypeError(f"link_inertials must be one of {expected}, got {type(value).__name__} {value!r}")
     if value not in LINK_INERTIALS:
-        raise ValueError(f"link_inertials must be one of {LINK_INERTIALS}, got {value!r}")
+        raise ValueError(f"link_inertials must be one of {expected}, got {value!r}")
     return value
 
 
@@ -81,10 +83,7 @@ def resolve(value: object, sensor_pipeline: object) -> str:
     pipeline's own: ``"kinova"`` under the full ``"jaco2"`` preset (a name or the equal ``SignalPipeline``),
     ``"dm_control"`` otherwise."""
     if value is not None:
-        if not isinstance(value, str):
-            raise TypeError(f"link_inertials must be one of {LINK_INERTIALS} or None, got {type(value).__name__} "
-                            f"{value!r}")
-        return check_link_inertials(value)
+        return check_link_inertials(value, none_allowed=True)
     from jaco_env.signal_pipeline import SignalPipeline
 
     jaco2 = sensor_pipeline == "jaco2" or sensor_pipeline == SignalPipeline.jaco2()

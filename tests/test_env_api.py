@@ -153,6 +153,8 @@ def test_payload_drawn_within_range(pour_env):
     [
         (np.array([0, 0, np.nan, 0, 0, 0]), ValueError, "finite"),
         (np.array([0, 0, 0, np.inf, 0, 0]), ValueError, "finite"),
+        (np.array([np.inf, 0, -np.inf, 0, 0, 0]), ValueError, "finite"),  # a sum of them is NaN: no warning
+        (np.array([-np.inf, np.inf, 0, 0, 0, 0], np.float32), ValueError, "finite"),
         (np.zeros(5), ValueError, r"shape \(6,\)"),
         (np.zeros((2, 6)), ValueError, r"shape \(6,\)"),
         ("torque", TypeError, "action must be an array"),
