@@ -64,7 +64,8 @@ def _struct(m: str) -> str:
 
 def curve_figure(block: dict[str, Any], models: list[str], title: str, path: Path) -> Path:
     """nRMSE vs seconds of data (log x), median over subsets with the interquartile range as
-    error bars (mean +- std for blocks without medians), one panel per joint."""
+    error bars (mean +- std for blocks without medians), one panel per joint. A panel in which a cascade is its
+    standard model by construction (its chain's first joint) says so in its title: the two curves coincide."""
     plt = _plt()
     N = int(block["dof"])
     ncol = 3 if N <= 6 else 4
@@ -93,7 +94,9 @@ def curve_figure(block: dict[str, Any], models: list[str], title: str, path: Pat
                 ax.errorbar(grid, mu, yerr=yerr, marker="o", ms=3, capsize=2, color=COLORS[_struct(m)],
                             label=label(m))
         ax.set_xscale("log")
-        ax.set_title(f"Joint {j + 1}")
+        same = [_struct(m) for m in models if m in block["models"] and chain_first(m, N) == j
+                and standard_twin(m) in models and standard_twin(m) in block["models"]]
+        ax.set_title(f"Joint {j + 1}" + "".join(f" ({s} = standard)" for s in same))
         ax.set_xlabel("seconds of training data")
         ax.set_ylabel("nRMSE")
         ax.grid(True, which="both", alpha=0.3)
