@@ -84,11 +84,22 @@ def _as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
     try:
         gain = np.broadcast_to(arr, (dof,)).copy()
     except ValueError:
-        raise ValueError(f"{name} must be one real number or {dof} of them (one per joint), got shape "
-                         f"{arr.shape}") from None
+        raise ValueError(f"{name} must be one real number or {dof} of them (one per joint, as torque_limits), got "
+                         f"shape {arr.shape}") from None
     if not np.all(np.isfinite(gain)) or np.any(gain < 0):
         raise ValueError(f"{name} must be finite and non-negative, got {value!r}")
+    gain.setflags(write=False)  # changed only through the checked assignment
     return gain
+
+
+def _check_finite_reference(q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, t: float) -> None:
+    """``ValueError`` naming the first of ``q_d``, ``qd_d``, ``qdd_d`` with a NaN or inf entry: a reference is the
+    caller's computation, so a non-finite one is a bug to report, not a sensor fault to ride out."""
+    for name, x in (("q_d", q_d), ("qd_d", qd_d), ("qdd_d", qdd_d)):
+        bad = np.flatnonzero(~np.isfinite(x))
+        if bad.size:
+            raise ValueError(f"reference: {name} at t={t} must be finite; entries {bad.tolist()} are NaN or inf: "
+                             f"{x.tolist()}")
 
 
 class FeedforwardController:
@@ -98,9 +109,10 @@ class FeedforwardController:
         model: the feedforward model: a fitted :mod:`cascgp.models` model (uses its lean
             ``predict_one`` path), an object with ``inverse_dynamics`` (e.g. the nominal
             :class:`~cascgp.rbd.RigidBodyModel`), or ``None`` for PD only.
-        kp: proportional gains (N m / rad), scalar or per joint.
-        kd: derivative gains (N m s / rad), scalar or per joint.
-        torque_limits: symmetric actuator limits (N m), per joint.
+        kp: proportional gains (N m / rad; N / m for a prismatic joint), scalar or per joint.
+        kd: derivative gains (N m s / rad; N s / m for a prismatic joint), scalar or per joint.
+        torque_limits: symmetric actuator limits (N m; N for a prismatic joint), per joint; their number is the
+            controller's number of joints.
         fallback: rigid-body model used when ``model`` returns a non-finite torque
             (defaults to ``model`` itself if that is a rigid-body model, else an SP model's own ``rbd``,
             else zero); with ``gate`` it is also the nominal model the feedforward falls back toward.
@@ -167,7 +179,6 @@ class FeedforwardController:
         self.dof = 0  # set from the limits: their setter checks them
         self.torque_limits = torque_limits
         self.dof = int(self._torque_limits.shape[0])
-        self.kp, self.kd = kp, kd  # the properties' setters check them
         self.model: Any = model  # duck-typed (predict_one / inverse_dynamics); None: PD only
         if model is not None:
             if not (hasattr(model, "predict_one") or hasattr(model, "inverse_dynamics")):
@@ -179,6 +190,7 @@ class FeedforwardController:
             model_dof = getattr(model, "dof", self.dof)
             if int(model_dof) != self.dof:
                 raise ValueError(f"model.dof ({model_dof}) does not match torque_limits ({self.dof} joints)")
+        self.kp, self.kd = kp, kd  # the properties' setters check them (one per joint of the limits)
         if fallback is not None:
             if not hasattr(fallback, "inverse_dynamics"):
                 raise TypeError("fallback: expected a rigid-body model (an object with inverse_dynamics(q, qd, qdd)) "
@@ -221,9 +233,9 @@ class FeedforwardController:
         self.last_model_error: str | None = None
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        """A copy or an unpickled controller keeps its limits read-only (copying makes arrays writable)."""
+        """A copy or an unpickled controller keeps its limits and gains read-only (copying makes arrays writable)."""
         self.__dict__.update(state)
-        for name in ("_torque_limits", "_neg_limits"):
+        for name in ("_torque_limits", "_neg_limits", "_kp", "_kd"):
             getattr(self, name).setflags(write=False)
 
     @property
@@ -249,9 +261,9 @@ class FeedforwardController:
 
     @property
     def kp(self) -> np.ndarray:
-        """Proportional gains (N m / rad), one per joint. Assigning a scalar or per-joint values (gain scheduling)
-        validates them as the constructor does (``ValueError`` for a negative or non-finite gain, nothing
-        changed)."""
+        """Proportional gains (N m / rad; N / m for a prismatic joint), one per joint, as a read-only array.
+        Assigning a scalar or per-joint values (gain scheduling) validates them as the constructor does
+        (``ValueError`` for a negative or non-finite gain, nothing changed)."""
         return self._kp
 
     @kp.setter
@@ -260,7 +272,8 @@ class FeedforwardController:
 
     @property
     def kd(self) -> np.ndarray:
-        """Derivative gains (N m s / rad), one per joint; assignment as for :attr:`kp`."""
+        """Derivative gains (N m s / rad; N s / m for a prismatic joint), one per joint, read-only; assignment as
+        for :attr:`kp`."""
         return self._kd
 
     @kd.setter
@@ -277,8 +290,10 @@ class FeedforwardController:
         return name + gate + ("-online" if self.online else "")
 
     def feedforward(self, t: float, reference: Reference) -> np.ndarray:
-        """The feedforward torque at time ``t`` (finite, not yet clipped)."""
-        return self._feedforward(t, *self._reference(reference, t), reference)
+        """The feedforward torque at time ``t`` (finite, not yet clipped); a reference as :meth:`__call__` takes."""
+        q_d, qd_d, qdd_d = self._reference(reference, t)
+        _check_finite_reference(q_d, qd_d, qdd_d, t)
+        return self._feedforward(t, q_d, qd_d, qdd_d, reference)
 
     def _feedforward(
         self, t: float, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, reference: Reference
@@ -333,28 +348,34 @@ class FeedforwardController:
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, reference: Reference) -> np.ndarray:
         """Joint torques for the measured state ``(q, qd)`` at time ``t``; always finite and within limits.
         Malformed arguments (``t`` not a real number, ``q``/``qd`` not real ``(N,)`` arrays) or a reference
-        that does not return three real ``(N,)`` arrays raise ``TypeError``/``ValueError`` naming them."""
+        that does not return three finite real ``(N,)`` arrays raise ``TypeError``/``ValueError`` naming them, and
+        change nothing. A non-finite *measurement* is a sensor fault, not an error: no feedback on that joint
+        (:attr:`n_bad_measurements`)."""
         if isinstance(t, (bool, np.bool_)) or not isinstance(t, (int, float, np.integer, np.floating)):
             raise TypeError(f"t: expected a real number (s), got {type(t).__name__}")
         q, qd = self._measured("q", q), self._measured("qd", qd)
         q_d, qd_d, qdd_d = self._reference(reference, t)  # once per tick; shared with the feedforward
+        # qdd_d finite (a sum that overflows is looked at entry by entry); q_d and qd_d: by the feedback below
+        if not math.isfinite(sum(qdd_d.tolist())):
+            _check_finite_reference(q_d, qd_d, qdd_d, t)
         # Kp (q_d - q) + Kd (qd_d - qd) in Python floats: the same IEEE double operations in the same order as
         # NumPy's, bit for bit, but an overflow or inf - inf gives inf or NaN without a floating-point warning,
         # so the usual tick needs neither np.errstate (a third of this form's cost) nor array temporaries.
         fb = [p * (a - b) + d * (c - e) for p, a, b, d, c, e in
               zip(self._kp.tolist(), q_d.tolist(), q.tolist(), self._kd.tolist(), qd_d.tolist(), qd.tolist())]
         if all(map(math.isfinite, fb)):
-            feedback = np.array(fb)
+            feedback = np.array(fb)  # so q_d and qd_d are finite too (0 * inf is NaN)
         else:
             # A finite feedback needs all four inputs finite and no overflow: then it equals the general form
             # below, which this tick needs only for a non-finite measurement or an absurd error.
+            _check_finite_reference(q_d, qd_d, qdd_d, t)
             feedback = self._feedback_nonfinite(q, qd, q_d, qd_d)
         tau = self._feedforward(t, q_d, qd_d, qdd_d, reference) + feedback
         return np.minimum(np.maximum(tau, self._neg_limits), self._torque_limits)  # np.clip, without its wrapper
 
     def _feedback_nonfinite(self, q: np.ndarray, qd: np.ndarray, q_d: np.ndarray, qd_d: np.ndarray) -> np.ndarray:
         """The feedback torque when a measurement is not finite or an error overflows."""
-        bad = ~(np.isfinite(q) & np.isfinite(qd) & np.isfinite(q_d) & np.isfinite(qd_d))
+        bad = ~(np.isfinite(q) & np.isfinite(qd))  # the reference is finite (checked)
         self.n_bad_measurements += bool(np.any(bad))
         with np.errstate(over="ignore", invalid="ignore"):
             # A finite but absurd error saturates with its sign (overflow to +-inf is capped
@@ -411,17 +432,27 @@ class FeedforwardController:
             self.gate_rule.start()  # after the window: a variance rule prepares the variance path of this episode
 
     def observe(self, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, t: float) -> None:
-        """A new measurement (called by the runner after every step). Every ``online_every``-th call makes a
-        sample of the *previous* tick: its q and qd, q̈ by central differences of the measured qd (as the
-        recorded episodes), and the torque measured over the period that started at that tick (reported now).
-        A gate rule that observes (the innovation rule) gets the sample first (an error it raises is kept in
-        ``last_model_error``); with ``online`` it then enters the model. A sample the
-        model refuses (e.g. non-finite) is counted in ``n_online_rejected``, never raised."""
+        """A new measurement, after every tick (the episode runner calls it after every step): the measured
+        ``q``, ``qd`` at the end of the control period, the joint torque ``tau`` measured over it (a torque
+        sensor's reading; without one, the best estimate of the torque applied), and the time ``t`` (s) of
+        that reading. A controller with the innovation gate (``gate=True`` with a derivative-based model) or
+        ``online`` needs these calls: without them the gate's weights stay 1/2 and nothing is learned.
+
+        Every ``online_every``-th call makes a sample of the *previous* tick: its q and qd, q̈ by central
+        differences of the measured qd (as the recorded episodes), and the torque measured over the period that
+        started at that tick (reported now). A gate rule that observes (the innovation rule) gets the sample
+        first (an error it raises is kept in ``last_model_error``); with ``online`` it then enters the model. A
+        sample the model refuses (non-finite values, a sensor fault or an unstable step's) is counted in
+        ``n_online_rejected``, never raised. Malformed arguments (``q``/``qd``/``tau`` not real ``(N,)`` arrays,
+        ``t`` not a real number) raise ``TypeError``/``ValueError`` naming them and change nothing."""
+        if isinstance(t, (bool, np.bool_)) or not isinstance(t, (int, float, np.integer, np.floating)):
+            raise TypeError(f"t: expected a real number (s), got {type(t).__name__}")
+        t = float(t)
+        q, qd, tau = self._measured("q", q), self._measured("qd", qd), self._measured("tau", tau)
         rule = self.gate_rule if self.gate_rule is not None and self.gate_rule.observes else None
         if not self.online and rule is None:
             return
-        self._recent = (self._recent + [(float(t), np.array(q, float), np.array(qd, float),
-                                         np.array(tau, float))])[-3:]
+        self._recent = (self._recent + [(t, q.copy(), qd.copy(), tau.copy())])[-3:]
         self._n_observed += 1
         if self._n_observed % self.online_every or len(self._recent) < 3:
             return

@@ -1,0 +1,156 @@
+"""FeedforwardController's inputs as one's own control loop gives them: gains, the reference, ``observe``.
+
+A rejected call raises naming the argument and changes nothing: a twin controller that never got it gives the same
+torques afterwards, bit for bit.
+"""
+
+from __future__ import annotations
+
+import copy
+import pickle
+
+import numpy as np
+import pytest
+
+from cascgp.controller import FeedforwardController
+
+KP = np.array([120.0, 120, 120, 40, 40, 40])
+KD = np.array([30.0, 30, 30, 9, 9, 9])
+LIMITS = np.array([30.5, 30.5, 30.5, 6.8, 6.8, 6.8])
+
+
+def reference(t: float):
+    q_d = np.array([0.1, 2.5, 1.5, -0.2, 0.3, 0.0]) + 0.1 * np.sin(t)
+    return q_d, 0.1 * np.cos(t) * np.ones(6), -0.1 * np.sin(t) * np.ones(6)
+
+
+@pytest.fixture(scope="module")
+def fitted_planar_model(arm3_train):
+    from cascgp.gp import GPFitConfig
+    from cascgp.models import make_model
+
+    data = arm3_train.take(np.arange(min(80, arm3_train.n_samples)))
+    return make_model("np-inward", data.dof, gp_config=GPFitConfig(n_restarts=2, max_iter=200)).fit(data)
+
+
+def planar_reference(t: float):
+    return 0.3 * np.sin([t, 2 * t, 3 * t]), 0.3 * np.cos([t, 2 * t, 3 * t]), -0.3 * np.sin([t, 2 * t, 3 * t])
+
+
+def test_gains_can_be_scheduled_by_assignment_and_are_validated():
+    ctrl = FeedforwardController(None, KP, KD, np.full(6, 1e6))
+    q_d, qd_d, _ = reference(0.3)
+    q, qd = q_d - 0.01, qd_d + 0.02
+    ctrl.kp, ctrl.kd = 2.0, np.arange(6.0)  # a scalar for every joint, or one gain per joint
+    np.testing.assert_array_equal(ctrl.kp, np.full(6, 2.0))
+    np.testing.assert_allclose(ctrl(0.3, q, qd, reference), 2.0 * 0.01 - np.arange(6.0) * 0.02, atol=1e-12)
+    with pytest.raises(ValueError, match="read-only"):  # unchecked in place: a negative gain is positive feedback
+        ctrl.kp[0] = -1e9
+    for twin in (copy.deepcopy(ctrl), pickle.loads(pickle.dumps(ctrl))):
+        with pytest.raises(ValueError, match="read-only"):
+            twin.kd[0] = -1.0
+    ctrl.kp = np.r_[5.0, ctrl.kp[1:]]  # one joint's gain, checked
+    assert ctrl(0.3, q, qd, reference)[0] == pytest.approx(5.0 * 0.01)
+    for bad, err in ((-1.0, ValueError), (np.nan, ValueError), (np.ones(5), ValueError), ("stiff", ValueError),
+                     ([1.0, None, 1.0, 1.0, 1.0, 1.0], ValueError), ({}, TypeError), (1j, TypeError)):
+        for name in ("kp", "kd"):
+            before = getattr(ctrl, name).copy()
+            with pytest.raises(err, match=name):
+                setattr(ctrl, name, bad)
+            np.testing.assert_array_equal(getattr(ctrl, name), before)  # a rejected gain changes nothing
+    with pytest.raises(ValueError, match="kd: |kd must"):
+        FeedforwardController(None, KP, np.ones(3), LIMITS)
+
+
+def test_a_wrong_number_of_limits_is_named_against_the_model(fitted_planar_model) -> None:
+    # the limits give the controller's joints; a model of another count is named before the gains' shapes
+    with pytest.raises(ValueError, match=r"model.dof \(3\) does not match torque_limits \(2 joints\)"):
+        FeedforwardController(fitted_planar_model, np.ones(3), np.ones(3), np.ones(2))
+    with pytest.raises(ValueError, match=r"kp must be one real number or 2 of them \(one per joint, as torque_limits"):
+        FeedforwardController(None, np.ones(3), np.ones(3), np.ones(2))
+
+
+@pytest.mark.parametrize("part, joint", [(0, 1), (1, 0), (2, 2)])
+@pytest.mark.parametrize("value", [np.nan, np.inf])
+@pytest.mark.parametrize("bad_measurement", [False, True])
+def test_a_non_finite_reference_is_refused_and_changes_nothing(fitted_planar_model, arm3_rbd, part, joint, value,
+                                                                bad_measurement) -> None:
+    """A NaN in one joint's reference used to drop every joint's feedforward silently (the model and the fallback
+    refused it): now a ValueError naming the part, also on a tick whose measurement is bad."""
+    ctrl = FeedforwardController(fitted_planar_model, 10.0, 1.0, np.full(3, 50.0), fallback=arm3_rbd, gate=True)
+    twin = copy.deepcopy(ctrl)
+    for c in (ctrl, twin):
+        c.start(None, {})
+    q, qd, _ = planar_reference(0.0)
+    broken = [x.copy() for x in planar_reference(0.1)]
+    broken[part][joint] = value
+    name = ("q_d", "qd_d", "qdd_d")[part]
+    q_meas = np.r_[np.nan, q[1:]] if bad_measurement else q
+    with pytest.raises(ValueError, match=rf"reference: {name} at t=0.1 must be finite; entries \[{joint}\]"):
+        ctrl(0.1, q_meas, qd, lambda t: tuple(broken))
+    with pytest.raises(ValueError, match=rf"reference: {name}"):
+        ctrl.feedforward(0.1, lambda t: tuple(broken))
+    assert (ctrl.n_fallbacks, ctrl.n_bad_measurements, ctrl.last_model_error) == (0, 0, None)
+    for k in range(1, 6):
+        t = 0.05 * k
+        np.testing.assert_array_equal(ctrl(t, q, qd, planar_reference), twin(t, q, qd, planar_reference))
+
+
+def test_a_huge_finite_reference_is_taken(fitted_planar_model, arm3_rbd) -> None:
+    ctrl = FeedforwardController(fitted_planar_model, 10.0, 1.0, np.full(3, 50.0), fallback=arm3_rbd)
+    ctrl.start(None, {})
+    huge = (np.full(3, 1e308), np.full(3, -1e308), np.full(3, 1e308))  # sums overflow; every entry is finite
+    tau = ctrl(0.0, np.zeros(3), np.zeros(3), lambda t: huge)
+    np.testing.assert_array_equal(np.abs(tau), np.full(3, 50.0))  # clipped, as any absurd but finite reference
+
+
+@pytest.mark.parametrize("bad, exc, match", [
+    (("q", np.zeros(2)), ValueError, r"q: expected shape \(3,\), got \(2,\)"),
+    (("qd", np.zeros((1, 3))), ValueError, r"qd: expected shape \(3,\)"),
+    (("tau", np.zeros(4)), ValueError, r"tau: expected shape \(3,\), got \(4,\)"),
+    (("tau", None), TypeError, "tau: expected a real numeric array"),
+    (("q", ["a", "b", "c"]), TypeError, "q: expected a real numeric array"),
+    (("t", None), TypeError, r"t: expected a real number \(s\), got NoneType"),
+    (("t", "0.1"), TypeError, r"t: expected a real number \(s\), got str"),
+])
+@pytest.mark.parametrize("online", [None, 4])
+def test_observe_refuses_malformed_input_and_changes_nothing(fitted_planar_model, arm3_rbd, bad, exc, match,
+                                                             online) -> None:
+    """observe() took anything: a wrong-sized q or tau entered the samples, or shifted the sampling phase
+    unnoticed; now it is checked as a tick's arguments are. Checked at every call, the slots that make no
+    sample included (online_every=4: the bad call lands on the fourth)."""
+    model = copy.deepcopy(fitted_planar_model)
+    ctrl = FeedforwardController(model, 10.0, 1.0, np.full(3, 50.0), fallback=arm3_rbd, gate=True, online=online,
+                                 online_every=4)
+    ctrl.start(None, {})
+    q, qd, _ = planar_reference(0.0)
+    for k in range(4):
+        ctrl(0.025 * k, q, qd, planar_reference)
+        ctrl.observe(q + 0.01 * k, qd, np.full(3, 0.5 + 0.1 * k), 0.025 * (k + 1))
+    twin = copy.deepcopy(ctrl)
+    args = {"q": q, "qd": qd, "tau": np.ones(3), "t": 0.125}
+    key, value = bad
+    args[key] = value
+    with pytest.raises(exc, match=match):
+        ctrl.observe(args["q"], args["qd"], args["tau"], args["t"])
+    for k in range(4, 14):  # the same ticks and observations for both: samples, gate weights and torques equal
+        t = 0.025 * k
+        np.testing.assert_array_equal(ctrl(t, q, qd, planar_reference), twin(t, q, qd, planar_reference))
+        for c in (ctrl, twin):
+            c.observe(q + 0.01 * k, qd, np.full(3, 0.5 + 0.1 * k), 0.025 * (k + 1))
+    assert ctrl.n_innovation_samples == twin.n_innovation_samples > 0
+    assert ctrl.n_online_samples == twin.n_online_samples == (3 if online else 0)
+    np.testing.assert_array_equal(ctrl.innovation_errors[1], twin.innovation_errors[1])
+
+
+def test_observe_rides_out_a_non_finite_reading(fitted_planar_model, arm3_rbd) -> None:
+    """NaN readings, a NaN time or a repeated one (an unstable simulation step reports the last finite state) are
+    sensor faults, as in a tick: the samples they spoil are refused and counted, never raised."""
+    model = copy.deepcopy(fitted_planar_model)
+    ctrl = FeedforwardController(model, 10.0, 1.0, np.full(3, 50.0), fallback=arm3_rbd, gate=True, online=4,
+                                 online_every=1)
+    ctrl.start(None, {})
+    q, qd, _ = planar_reference(0.0)
+    for k, t in enumerate([0.0, 0.025, np.nan, 0.075, 0.1, 0.1]):
+        ctrl.observe(q, np.r_[np.nan, qd[1:]] if k == 3 else qd, np.ones(3), np.float32(t) if k == 1 else t)
+    assert ctrl.n_online_samples + ctrl.n_online_rejected == 4 and ctrl.n_online_rejected >= 1
