@@ -338,6 +338,8 @@ def test_controller_output_is_valid_or_the_error_names_the_field(controllers, na
         elif ref_kind == "constant":
             fixed = tuple(np.asarray(x, dtype=float) for x in parts)
             reference = lambda t: fixed  # noqa: E731
+            if not all(np.all(np.isfinite(x)) for x in fixed):
+                ref_expected = ValueError  # a NaN or inf setpoint is the caller's bug: refused, naming the reference
         if ref_kind == "constant" and t_expected is not TypeError:
             t_expected = OK  # a constant reference ignores t's value (its type is still checked)
         if _ff_known_finding(t):
