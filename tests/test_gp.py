@@ -235,6 +235,33 @@ def test_prediction_finite_far_away_and_constant_cases():
     m2, _ = bank.predict([np.array([[0.1, -7.0, 0.2]] * 2), Xq[1]])
     assert mean[1, 0] == pytest.approx(m2[1, 0], rel=1e-12)
     assert np.all(np.isfinite(bank.posterior(0).predict(Xq[0])[0]))
+    # at any finite distance the prior (from 1e155 on the squared distance overflowed: NaN from the bank, SciPy's
+    # error from the posterior)
+    huge = np.array([[1e155, 0.0, 0.0], [-1e300, 1.0, 1e308]])
+    hm, hv = bank.predict([huge, np.array([[1e200, 0.0], [0.0, -1e308]])])
+    P = bank.posterior(0)
+    np.testing.assert_allclose(hm[:, 0], P.y_mean, rtol=1e-12)
+    np.testing.assert_allclose(hv[:, 0], P.signal_var * P.y_std**2, rtol=1e-12)
+    np.testing.assert_allclose(np.stack(P.predict(huge)), np.stack([hm[:, 0], hv[:, 0]]), rtol=1e-12)
+    assert np.all(np.isfinite(hm)) and np.all(np.isfinite(hv))
+
+
+@pytest.mark.parametrize("x_scale, y_scale", [(1.0, 1e-13), (1e-14, 1.0), (1e-15, 1e-20)])
+def test_constant_detection_is_the_same_in_any_units(x_scale, y_scale):
+    """A target or input column is constant relative to its mean: data in tiny units is fitted as in unit ones
+    (a target of order 1e-13 was declared constant, its signal lost)."""
+    rng = np.random.default_rng(3)
+    X = rng.uniform(-1, 1, (40, 2))
+    y = np.sin(2 * X[:, 0]) + X[:, 1] + 0.01 * rng.normal(size=40)
+    ref = GPBank(GPFitConfig(n_restarts=2)).fit([X], [y])
+    scaled = GPBank(GPFitConfig(n_restarts=2)).fit([X * x_scale], [y * y_scale])
+    assert not scaled.fit_info[0]["constant_target"] and np.all(np.isfinite(scaled.hyperparameters(0)["lengthscale"]))
+    # the NLL of the standardised data, the same optimum
+    assert scaled.fit_info[0]["best_nll"] == pytest.approx(ref.fit_info[0]["best_nll"], abs=1e-6)
+    np.testing.assert_allclose(scaled.predict([X[:5] * x_scale])[0][:, 0], ref.predict([X[:5]])[0][:, 0] * y_scale,
+                               rtol=1e-6)
+    const = GPBank(GPFitConfig(n_restarts=2)).fit([X], [np.full(40, 0.7)])  # a constant stays constant
+    assert const.fit_info[0]["constant_target"]
 
 
 def test_state_dict_round_trip_identical_predictions():

@@ -4,8 +4,7 @@ r"""The GP bank: ``B`` independent exact GPs (one per output) fitted together in
 keep the best start per GP, cache the factors) and batched prediction. The pieces it drives live next to it:
 :mod:`~cascgp.gp.likelihood` (NLL and gradient), :mod:`~cascgp.gp.lbfgs` (batched optimiser),
 :mod:`~cascgp.gp.restarts` (starts and early stopping), :mod:`~cascgp.gp.posterior` (factors, NumPy posterior),
-:mod:`~cascgp.gp.state` (save/load). (Under 500 lines: the fit driver and batched prediction share one
-state; everything separable lives in those modules.)
+:mod:`~cascgp.gp.state` (save/load); the fit driver and batched prediction, which share one state, stay here.
 
 Normalisation
 -------------
@@ -20,9 +19,9 @@ of GP ``b`` is ``max(noise_floor, noise_floor_target[b] / y_std[b]**2)`` in norm
 
 Edge cases (documented behaviour)
 ---------------------------------
-* Constant target ``y[b]`` (standard deviation <= 1e-12 x max(1, |mean|)): the GP is not optimised,
-  ``y_std = 1``, hyperparameters stay at the default start, the posterior mean is exactly the constant and
-  ``fit_info[b]["constant_target"]`` is True.
+* Constant target ``y[b]`` (standard deviation <= 1e-12 x |mean|: the same in any units; an input column too):
+  not optimised, ``y_std = 1``, hyperparameters at the default start (variances in target units squared that say
+  nothing of its scale), the posterior mean exactly the constant, ``fit_info[b]["constant_target"]`` True.
 * NaN/inf or wrong shapes, ``n < 2``, different ``n`` across GPs, unknown kernel: ``ValueError`` naming the field.
 """
 
@@ -42,7 +41,7 @@ from cascgp.gp.config import GPFitConfig, noise_var
 from cascgp.gp.kernels import get_kernel, scaled_sqdist
 from cascgp.gp.lbfgs import LBFGSOptions, minimize_batched
 from cascgp.gp.likelihood import DTYPE, fit_threads, nll_and_grad, plan_chunk
-from cascgp.gp.posterior import Factors, GPPosterior, compute_factors
+from cascgp.gp.posterior import ZCLIP, Factors, GPPosterior, compute_factors
 from cascgp.gp.restarts import initial_thetas, make_pruner, warm_theta
 from cascgp.gp.state import BankData, bank_from_state, bank_state
 
@@ -123,10 +122,11 @@ class GPBank:
         fit_info: per GP a dict (JSON-serialisable): ``nll`` (final NLL per start in normalised units; for a
             dropped start its last NLL, for a start screened out or not run ``None``), ``n_iter``, ``n_eval``,
             ``reason`` (per start: ``grad_tol``, ``rel_tol``, ``stalled``, ``dropped``, ``screened_out``, ...),
-            ``best`` (index of the kept start), ``best_nll``, ``converged`` (reason of the kept start), ``jitter``
-            (jitter in the final factor, normalised units), ``max_jitter_fit`` (largest jitter met during the
-            fit), ``constant_target``, ``warm_start`` (start 0 came from ``init``), ``screen_nll`` (subset NLL
-            per start when screening was used), ``shared`` (taken from another bank: ``shared`` of :meth:`fit`).
+            ``best`` (index of the kept start), ``best_nll`` (normalised units; add ``n * log(y_std)`` for target
+            units), ``converged`` (reason of the kept start), ``jitter`` (in the final factor, normalised units),
+            ``max_jitter_fit`` (largest jitter met during the fit), ``constant_target``, ``warm_start`` (start 0
+            came from ``init``), ``screen_nll`` (subset NLL per start when screening was used), ``shared`` (taken
+            from another bank: ``shared`` of :meth:`fit`).
         fit_summary: totals of the last fit (``time_s``, ``n_eval``, ``batch_rounds``).
     """
 
@@ -449,7 +449,7 @@ class GPBank:
         kern = get_kernel(self.config.kernel)
         means, vars_ = [], []
         for c in range(0, max(m, 1), chunk):
-            Zq = Qn[:, c : c + chunk] * f.inv_l[:, None, :]
+            Zq = (Qn[:, c : c + chunk] * f.inv_l[:, None, :]).clamp_(-ZCLIP, ZCLIP)  # finite for finite input
             Ks = kern.value_torch(scaled_sqdist(Zq, f.Z)) * f.sf2[:, None, None]
             means.append(torch.matmul(Ks, f.alpha.unsqueeze(-1)).squeeze(-1))
             if return_var:

@@ -70,8 +70,10 @@ class GPFitConfig:
             ``python -m scripts.bench_fit_threads``: on 2 quiet cores torch's default two threads took 0.85x the
             one-thread time, beside one busy process 2.7x); parallelism across fits belongs to processes
             (``--workers``), and ``threads=2`` suits a dedicated machine. ``None`` leaves the caller's settings
-            untouched; an integer ``k >= 1`` uses ``k`` threads. It changes no hyperparameter beyond the round-off
-            of reduction order.
+            untouched; an integer ``k >= 1`` uses ``k`` threads. Another thread count sums in another order: the
+            NLL and predictions agree to round-off, but where the NLL is flat (a lengthscale of an input that does
+            not matter) the optimiser can stop elsewhere, with the same predictions to about 1e-3 of the target's
+            scale.
     """
 
     kernel: str = "matern52"
@@ -104,7 +106,7 @@ class GPFitConfig:
     def from_dict(cls, d: dict[str, Any]) -> GPFitConfig:
         """Config from a saved ``asdict`` (unknown keys ignored). Fields missing from a save that predates them take
         the value that reproduces the old behaviour (``snr_max=None``, ``stall_window=None``), so that a loaded
-        model predicts exactly as when it was saved."""
+        model predicts as when it was saved (to round-off: the factors are recomputed)."""
         if not isinstance(d, dict):
             raise TypeError(f"config: expected a dict, got {type(d).__name__}")
         names = {f.name for f in fields(cls)}

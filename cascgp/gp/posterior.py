@@ -13,7 +13,11 @@ from cascgp.gp.config import GPFitConfig, noise_var
 from cascgp.gp.kernels import get_kernel, scaled_sqdist
 from cascgp.gp.likelihood import DTYPE, LOG2PI
 
-__all__ = ["GPPosterior", "Factors", "compute_factors", "robust_cholesky"]
+__all__ = ["GPPosterior", "Factors", "compute_factors", "robust_cholesky", "ZCLIP"]
+
+#: Scaled query inputs (lengthscales applied) are clipped to +-ZCLIP in prediction, so that no squared distance
+#: overflows: the output is finite for any finite input (far beyond the data, where the kernel is 0 anyway).
+ZCLIP = 1e6
 
 
 @dataclass(frozen=True)
@@ -22,11 +26,14 @@ class GPPosterior:
 
     .. math::
 
-        z = (x - x_{mean}) / x_{scale}, \quad
+        z = \operatorname{clip}((x - x_{mean}) / x_{scale}, \pm 10^6), \quad
         \mu(x) = y_{mean} + y_{std}\, s_f^2\, k(r^2(z, Z))^\top \alpha, \quad
         \sigma^2(x) = y_{std}^2\, \big(s_f^2 - \|L^{-1} s_f^2 k(r^2(z, Z))\|^2\big)
 
-    ``x_scale`` is ``inf`` for ignored (constant) input columns, so their ``z`` is 0.
+    ``x_scale`` is the input's standard deviation times its lengthscale, both in the input's units (so ``z`` is
+    the scaled input and ``Z`` the scaled training inputs: apply no lengthscale again); ``inf`` for ignored
+    (constant) input columns, so their ``z`` is 0. The clip (:data:`ZCLIP`) keeps the output finite for any
+    finite input.
     ``noise_var`` and ``signal_var`` are in normalised units (multiply by ``y_std**2`` for target units).
     """
 
@@ -45,7 +52,7 @@ class GPPosterior:
     def predict(self, x: np.ndarray, return_var: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """Reference NumPy prediction: ``x`` ``(m, d)`` or ``(d,)`` -> mean ``(m,)``, latent variance ``(m,)``."""
         x = np.atleast_2d(np.asarray(x, dtype=np.float64))
-        z = (x - self.x_mean) / self.x_scale
+        z = np.clip((x - self.x_mean) / self.x_scale, -ZCLIP, ZCLIP)
         r2 = (z * z).sum(1)[:, None] + (self.Z * self.Z).sum(1)[None, :] - 2.0 * z @ self.Z.T
         ks = self.signal_var * get_kernel(self.kernel).value(r2)
         mean = self.y_mean + self.y_std * (ks @ self.alpha)

@@ -46,7 +46,9 @@ Bad input (documented behaviour)
 Unknown name, SP without ``rbd``, ``rbd.dof != dof``, data of another DOF, NaN/inf or wrong
 shapes of queries: ``ValueError``/``TypeError`` naming the field.  Fewer than 2 usable rows
 (``-df`` models lose the rows whose history reaches before their segment's start): ``ValueError``.
-Duplicated samples are allowed (the noise variance absorbs them).  A joint with constant
+Repeated inputs with their own measured targets are allowed (the noise variance absorbs their spread); exact
+duplicate rows (the same inputs *and* target) count as independent agreeing measurements and pull the fitted
+noise toward its floor, so drop them first (``np.unique(..., axis=0)``).  A joint with constant
 targets gets the constant as its prediction (see :mod:`cascgp.gp.bank`).  Predictions are finite
 for finite inputs (normalised inputs are clipped to +-1e6 so no distance overflows).
 

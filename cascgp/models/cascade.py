@@ -58,7 +58,7 @@ class CascadedGPModel:
         df_delta: the history step of ``-df`` features (s).
         train_on_predicted: cascades only: each joint trained on its neighbour's predicted torque (not measured).
         order: joints (0-based) in prediction order (inward: N-1 .. 0, else 0 .. N-1).
-        banks: the fitted :class:`cascgp.gp.GPBank` objects; ``where[j] = (bank, b)`` locates joint j's GP.
+        banks: the fitted :class:`cascgp.gp.GPBank` objects; ``where[j] = (k, b)``: joint j is GP ``b`` of ``banks[k]``.
     """
 
     def __init__(self, name: str, dof: int, rbd: Any = None, *, gp_config: Any = None,

@@ -27,13 +27,12 @@ import numpy as np
 from scipy.linalg.blas import dtrsv
 
 from cascgp.gp.kernels import Kernel, get_kernel
-from cascgp.gp.posterior import GPPosterior
+from cascgp.gp.posterior import ZCLIP, GPPosterior
 from cascgp.models.fastkernel import JIT_WT, jit_args, jit_mean, jit_var, jit_var_factors
 
 __all__ = ["FastPath", "FastVariance", "ZCLIP"]
 
-#: Normalised inputs are clipped to +-ZCLIP (finite output for any finite input).
-ZCLIP = 1e6
+# ZCLIP (cascgp.gp.posterior): the bound the normalised inputs are clipped to (finite output for any finite input)
 
 
 @dataclass(frozen=True)

@@ -7,7 +7,7 @@ cheap checks and is written straight into the fast path's input buffer (:func:`l
 
 Joint :math:`j`'s GP input is the states :math:`(q_k, \dot q_k, \ddot q_k)` of the joints it sees
 (:func:`state_cols`) followed, in a cascade, by its neighbour's torque; before prediction its normalised values are
-clipped to :math:`\pm` :data:`~cascgp.models.fastpath.ZCLIP` (:func:`clipped`), so that the output is finite for
+clipped to :math:`\pm` :data:`~cascgp.gp.posterior.ZCLIP` (:func:`clipped`), so that the output is finite for
 finite input.
 """
 
