@@ -19,7 +19,7 @@ of GP ``b`` is ``max(noise_floor, noise_floor_target[b] / y_std[b]**2)`` in norm
 
 Edge cases (documented behaviour)
 ---------------------------------
-* Constant target ``y[b]`` (standard deviation <= 1e-12 x |mean|: the same in any units; an input column too):
+* Constant target ``y[b]`` (standard deviation <= 1e-12 x max(1, |mean|), for SI-like units; an input column too):
   not optimised, ``y_std = 1``, hyperparameters at the default start (variances in target units squared that say
   nothing of its scale), the posterior mean exactly the constant, ``fit_info[b]["constant_target"]`` True.
 * NaN/inf or wrong shapes, ``n < 2``, different ``n`` across GPs, unknown kernel: ``ValueError`` naming the field.

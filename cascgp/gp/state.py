@@ -66,14 +66,16 @@ class BankData:
             Xp[b, :, :d] = Xs[b]
             mu = Xs[b].mean(0)
             sd = Xs[b].std(0)
-            active = sd > 1e-12 * np.abs(mu)  # relative: the same columns in any units (0 only if exactly constant)
+            # constant: a spread within 1e-12 of max(1, |mean|), which assumes SI-like units (rad, N m): round-off
+            # around 0 (q̈ differenced from a constant q̇) is no input, at the price of data in units below 1e-12
+            active = sd > 1e-12 * np.maximum(1.0, np.abs(mu))
             x_mean[b, :d] = mu
             x_std[b, :d] = np.where(active, sd, 1.0)
             mask[b, :d] = active
             y_arr[b] = ys[b]
             y_mean[b] = ys[b].mean()
             s = ys[b].std()
-            if s <= 1e-12 * abs(y_mean[b]):  # relative, as the inputs'
+            if s <= 1e-12 * max(1.0, abs(y_mean[b])):  # as the inputs' rule
                 const_y[b] = True
             else:
                 y_std[b] = s
