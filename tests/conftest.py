@@ -166,3 +166,13 @@ def write_tiny_ias(path: Path) -> Path:
     savemat(path, {"X_train": np.zeros((3, 21)), "Y_train": np.zeros((3, 7)), "X_test": np.zeros((2, 21)),
                    "Y_test": np.zeros((2, 7))})
     return path
+
+
+@pytest.fixture(scope="module")
+def fitted_planar_model(arm3_train):
+    """An NP inward cascade of ``arm3`` on 80 rows (2 starts): the controller tests' fitted model."""
+    from cascgp.gp import GPFitConfig
+    from cascgp.models import make_model
+
+    data = arm3_train.take(np.arange(min(80, arm3_train.n_samples)))
+    return make_model("np-inward", data.dof, gp_config=GPFitConfig(n_restarts=2, max_iter=200)).fit(data)

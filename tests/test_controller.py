@@ -228,15 +228,6 @@ def test_far_out_of_range_states_with_a_fitted_gp_model(scale, gate, bad, online
 
 
 @pytest.fixture(scope="module")
-def fitted_planar_model(arm3_train):
-    from cascgp.gp import GPFitConfig
-    from cascgp.models import make_model
-
-    data = arm3_train.take(np.arange(min(80, arm3_train.n_samples)))
-    return make_model("np-inward", data.dof, gp_config=GPFitConfig(n_restarts=2, max_iter=200)).fit(data)
-
-
-@pytest.fixture(scope="module")
 def fitted_planar_sp_model(arm3_train, arm3_rbd):
     from cascgp.gp import GPFitConfig
     from cascgp.models import make_model

@@ -13,25 +13,7 @@ import numpy as np
 import pytest
 
 from cascgp.controller import FeedforwardController
-
-KP = np.array([120.0, 120, 120, 40, 40, 40])
-KD = np.array([30.0, 30, 30, 9, 9, 9])
-LIMITS = np.array([30.5, 30.5, 30.5, 6.8, 6.8, 6.8])
-
-
-def reference(t: float):
-    q_d = np.array([0.1, 2.5, 1.5, -0.2, 0.3, 0.0]) + 0.1 * np.sin(t)
-    return q_d, 0.1 * np.cos(t) * np.ones(6), -0.1 * np.sin(t) * np.ones(6)
-
-
-@pytest.fixture(scope="module")
-def fitted_planar_model(arm3_train):
-    from cascgp.gp import GPFitConfig
-    from cascgp.models import make_model
-
-    data = arm3_train.take(np.arange(min(80, arm3_train.n_samples)))
-    return make_model("np-inward", data.dof, gp_config=GPFitConfig(n_restarts=2, max_iter=200)).fit(data)
-
+from tests.test_controller import KD, KP, LIMITS, reference
 
 def planar_reference(t: float):
     return 0.3 * np.sin([t, 2 * t, 3 * t]), 0.3 * np.cos([t, 2 * t, 3 * t]), -0.3 * np.sin([t, 2 * t, 3 * t])
