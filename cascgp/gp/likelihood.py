@@ -407,9 +407,10 @@ def plan_chunk(cfg: GPFitConfig, n: int, d: int, n_gps: int) -> int:
     if need1 > cfg.max_batch_bytes:
         raise ValueError(
             f"max_batch_bytes: fitting {n_gps} GPs x {cfg.n_restarts} starts on n={n} points (d={d}) needs about "
-            f"{need1 / 2**20:.0f} MiB even one start at a time (3 + {n_gps + 12} matrices of {n}x{n} float64 plus "
-            f"the data), over GPFitConfig.max_batch_bytes = {cfg.max_batch_bytes / 2**20:.0f} MiB; raise "
-            "GPFitConfig.max_batch_bytes, or use fewer training points (memory grows as n^2)")
+            f"{need1 / 2**20:.0f} MiB even one start at a time (3 + {n_gps + 12} matrices of {n}x{n} float64, the "
+            f"data and 128 MiB of fixed overhead), over GPFitConfig.max_batch_bytes = "
+            f"{cfg.max_batch_bytes / 2**20:.0f} MiB; raise GPFitConfig.max_batch_bytes, or use fewer training points "
+            "(memory grows as n^2)")
     while chunk > 1 and estimate_fit_bytes(n, d, n_gps, cfg.n_restarts, chunk) > cfg.max_batch_bytes:
         chunk -= 1
     return chunk
