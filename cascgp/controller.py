@@ -355,8 +355,7 @@ class FeedforwardController:
             raise TypeError(f"t: expected a real number (s), got {type(t).__name__}")
         q, qd = self._measured("q", q), self._measured("qd", qd)
         q_d, qd_d, qdd_d = self._reference(reference, t)  # once per tick; shared with the feedforward
-        # qdd_d finite (a sum that overflows is looked at entry by entry); q_d and qd_d: by the feedback below
-        if not math.isfinite(sum(qdd_d.tolist())):
+        if not all_finite(qdd_d):  # q_d and qd_d: by the feedback's finiteness below
             _check_finite_reference(q_d, qd_d, qdd_d, t)
         # Kp (q_d - q) + Kd (qd_d - qd) in Python floats: the same IEEE double operations in the same order as
         # NumPy's, bit for bit, but an overflow or inf - inf gives inf or NaN without a floating-point warning,

@@ -32,8 +32,6 @@ from cascgp.models.fastkernel import JIT_WT, jit_args, jit_mean, jit_var, jit_va
 
 __all__ = ["FastPath", "FastVariance", "ZCLIP"]
 
-# ZCLIP (cascgp.gp.posterior): the bound the normalised inputs are clipped to (finite output for any finite input)
-
 
 @dataclass(frozen=True)
 class FastPath:
