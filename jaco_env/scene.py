@@ -51,6 +51,10 @@ JAR_INNER_RADIUS = 0.027
 JAR_HEIGHT = 0.12
 JAR_WALL = 0.006
 JAR_N_WALLS = 16
+#: Radius (m) of the robot's base around the z axis at the origin: the farthest vertex of the Kinova
+#: base mesh (dm_control's ``kinova/jaco_arm.xml``, geom ``base``) lies 0.0493 m from the axis in the
+#: compiled scene (``tests/test_env_api.py`` checks the bound against the mesh).
+BASE_RADIUS = 0.050
 #: Total payload held in the hand (bottle + marbles + extra), Jaco 2 datasheet maximum.
 MAX_PAYLOAD = 1.6
 #: Most marbles a pouring env holds in its bottle.

@@ -51,7 +51,8 @@ class PouringTask:
 
     Attributes:
         name: task name.
-        jar_pos: (3,) jar bottom centre on the table (m, world frame; robot base at origin).
+        jar_pos: (3,) jar bottom centre (m, world frame; robot base at origin): on the table top
+            (z = 0) or above it, and clear of the robot's base (its axis at least 0.083 m from the z axis).
         payload_mass: total mass held in the hand (bottle + marbles + extra rigid mass, kg), or
             ``None`` to draw it per episode (see ``JacoPourEnv``); at most 1.6 kg.
         tilt: final bottle tilt from upright (rad).
@@ -83,6 +84,14 @@ class PouringTask:
         self.jar_pos = np.asarray(self.jar_pos, dtype=float).copy()
         if self.jar_pos.shape != (3,) or not np.all(np.isfinite(self.jar_pos)):
             raise ValueError(f"PouringTask.jar_pos must be 3 finite numbers, got {self.jar_pos!r}")
+        if self.jar_pos[2] < 0:
+            raise ValueError(f"PouringTask.jar_pos: the jar's bottom must be on the table top (z = 0) or above "
+                             f"it, got z = {self.jar_pos[2]} m")
+        clearance = scene.BASE_RADIUS + scene.JAR_INNER_RADIUS + scene.JAR_WALL
+        if np.hypot(self.jar_pos[0], self.jar_pos[1]) < clearance:
+            raise ValueError(f"PouringTask.jar_pos: the jar would stand inside the robot's base; its axis must "
+                             f"be at least {clearance:.3f} m from the base's axis (x = y = 0), got "
+                             f"{self.jar_pos[:2].tolist()}")
         if self.payload_mass is not None:
             if not is_real_number(self.payload_mass):
                 raise TypeError(f"PouringTask.payload_mass must be a real number (kg) or None, got "

@@ -233,6 +233,29 @@ def test_bad_constructor_arguments():
         PouringTask("x", jar_pos=[0.5, 0.0])
 
 
+def test_jar_must_stand_clear_of_the_base_and_on_the_table(pour_env):
+    """A task's jar inside the robot's base or sunk into the table is refused, naming jar_pos; the clearance is
+    the base mesh's extent plus the jar's outer radius."""
+    model = pour_env.unwrapped.model
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    g = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, "jaco_arm/base")
+    mesh = model.geom_dataid[g]
+    verts = model.mesh_vert[model.mesh_vertadr[mesh]:model.mesh_vertadr[mesh] + model.mesh_vertnum[mesh]]
+    world = verts @ data.geom_xmat[g].reshape(3, 3).T + data.geom_xpos[g]
+    reach = np.hypot(world[:, 0], world[:, 1]).max()
+    assert 0.9 * scene.BASE_RADIUS < reach <= scene.BASE_RADIUS
+    clearance = scene.BASE_RADIUS + scene.JAR_INNER_RADIUS + scene.JAR_WALL
+    for pos in ([0.0, 0.0, 0.0], [0.05, 0.02, 0.0], [0.0, -0.99 * clearance, 0.1]):
+        with pytest.raises(ValueError, match="jar_pos.*inside the robot's base"):
+            PouringTask("x", jar_pos=pos)
+    with pytest.raises(ValueError, match="jar_pos.*table top"):
+        PouringTask("x", jar_pos=[0.5, 0.0, -0.01])
+    assert PouringTask("x", jar_pos=[0.0, 1.01 * clearance, 0.0]).jar_pos[1] > clearance
+    with pytest.raises(ValueError, match="inside the robot's base"):
+        DEFAULT_TASKS["front"].replace(jar_pos=np.array([0.06, 0.0, 0.0]))
+
+
 def test_unstable_simulation_truncates_without_nan(pour_env):
     obs0, _ = pour_env.reset(seed=0, options={"task": "front"})
     u = pour_env.unwrapped
