@@ -8,7 +8,7 @@ gains and torque limits (:class:`Feedback`) and, optionally, a model factory and
 
 Controllers: ``"pd"`` (feedback only), ``"rbd"`` (nominal rigid-body feedforward) and any model name
 of :mod:`cascgp.models`, optionally suffixed with a gate (the feedforward falls back toward the RBD:
-:class:`cascgp.controller.FeedforwardController` ``gate=...``): ``-igated`` (``"innovation"``, the default gate:
+:class:`cascgp.controller.FeedforwardController` ``gate=...``): ``-igated`` (``"innovation"``, what ``gate=True`` picks:
 where the model has predicted this episode's measured torques worse than the RBD), ``-gated`` (``"wiener"``),
 ``-fgated`` (``"floor"``) or ``-vgated`` (``"variance"``; the last three where the model is unsure), and
 ``-online`` (new samples enter the model during each attempt, window :data:`ONLINE_WINDOW`, hyperparameters held

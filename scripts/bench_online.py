@@ -11,7 +11,7 @@ with a full online window; the six triangular solves of the variance alone and o
 triangles packed into one array (the memory floor of an exact variance at this n); one online sample's BLAS calls
 alone, with SciPy's wrappers' overhead and (with the compiled sample) from one compiled call without it (the
 floor of its memory traffic); and whole controller ticks
-(:class:`cascgp.FeedforwardController`, PD plus feedforward): ungated, with the default innovation gate (RBD plus
+(:class:`cascgp.FeedforwardController`, PD plus feedforward): ungated, with the innovation gate (``gate=True``; RBD plus
 ``predict_one`` per tick) and its update per measured sample (``observe``: one more ``predict_one`` and RBD call),
 and with each variance gate (RBD plus ``predict_one_var``); the innovation- and variance-gated ticks again one every
 25 ms (``--paced-reps`` of them; the 40 Hz control period of a robot), the process idle in between (asleep: the core
