@@ -49,6 +49,30 @@ def test_file_outputs_are_checked_before_the_inputs_are_read(places: dict[str, P
     assert sorted(p.name for p in folder.parent.iterdir()) == ["file.txt", "folder"]  # nothing written
 
 
+def test_an_output_that_is_an_input_is_refused(places: dict[str, Path], capsys) -> None:
+    """Writing an output over one of the command's inputs (the same file by another spelling or a link too) would
+    destroy the input: refused before anything is read or written."""
+    folder = places["folder"]
+    log, model = folder / "log.npz", folder / "model.npz"
+    log.write_bytes(b"log")
+    model.write_bytes(b"model")
+    (folder / "link.npz").symlink_to(log)
+    other = str(folder / ".." / "folder" / "log.npz")
+    cases = [
+        (["fit_main", "--data", str(log), "--model", "np-standard", "--out", other], "--out", "--data"),
+        (["fit_main", "--data", str(folder / "link.npz"), "--model", "np-standard", "--out", str(log)], "--out",
+         "--data"),
+        (["evaluate_main", "--model", str(model), "--data", str(log), "--json", str(model)], "--json", "--model"),
+        (["evaluate_main", "--model", str(model), "--data", str(log), "--json", str(log)], "--json", "--data"),
+        (["predict_main", "--model", str(model), "--data", str(log), "--out", str(model)], "--out", "--model"),
+        (["predict_main", "--model", str(model), "--data", str(log), "--out", str(log)], "--out", "--data"),
+    ]
+    for argv, option, other_option in cases:
+        err = _refused("model_commands", list(argv), capsys)
+        assert f"{option}: " in err and f"is also {other_option}; writing it would replace that input" in err, argv
+    assert log.read_bytes() == b"log" and model.read_bytes() == b"model"
+
+
 @pytest.mark.parametrize("module,extra", [("transfer", ["--quick"]), ("study", ["--smoke", "--no-sarcos"]),
                                           ("sarcos", ["--quick"]), ("collect", ["--smoke"])])
 def test_folder_outputs_are_checked_before_anything_runs(module: str, extra: list[str], places: dict[str, Path],

@@ -236,7 +236,7 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
             p.error(f"--{opt}: chooses joints of the URDF; it needs --urdf (an sp-* model)")
     a.joints = _parse_joints(p, a.joints)
     a.lock = _parse_lock(p, a.lock)
-    check_output(p, a.out, "--out", "file")  # before the fit, which can take minutes
+    check_output(p, a.out, "--out", "file", {"--data": a.data})  # before the fit, which can take minutes
     if a.out.suffix != ".npz":
         p.error(f"--out: expected a model file name ending in .npz, got {str(a.out)!r}")
     return _run(prog, lambda: _fit(a, prog))
@@ -353,7 +353,7 @@ def evaluate_main(argv: list[str] | None = None, prog: str | None = None) -> int
     p.add_argument("--json", type=Path, default=None,
                    help="also write the scores with provenance (cascgp version, command, files, SHA-256) as JSON")
     a = p.parse_args(argv)
-    check_output(p, a.json, "--json", "file")
+    check_output(p, a.json, "--json", "file", {"--model": a.model, "--data": a.data})
     return _run(prog, lambda: _evaluate(a, prog, argv))
 
 
@@ -424,7 +424,7 @@ def predict_main(argv: list[str] | None = None, prog: str | None = None) -> int:
     p.add_argument("--data", type=Path, required=True, help="log of states: t, q1..qN (qd, qdd, tau optional)")
     p.add_argument("--out", type=Path, required=True, help="CSV file to write (replaced atomically)")
     a = p.parse_args(argv)
-    check_output(p, a.out, "--out", "file")
+    check_output(p, a.out, "--out", "file", {"--model": a.model, "--data": a.data})
     return _run(prog, lambda: _predict(a, prog))
 
 

@@ -90,9 +90,25 @@ def output_path_problem(path: str | os.PathLike, kind: str) -> str | None:
     return None
 
 
-def check_output(parser: argparse.ArgumentParser, path: str | os.PathLike | None, option: str, kind: str) -> None:
-    """``parser.error`` (exit status 2) naming ``option`` when :func:`output_path_problem` finds one."""
+def check_output(parser: argparse.ArgumentParser, path: str | os.PathLike | None, option: str, kind: str,
+                 inputs: Mapping[str, str | os.PathLike | None] | None = None) -> None:
+    """``parser.error`` (exit status 2) naming ``option`` when :func:`output_path_problem` finds one, or when the
+    output is one of the command's ``inputs`` (option -> path): writing it would replace that input."""
     problem = None if path is None else output_path_problem(path, kind)
     if problem:
         parser.error(f"{option}: {problem}")
+    for other, src in (inputs or {}).items():
+        if path is not None and src is not None and _same_file(Path(path), Path(src)):
+            parser.error(f"{option}: {path} is also {other}; writing it would replace that input; choose another "
+                         "path")
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` name the same file (through links, ``..`` or another spelling)."""
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+        return a.resolve() == b.resolve()
+    except OSError:
+        return False
 
