@@ -69,11 +69,18 @@ def sidecar_path(urdf_path: str | os.PathLike) -> Path:
 
 
 def _as_vector(name: str, value: Any, n: int) -> np.ndarray:
-    arr = np.asarray(value, dtype=float)
+    """``value`` as ``n`` floats (a number is repeated), ``ValueError`` naming ``name`` otherwise: strings and
+    booleans (``"30"``, ``true`` in a sidecar JSON) are refused, not converted."""
+    raw = np.asarray(value, dtype=object)
+    if any(isinstance(v, (bool, np.bool_, str, bytes)) or not isinstance(v, (int, float, np.integer, np.floating))
+           for v in raw.ravel()):
+        raise ValueError(f"{name}: expected numbers, got {value!r}")
+    arr = raw.astype(float)
     if arr.ndim == 0:
         arr = np.full(n, float(arr))
     if arr.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},) (one value per joint), got {arr.shape}")
+        per = "x, y, z in m/s^2" if name == "gravity" else "one value per joint"
+        raise ValueError(f"{name} must have shape ({n},) ({per}), got {arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} must be finite, got {arr}")
     if name.endswith("_limits") and not np.all(arr > 0):
@@ -212,8 +219,14 @@ class RigidBodyModel:
                 model = pin.buildModelFromUrdf(str(path))
         except Exception as exc:  # Pinocchio raises a bare ValueError/RuntimeError with a terse message
             raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}{parser_reason(said)}") from exc
-        rbd = cls(model, armature=armature, gravity=gravity, source=str(path), urdf_text=text, joints=joints,
-                  locked=locked)
+        try:
+            rbd = cls(model, armature=armature, gravity=gravity, source=str(path), urdf_text=text, joints=joints,
+                      locked=locked)
+        except ValueError as exc:  # a floating or planar joint, say: name the file, as a parse error does (an
+            # argument's error, "joints: ...", already names what to change)
+            if str(exc).split(" ", 1)[0].endswith(":"):
+                raise
+            raise ValueError(f"URDF {str(path)!r}: {exc}") from exc
         rbd._check_dof(dof, f"URDF {str(path)!r}")
         return rbd
 

@@ -292,6 +292,11 @@ def test_state_dict_round_trip_identical_predictions():
     del bad["X"]
     with pytest.raises(ValueError, match="X"):
         GPBank.from_state_dict(bad)
+    for huge in (800.0, -800.0):  # finite, but exp() overflows or gives a zero lengthscale: named, not an OverflowError
+        bad = dict(sd)
+        bad["theta"] = sd["theta"] + huge
+        with pytest.raises(ValueError, match=r"state\['theta'\]: expected log hyperparameters within"):
+            GPBank.from_state_dict(bad)
 
 
 # ------------------------------------------------------------------------------------------------ errors

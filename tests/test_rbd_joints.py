@@ -8,6 +8,7 @@ joints at the locked positions (locked joints).
 from __future__ import annotations
 
 import csv
+import json
 import warnings
 from pathlib import Path
 
@@ -112,8 +113,11 @@ def test_angle_joints_keeps_the_model_and_leaves_the_callers(tmp_path: Path) -> 
     # a rejected construction changes nothing of the caller's model, whatever its joints
     for model in (native, pin.buildModelFromUrdf(str(write(tmp_path, "r.urdf", arm_urdf(("revolute",) * 3))))):
         before = np.array(model.armature)
-        with pytest.raises(ValueError, match=r"gravity must have shape \(3,\)"):
+        with pytest.raises(ValueError, match=r"gravity must have shape \(3,\) \(x, y, z in m/s\^2\)"):
             RigidBodyModel(model, armature=[1.0, 2.0, 3.0], gravity=[1.0, 2.0])
+        for bad in ("30", [True, 1.0, 2.0], [30.0, "abc", 1.0]):  # a sidecar's strings and booleans: not converted
+            with pytest.raises(ValueError, match="torque_limits: expected numbers"):
+                RigidBodyModel(model, torque_limits=bad)
         np.testing.assert_array_equal(model.armature, before)
         assert RigidBodyModel(model, armature=[1.0, 2.0, 3.0]).pin_model is not model
         np.testing.assert_array_equal(model.armature, before)
@@ -183,7 +187,7 @@ def test_joint_selection_errors(tmp_path: Path) -> None:
 
     floating = write(tmp_path, "floating.urdf", arm_urdf(("revolute",) * 3).replace(
         '<joint name="j1" type="revolute">', '<joint name="j1" type="floating">'))
-    with pytest.raises(ValueError, match=r"joints \['j1'\] have more than one position"):
+    with pytest.raises(ValueError, match=r"URDF '.*floating.urdf': joints \['j1'\] have more than one position"):
         RigidBodyModel.from_urdf(floating)
     welded = write(tmp_path, "welded.urdf", '<robot name="w"><link name="a"/><link name="b"/><joint name="f" '
                    'type="fixed"><parent link="a"/><child link="b"/></joint></robot>')
@@ -223,6 +227,21 @@ def test_a_model_with_locked_joints_saves_and_loads(tmp_path: Path) -> None:
     for damaged, match in (("{", "rbd/joints_json: not valid JSON"), ("[]", "rbd/joints_json: expected an object")):
         np.savez(tmp_path / "bad.npz", **{**z, "rbd/joints_json": np.array(damaged)})
         with pytest.raises(ValueError, match=match):
+            load_model(tmp_path / "bad.npz")
+    # every damaged rbd/* entry is named (a JSON error, or an attribute error of a list, named nothing)
+    for key, damaged, match in (("rbd/limits_json", np.array("{x"), "rbd/limits_json: not valid JSON"),
+                                ("rbd/limits_json", np.array("[1]"), "rbd/limits_json: expected a JSON object"),
+                                ("rbd/meta_json", np.array("[1]"), "rbd/meta_json: expected a JSON object"),
+                                ("rbd/armature", np.array(["a", "b", "c"]), "rbd/armature: expected real numbers"),
+                                ("rbd/gravity", np.array([0.0, 0.0]), r"rbd/\*: the embedded .*grav")):
+        np.savez(tmp_path / "bad.npz", **{**z, key: damaged})
+        with pytest.raises(ValueError, match=f"bad.npz: {match}"):
+            load_model(tmp_path / "bad.npz")
+    # config fields of the wrong kind: named, not converted ("no" was True, 5.7 was 5)
+    cfg = json.loads(str(z["config_json"]))
+    for field, value in (("train_on_predicted", "no"), ("dof", 3.0), ("where", [[0, 5.7]] * len(cfg["where"]))):
+        np.savez(tmp_path / "bad.npz", **{**z, "config_json": np.array(json.dumps({**cfg, field: value}))})
+        with pytest.raises(ValueError, match=f"config_json: .*{field}: expected"):
             load_model(tmp_path / "bad.npz")
 
 

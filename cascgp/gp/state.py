@@ -108,6 +108,10 @@ def bank_state(config: GPFitConfig, data: BankData, fit_info: list[dict[str, Any
     }
 
 
+#: Largest |log hyperparameter| a saved state may hold: exp() of 709.8 overflows float64, and exp(-745) is 0.
+_THETA_MAX = 700.0
+
+
 def bank_from_state(d: dict[str, Any]) -> tuple[GPFitConfig, BankData, list[dict[str, Any]]]:
     """Validate a :func:`bank_state` dict; ``ValueError`` naming the first bad field."""
     if not isinstance(d, dict):
@@ -156,6 +160,9 @@ def bank_from_state(d: dict[str, Any]) -> tuple[GPFitConfig, BankData, list[dict
         arrs[k] = a
     if not np.all(np.isfinite(Xp)):
         raise ValueError("state['X']: contains NaN or inf")
+    if np.abs(arrs["theta"]).max() > _THETA_MAX:  # exp() of it overflows (or underflows to a zero lengthscale)
+        raise ValueError(f"state['theta']: expected log hyperparameters within +-{_THETA_MAX:g}, got "
+                         f"{arrs['theta'].flat[np.abs(arrs['theta']).argmax()]:g}")
     try:
         fit_info = json.loads(str(np.asarray(d["fit_info_json"])))
     except json.JSONDecodeError as e:
