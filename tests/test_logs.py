@@ -55,11 +55,11 @@ def test_npz_is_accepted(tmp_path: Path, data: DynamicsData) -> None:
 
 def test_column_order_blanks_and_blank_lines_do_not_matter(tmp_path: Path) -> None:
     path = tmp_path / "log.csv"
-    path.write_text(" tau1 , q1 , t\n\n3.0, 1.0, 0.0\n4.0, 1.5, 0.1\n\n")
+    path.write_text(" tau1 , q1 , t\n\n3.0, 1.0, 0.0\n4.0, 1.5, 0.1\n\n5.0, 2.0, 0.2\n")
     d = read_log(path, smoothing=None)
-    np.testing.assert_array_equal(d.q[:, 0], [1.0, 1.5])
-    np.testing.assert_array_equal(d.tau[:, 0], [3.0, 4.0])
-    np.testing.assert_allclose(d.qd[:, 0], [5.0, 5.0])
+    np.testing.assert_array_equal(d.q[:, 0], [1.0, 1.5, 2.0])
+    np.testing.assert_array_equal(d.tau[:, 0], [3.0, 4.0, 5.0])
+    np.testing.assert_allclose(d.qd[:, 0], [5.0, 5.0, 5.0])
     assert d.meta["derivative_filter"] == filter_name(None)
 
 
@@ -157,7 +157,8 @@ CASES = {
     "t goes back": (HEAD + "\n0,1,2,3,4\n0.2,1,2,3,4\n\n0.1,1,2,3,4\n", 5, "t", "does not come after t = 0.2 (row 3)"),
     "segment not integer": ("t,segment,q1,tau1\n0,0.5,1,2\n", 2, "segment", "integer"),
     "segment goes back": ("t,segment,q1,tau1\n0,1,1,2\n0.1,0,1,2\n", 3, "segment", "non-decreasing"),
-    "wrapped angle": (HEAD + "\n0,3.1,2,3,4\n\n0.1,-3.1,2,3,4\n", 4, "q1", "changes by -6.2 from row 2, more than pi"),
+    "wrapped angle": (HEAD + "\n0,3.1,2,3,4\n\n0.1,-3.1,2,3,4\n0.2,-3.1,2,3,4\n", 4, "q1",
+                      "changes by -6.2 from row 2, more than pi"),
     "empty file": ("", 1, None, "empty file"),
     "blank file": ("\n\n", 1, None, "empty file"),
     "no data rows": (HEAD + "\n", 2, None, "no data rows"),
@@ -182,8 +183,9 @@ def test_a_jump_across_segments_or_unwrapped_is_accepted(tmp_path: Path) -> None
     """The wrap check is per segment, only for logs whose velocities are computed, and an unwrapped continuous
     angle passes it."""
     path = tmp_path / "log.csv"
-    path.write_text("t,segment,q1,tau1\n0,0,3.1,1\n0.1,1,-3.1,1\n")
-    assert read_log(path).n_samples == 2
+    rows = [f"{r / 10},{r // 3},{3.1 if r < 3 else -3.1},1\n" for r in range(6)]  # segments of 3 rows, +-3.1 rad
+    path.write_text("t,segment,q1,tau1\n" + "".join(rows))
+    assert read_log(path).n_samples == 6
     path.write_text("t,q1,qd1,qdd1,tau1\n0,3.1,0,0,1\n0.1,-3.1,0,0,1\n")  # independent samples
     assert read_log(path).n_samples == 2
     t = np.arange(0.0, 2.0, 0.01)
@@ -196,9 +198,30 @@ def test_a_jump_across_segments_or_unwrapped_is_accepted(tmp_path: Path) -> None
         read_log(path)
 
 
+def test_a_segment_too_short_to_differentiate_is_refused(tmp_path: Path) -> None:
+    """qd and qdd from q need 3 rows per segment, qdd from qd 2: a shorter segment is named (it had velocity 0,
+    or acceleration 0); with every derivative given, any length reads."""
+    path = tmp_path / "log.csv"
+    rows = "0,0,1.0,2\n0.1,0,1.2,2\n0.2,0,1.4,2\n0.3,1,1.0,2\n0.4,1,1.1,2\n"
+    path.write_text("t,segment,q1,tau1\n" + rows)
+    with pytest.raises(LogFormatError, match=r"log.csv: row 5: segment 1 has 2 rows; computing qd and qdd from q "
+                                             r"needs at least 3 rows per segment.*give the qd1..qdN and qdd1..qdN"):
+        read_log(path)
+    path.write_text("t,segment,q1,qd1,tau1\n" + rows.replace(",2\n", ",0.5,2\n"))
+    assert read_log(path).n_samples == 5  # qdd from qd: 2 rows are enough
+    path.write_text("t,segment,q1,qd1,tau1\n0,0,1,0.5,2\n0.1,1,1,0.5,2\n0.2,1,1,0.5,2\n")
+    with pytest.raises(LogFormatError, match="row 2: segment 0 has 1 row; computing qdd from qd needs at least 2"):
+        read_log(path)
+    path.write_text("t,q1,tau1\n0,1.0,2\n")
+    with pytest.raises(LogFormatError, match="log.csv: the log has 1 row; computing qd and qdd"):
+        read_log(path, require_tau=False)
+    path.write_text("t,q1,qd1,qdd1\n0,1.0,0.5,0.1\n")
+    assert read_log(path, require_tau=False).n_samples == 1
+
+
 def test_segments_reset_time(tmp_path: Path) -> None:
     path = tmp_path / "log.csv"
-    path.write_text("t,segment,q1,tau1\n0,0,1,2\n0.1,0,1,2\n0,1,1,2\n0.1,1,1,2\n")
+    path.write_text("t,segment,q1,tau1\n0,0,1,2\n0.1,0,1,2\n0.2,0,1,2\n0,1,1,2\n0.1,1,1,2\n0.2,1,1,2\n")
     assert read_log(path, smoothing=None).segments.tolist() == [0, 1]
 
 
