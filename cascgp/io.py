@@ -111,7 +111,10 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], object], 
         raise NotADirectoryError(f"{path}: cannot create its folder {folder}: {file_in_path(folder)} is a "
                                  "file") from None
     remove_stale_temporaries(folder)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_HOST}-{os.getpid()}.", suffix=".tmp", dir=folder)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_HOST}-{os.getpid()}.", suffix=".tmp", dir=folder)
+    except OSError as exc:  # read-only or not ours: its message names the temporary file, not the caller's path
+        raise type(exc)(exc.errno, f"{path}: cannot write in its folder {folder} ({exc.strerror})") from None
     try:
         os.fchmod(fd, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the mode open() would
         with os.fdopen(fd, "wb") as f:

@@ -82,6 +82,11 @@ def filter_name(smoothing: SavGol | None) -> str:
 
 
 # --------------------------------------------------------------------------- reading
+def _span(group: str, lo: int, hi: int) -> str:
+    """``q2`` or ``q2..q4``."""
+    return f"{group}{lo}" if lo == hi else f"{group}{lo}..{group}{hi}"
+
+
 def _header(path: Path, names: list[str], row: int, require_tau: bool
             ) -> tuple[int, dict[str, list[int] | None], int | None]:
     """N, the column indices of every group (``None`` for an absent group) and the index of ``segment``."""
@@ -124,7 +129,8 @@ def _header(path: Path, names: list[str], row: int, require_tau: bool
             raise LogFormatError(
                 f"{where}, column {bad!r}: joint count mismatch: the q columns give N = {n} joints, so {g} needs "
                 f"exactly {g}1..{g}{n}; "
-                + (f"missing {', '.join(gaps)}" if gaps else f"unexpected {', '.join(extra)}"))
+                + (f"missing {', '.join(gaps)}" if gaps else
+                   f"unexpected {', '.join(extra)} (or is {_span('q', n + 1, max(have))} missing?)"))
     cols = {g: ([groups[g][j] for j in range(1, n + 1)] if groups[g] else None) for g in _GROUPS}
     return n, cols, seg_col
 
@@ -266,8 +272,9 @@ def _check_uniform(path: Path, t: np.ndarray, seg: np.ndarray, smoothing: SavGol
         return
     d = np.diff(t)[np.diff(seg) == 0]
     if d.size and np.max(np.abs(d - np.median(d))) > 0.05 * np.median(d):
-        warnings.warn(f"{path}: sample periods vary by more than 5 % of their median ({np.median(d):.4g} s); the "
-                      f"{filter_name(smoothing)} derivative assumes uniform sampling", stacklevel=3)
+        warnings.warn(f"{path}: sample periods vary by more than 5 % of their median ({np.median(d):.4g} s, "
+                      f"longest {d.max():.4g} s); the {filter_name(smoothing)} derivative assumes uniform sampling: "
+                      "start a new segment (column 'segment') where logging paused", stacklevel=3)
 
 
 #: A median sample period above this (s) is taken for a time column in other units than seconds: no arm's dynamics
@@ -340,15 +347,18 @@ def read_log(path: str | os.PathLike, *, smoothing: SavGol | int | None = DEFAUL
 def _csv_bytes(columns: dict[str, np.ndarray]) -> bytes:
     names = list(columns)
     a = np.column_stack([np.asarray(columns[k], dtype=np.float64) for k in names])
-    buf = io.StringIO()
-    np.savetxt(buf, a, delimiter=",", fmt="%.17g", header=",".join(names), comments="")
-    return buf.getvalue().encode("utf-8")
+    # repr: the shortest text that reads back as the same float (0.04, not %.17g's 0.040000000000000001)
+    cells = a.astype(object)
+    if "segment" in names:  # ids as integers
+        cells[:, names.index("segment")] = a[:, names.index("segment")].astype(np.int64).tolist()
+    rows = (",".join(map(repr, row)) for row in cells.tolist())
+    return "\n".join([",".join(names), *rows, ""]).encode("utf-8")
 
 
 def write_log(path: str | os.PathLike, data: DynamicsData) -> Path:
     """Write ``data`` atomically (:func:`cascgp.io.atomic_write`): ``.npz`` as :meth:`DynamicsData.save`,
     anything else as a CSV log with every column (``t``, ``segment`` when there is more than one segment,
-    ``q``, ``qd``, ``qdd``, ``tau``), values printed to round-trip exactly (17 significant digits)."""
+    ``q``, ``qd``, ``qdd``, ``tau``), values printed to round-trip exactly (Python's shortest repr of each float)."""
     if not isinstance(data, DynamicsData):
         raise TypeError(f"data: expected DynamicsData, got {type(data).__name__}")
     path = Path(path)

@@ -221,7 +221,7 @@ def joint_selection(model: pin.Model, joints: Sequence[str] | None, locked: Mapp
             x = _mimic_position(name, mimics[name], keep, coupled, values, given, x)
         j = model.getJointId(name)
         lo, hi = model.lowerPositionLimit[model.idx_qs[j]], model.upperPositionLimit[model.idx_qs[j]]
-        if not np.isfinite(x) or not lo <= x <= hi:
+        if not np.isfinite(x) or (hi > lo and not lo <= x <= hi):  # lower = upper (URDF's default 0, 0): no limits
             where = ("" if name in given else f" (from {mimics[name][0]!r}, which it mimics)" if name in mimics
                      else " (the default; give its position in locked=)")
             shown = repr(value) if name in given or name not in mimics else f"{x:g}"

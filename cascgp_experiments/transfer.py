@@ -433,9 +433,10 @@ def plot(results: dict[str, Any], path: Path) -> None:
 
 
 def write_outputs(runs: list[ControllerRun], cfg: TransferConfig, out: Path, wall_s: float,
-                  jobs: dict[str, Any] | None = None) -> dict[str, Any]:
+                  jobs: dict[str, Any] | None = None, command: str = "") -> dict[str, Any]:
     """Write ``results.json``, ``summary.md`` and ``transfer.png`` into ``out``; returns the results dict.
-    ``jobs``: the job statistics of the run (workers, backend, seconds per controller), stored as ``"jobs"``."""
+    ``jobs``: the job statistics of the run (workers, backend, seconds per controller), stored as ``"jobs"``;
+    ``command``: the command line that ran it, stored in ``"provenance"``."""
     from cascgp.models.fastkernel import jit_enabled
 
     compiled = (jobs or {}).get("compiled_kernels", jit_enabled())  # the path the jobs were planned and run on
@@ -443,7 +444,8 @@ def write_outputs(runs: list[ControllerRun], cfg: TransferConfig, out: Path, wal
         "config": cfg.to_dict(),
         "wall_seconds": wall_s,
         "controllers": {run.name: run.attempts for run in runs},
-        "provenance": {"versions": package_versions(), "compiled_kernels": compiled, "machine": machine_info(),
+        "provenance": {"command": command, "versions": package_versions(), "compiled_kernels": compiled,
+                       "machine": machine_info(),
                        "written_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
     }
     if jobs is not None:

@@ -47,3 +47,11 @@ def test_plots_refuses_a_json_of_something_else(tmp_path: Path, capsys) -> None:
     assert exc.value.code == 2
     assert "expected a study's results.json or a sarcos.json" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+    run = json.loads((REPO / "docs" / "results.json").read_text())  # a results file that lacks a key
+    del run["jaco"]["grid_s"]
+    (tmp_path / "cut.json").write_text(json.dumps(run))
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["plots", "--json", str(tmp_path / "cut.json"), "--out", str(tmp_path / "out")])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "cut.json: not a complete study results file (missing entry 'grid_s')" in err and "Traceback" not in err

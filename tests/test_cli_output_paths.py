@@ -115,6 +115,23 @@ def test_atomic_write_names_a_folder_or_a_file_in_the_way(places: dict[str, Path
     assert list(folder.iterdir()) == [] and file.read_text() == "x"  # no temporary left, nothing replaced
 
 
+def test_atomic_write_in_a_folder_it_cannot_write_names_the_path(places: dict[str, Path], monkeypatch) -> None:
+    """A read-only folder (a read-only mount: root is refused too) is reported with the path asked for, not the
+    temporary file's name."""
+    import errno
+    import tempfile
+
+    def read_only(*args, **kwargs):
+        raise OSError(errno.EROFS, "Read-only file system", str(places["folder"] / ".m.npz.host-1.abc.tmp"))
+
+    monkeypatch.setattr(tempfile, "mkstemp", read_only)
+    target = places["folder"] / "m.npz"
+    with pytest.raises(OSError, match=f"{target}: cannot write in its folder {places['folder']} "
+                                      r"\(Read-only file system\)$") as err:
+        atomic_write_text(target, "y")
+    assert err.value.errno == errno.EROFS and ".tmp" not in str(err.value)
+
+
 def test_a_data_buffer_on_a_file_names_it(places: dict[str, Path]) -> None:
     from cascgp import DataBuffer
 

@@ -145,6 +145,7 @@ def test_tiny_transfer_two_workers_identical(tiny_transfer_serial: Path, tmp_pat
 
     prov = res["provenance"]  # which kernel path ran (the fast extra's compiled loops or NumPy), versions, machine
     assert prov["compiled_kernels"] == jit_enabled() and "cascgp-jaco" in prov["versions"] and prov["machine"]["cpus"]
+    assert prov["command"] == " ".join(["cascgp transfer", "--out", str(out), *TINY_TRANSFER, "--workers", "2"])
     assert _transfer_numbers(out) == _transfer_numbers(tiny_transfer_serial)
     assert (out / "summary.md").read_text() == (tiny_transfer_serial / "summary.md").read_text()
     assert (out / "summary.md").read_text() in run.stdout

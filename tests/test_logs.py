@@ -112,7 +112,7 @@ def test_nonuniform_sampling_is_warned_about(tmp_path: Path) -> None:
     t = np.cumsum(np.r_[0.0, np.full(9, 0.02), np.full(10, 0.04)])
     path = tmp_path / "log.csv"
     path.write_text("t,q1,tau1\n" + "".join(f"{float(x)!r},{float(np.sin(x))!r},0.5\n" for x in t))
-    with pytest.warns(UserWarning, match="log.csv: sample periods vary"):
+    with pytest.warns(UserWarning, match=r"log.csv: sample periods vary .*longest 0.04 s.*start a new segment"):
         read_log(path)
 
 
@@ -146,6 +146,8 @@ CASES = {
     "unknown column": (HEAD + ",qd_1\n0,1,2,3,4,5\n", 1, "qd_1", "unknown column"),
     "duplicate column": ("t,q1,q1,tau1\n0,1,1,2\n", 1, "q1", "appears twice"),
     "N mismatch": (HEAD + ",tau3\n0,1,2,3,4,5\n", 1, "tau3", "N = 2"),
+    "q column missing": ("t,q1,tau1,tau2,tau3\n0,1,2,3,4\n", 1, "tau2",
+                         "unexpected tau2, tau3 (or is q2..q3 missing?)"),
     "partial group": (HEAD + ",qd2\n0,1,2,3,4,5\n", 1, "qd1", "missing qd1"),
     "ragged row (short)": (HEAD + "\n0,1,2,3,4\n0.1,1,2\n", 3, "tau1", "the row has 3 cells, the header 5"),
     "ragged row (long)": (HEAD + "\n0,1,2,3,4,5\n", 2, "tau2", "1 extra cell"),

@@ -141,6 +141,13 @@ def test_fit_evaluate_predict_commands(robot: Path) -> None:
     assert scores["notes"] == []  # a held-out log in the training log's units: nothing noted
     assert scores["command"][:2] == ["cascgp", "evaluate"] and scores["cascgp_version"]
     assert "mean" in ev.stdout.splitlines()[-1]
+    with (moved / "test.csv").open() as f:  # a joint whose test torque is constant: nRMSE undefined, named
+        rows = list(csv.reader(f))
+    col = rows[0].index("tau2")
+    body = [",".join(r[:col] + ["1.5"] + r[col + 1:]) for r in rows[1:]]
+    (moved / "flat.csv").write_text("\n".join([",".join(rows[0]), *body]) + "\n")
+    flat = cascgp("evaluate", "--model", "model.npz", "--data", "flat.csv", cwd=moved)
+    assert flat.returncode == 2 and "flat.csv: column 'tau2' is constant (1.5)" in flat.stderr, flat.stderr
 
     states = moved / "states.csv"  # predict needs no torque columns
     with states.open("w", newline="") as f:

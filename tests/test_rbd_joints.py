@@ -144,6 +144,16 @@ def test_locked_joints_are_welded_at_their_positions(tmp_path: Path) -> None:
     np.testing.assert_array_equal(alone.inverse_dynamics(q, qd, qdd), rbd.inverse_dynamics(q, qd, qdd))
 
 
+def test_a_joint_with_equal_limits_locks_anywhere(tmp_path: Path) -> None:
+    """lower = upper (URDF's default of 0 and 0: no limits stated) is no limit, as for the fit's limits note; a
+    joint with limits is still held within them."""
+    text = arm_urdf(("revolute",) * 3).replace('lower="-3" upper="3"', 'lower="0" upper="0"', 1)
+    urdf = write(tmp_path, "zero.urdf", text)
+    assert RigidBodyModel.from_urdf(urdf, joints=["j2", "j3"], locked={"j1": 0.5}).locked == {"j1": 0.5}
+    with pytest.raises(ValueError, match=r"locked: 'j2': expected a finite position within the joint's limits"):
+        RigidBodyModel.from_urdf(urdf, joints=["j1", "j3"], locked={"j2": 3.5})
+
+
 def test_a_joint_locked_mid_chain_is_held_still(tmp_path: Path) -> None:
     """Locking j2 at 0.4 rad: the other joints' torques are the full model's with j2 at 0.4, at rest."""
     urdf = write(tmp_path, "arm.urdf", arm_urdf(("continuous", "revolute", "revolute")))

@@ -377,6 +377,11 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     notes = [n for n in (_limits_note(prog, model.rbd, data), _coverage_note(prog, model, data),
                          _in_sample_note(prog, model, data)) if n]
     tau = data.tau[rows]
+    flat = [j for j in range(model.dof) if np.ptp(tau[:, j]) == 0]
+    if flat:
+        raise _Fail(f"{a.data}: column 'tau{flat[0] + 1}' is constant ({tau[0, flat[0]]:g}) over the "
+                    f"{int(rows.sum())} rows scored; nRMSE (RMSE over the torque's range) is undefined: evaluate on a "
+                    "log in which every joint's torque varies")
     scores = {model.name: nrmse(mean[rows], tau)}
     if model.rbd is not None:
         scores["nominal (rigid body)"] = nrmse(model.rbd.inverse_dynamics(data.q[rows], data.qd[rows],

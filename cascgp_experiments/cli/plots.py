@@ -35,7 +35,12 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     if res is None:
         ap.error(f"--json: {a.json}: expected a study's results.json or a sarcos.json (no 'jaco' or 'sarcos' "
                  f"results)")
-    for p in render_results(res, a.out):
+    try:
+        written = render_results(res, a.out)
+    except (KeyError, IndexError, TypeError) as exc:  # a hand-edited or truncated file: name what it lacks
+        what = f"missing entry {exc.args[0]!r}" if isinstance(exc, KeyError) else str(exc)
+        ap.error(f"--json: {a.json}: not a complete study results file ({what})")
+    for p in written:
         print(p)
 
 

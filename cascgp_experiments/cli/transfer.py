@@ -136,7 +136,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     jobs: dict = {}
     with session(a.ray, a.workers):
         runs = run_transfer(cfg, out, workers=a.workers, ray_address=a.ray, stats=jobs, video=a.video_options)
-    write_outputs(runs, cfg, out, time.perf_counter() - t0, jobs=jobs)
+    command = " ".join([prog or "cascgp transfer", *(argv if argv is not None else sys.argv[1:])])
+    write_outputs(runs, cfg, out, time.perf_counter() - t0, jobs=jobs, command=command)
     print((out / "summary.md").read_text())
     if a.video_options is not None:
         print(f"videos:  {a.video}/*.mp4")
