@@ -4,11 +4,12 @@ and what was expected. Imports neither torch nor MuJoCo, so settings classes can
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any, Literal, overload
 
 import numpy as np
 
-__all__ = ["check_count", "check_positive"]
+__all__ = ["check_count", "check_positive", "check_real_vector"]
 
 
 @overload
@@ -39,3 +40,29 @@ def check_positive(v: Any, field_name: str, unit: str = "", zero: bool = False) 
         raise ValueError(f"{field_name}: expected a finite number {'>=' if zero else '>'} 0"
                          f"{f' ({unit})' if unit else ''}, got {v!r}")
     return float(v)
+
+
+def _is_real(v: Any) -> bool:
+    """A real number (Python or NumPy, a 0-d array of one), not a bool or a string."""
+    if isinstance(v, np.ndarray) and v.ndim == 0:
+        return v.dtype.kind in "fiu"
+    return isinstance(v, numbers.Real) and not isinstance(v, (bool, np.bool_))
+
+
+def check_real_vector(value: Any, field_name: str, n: int, per: str = "one value per joint") -> np.ndarray:
+    """``value`` as ``n`` finite floats (one number is repeated); else ``ValueError`` naming ``field_name``. Strings
+    and booleans (a JSON file's ``"30"`` or ``true``) are refused, not converted."""
+    if isinstance(value, np.ndarray) and value.dtype.kind in "fiu":
+        arr = value.astype(float)
+    else:
+        raw = np.asarray(value, dtype=object)
+        if not all(_is_real(v) for v in raw.ravel()):
+            raise ValueError(f"{field_name}: expected numbers, got {value!r}")
+        arr = np.array([float(v) for v in raw.ravel()]).reshape(raw.shape)
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise ValueError(f"{field_name} must have shape ({n},) ({per}), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{field_name} must be finite, got {arr}")
+    return arr

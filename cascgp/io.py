@@ -114,7 +114,8 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], object], 
     try:
         fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{_HOST}-{os.getpid()}.", suffix=".tmp", dir=folder)
     except OSError as exc:  # read-only or not ours: its message names the temporary file, not the caller's path
-        raise type(exc)(exc.errno, f"{path}: cannot write in its folder {folder} ({exc.strerror})") from None
+        msg = f"{path}: cannot write in its folder {folder} ({exc.strerror or exc})"
+        raise (type(exc)(exc.errno, msg) if exc.errno is not None else type(exc)(msg)) from None
     try:
         os.fchmod(fd, 0o666 & ~_UMASK)  # mkstemp makes 0600; give the file the mode open() would
         with os.fdopen(fd, "wb") as f:

@@ -32,7 +32,7 @@ Within each segment, :math:`\dot q` is the derivative of :math:`q` and :math:`\d
 (Savitzky-Golay, window 7, polynomial order 2, :class:`cascgp.data.SavGol`): the derivative of a local quadratic
 fitted by least squares to 7 samples, centred (no lag), assuming the segment's median sample period; segments
 shorter than the window, and ``smoothing=None``, use central differences (:func:`numpy.gradient` on the times).
-A segment needs 3 rows to compute both, 2 to compute :math:`\ddot q` from a given :math:`\dot q`; a shorter one is
+A segment needs 3 rows to compute both, 2 to compute one of them; a shorter one is
 refused with a :class:`LogFormatError` naming its first row (it would get a zero derivative).
 The filter used is recorded in ``data.meta["derivative_filter"]`` and each group's origin in
 ``data.meta["qd_source"]`` / ``["qdd_source"]`` (``"column"`` or ``"computed"``). A median sample period above
@@ -214,7 +214,7 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
     meta: dict = {"source": str(path), "format": "cascgp log CSV", "qd_source": "column", "qdd_source": "column",
                   "has_tau": arr["tau"] is not None, "derivative_filter": None}
     if arr["qd"] is None or arr["qdd"] is None:
-        _check_segment_rows(path, seg, rownos, 3 if arr["qd"] is None else 2, seg_col is not None)
+        _check_segment_rows(path, seg, rownos, arr["qd"] is None, arr["qdd"] is None, seg_col is not None)
         _check_uniform(path, t, seg, smoothing)
         _check_seconds(path, t, seg)
         meta["derivative_filter"] = filter_name(smoothing)
@@ -250,16 +250,18 @@ def _check_no_wrap(path: Path, q: np.ndarray, seg: np.ndarray, rownos: list[int]
                              "Unwrap it (numpy.unwrap) or start a new segment there")
 
 
-def _check_segment_rows(path: Path, seg: np.ndarray, rownos: list[int], need: int, has_segments: bool) -> None:
-    """``LogFormatError`` naming the first segment shorter than ``need`` rows: q̇ and q̈ differenced from q need 3
-    rows per segment, q̈ from q̇ 2 (a one-row segment had velocity 0, a two-row one acceleration 0)."""
+def _check_segment_rows(path: Path, seg: np.ndarray, rownos: list[int], no_qd: bool, no_qdd: bool,
+                        has_segments: bool) -> None:
+    """``LogFormatError`` naming the first segment too short for the derivatives to compute: q̇ and q̈ both from q
+    need 3 rows per segment, one of them 2 (a one-row segment had velocity 0, a two-row one acceleration 0)."""
+    need = 3 if no_qd and no_qdd else 2
     starts = np.r_[0, np.flatnonzero(np.diff(seg)) + 1]
     sizes = np.diff(np.r_[starts, len(seg)])
     short = np.flatnonzero(sizes < need)
     if short.size:
         lo, k = int(starts[short[0]]), int(sizes[short[0]])
-        what = "qd and qdd from q" if need == 3 else "qdd from qd"
-        cols = "qd1..qdN and qdd1..qdN" if need == 3 else "qdd1..qddN"
+        what = "qd and qdd from q" if need == 3 else "qd from q" if no_qd else "qdd from qd"
+        cols = "qd1..qdN and qdd1..qdN" if need == 3 else "qd1..qdN" if no_qd else "qdd1..qddN"
         rows = f"{k} row{'s' if k > 1 else ''}"
         where = f"row {rownos[lo]}: segment {int(seg[lo])} has {rows}" if has_segments else f"the log has {rows}"
         raise LogFormatError(f"{path}: {where}; computing {what} needs at least {need} rows per segment: merge or "

@@ -45,6 +45,7 @@ from typing import Any
 import numpy as np
 import pinocchio as pin
 
+from cascgp.checks import check_real_vector
 from cascgp.data import F64, all_finite
 from cascgp.rbd_joints import angle_joints, coupling_map, joint_selection, lock_joints, mimic_joints
 from cascgp.urdf_parser_output import parser_output, parser_reason
@@ -69,20 +70,7 @@ def sidecar_path(urdf_path: str | os.PathLike) -> Path:
 
 
 def _as_vector(name: str, value: Any, n: int) -> np.ndarray:
-    """``value`` as ``n`` floats (a number is repeated), ``ValueError`` naming ``name`` otherwise: strings and
-    booleans (``"30"``, ``true`` in a sidecar JSON) are refused, not converted."""
-    raw = np.asarray(value, dtype=object)
-    if any(isinstance(v, (bool, np.bool_, str, bytes)) or not isinstance(v, (int, float, np.integer, np.floating))
-           for v in raw.ravel()):
-        raise ValueError(f"{name}: expected numbers, got {value!r}")
-    arr = raw.astype(float)
-    if arr.ndim == 0:
-        arr = np.full(n, float(arr))
-    if arr.shape != (n,):
-        per = "x, y, z in m/s^2" if name == "gravity" else "one value per joint"
-        raise ValueError(f"{name} must have shape ({n},) ({per}), got {arr.shape}")
-    if not np.all(np.isfinite(arr)):
-        raise ValueError(f"{name} must be finite, got {arr}")
+    arr = check_real_vector(value, name, n, "x, y, z in m/s^2" if name == "gravity" else "one value per joint")
     if name.endswith("_limits") and not np.all(arr > 0):
         raise ValueError(f"{name} must be > 0 (symmetric limits, one per joint), got {arr}")
     return arr
@@ -222,9 +210,8 @@ class RigidBodyModel:
         try:
             rbd = cls(model, armature=armature, gravity=gravity, source=str(path), urdf_text=text, joints=joints,
                       locked=locked)
-        except ValueError as exc:  # a floating or planar joint, say: name the file, as a parse error does (an
-            # argument's error, "joints: ...", already names what to change)
-            if str(exc).split(" ", 1)[0].endswith(":"):
+        except ValueError as exc:  # the URDF's joint types ("joints [...] have ..."): name the file, as a parse error
+            if not str(exc).startswith("joints ["):  # does; an argument's error names the argument
                 raise
             raise ValueError(f"URDF {str(path)!r}: {exc}") from exc
         rbd._check_dof(dof, f"URDF {str(path)!r}")

@@ -55,3 +55,10 @@ def test_plots_refuses_a_json_of_something_else(tmp_path: Path, capsys) -> None:
     assert exc.value.code == 2
     err = capsys.readouterr().err
     assert "cut.json: not a complete study results file (missing entry 'grid_s')" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists() and not [p for p in tmp_path.iterdir() if p.name.startswith("tmp")]
+    del run["iterations"]["models"]  # the Jaco figures are drawn before the iterations': still nothing written
+    run["jaco"]["grid_s"] = json.loads((REPO / "docs" / "results.json").read_text())["jaco"]["grid_s"]
+    (tmp_path / "cut.json").write_text(json.dumps(run))
+    with pytest.raises(SystemExit):
+        cli.main(["plots", "--json", str(tmp_path / "cut.json"), "--out", str(tmp_path / "out")])
+    assert "missing entry 'models'" in capsys.readouterr().err and not (tmp_path / "out").exists()

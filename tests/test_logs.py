@@ -211,6 +211,11 @@ def test_a_segment_too_short_to_differentiate_is_refused(tmp_path: Path) -> None
         read_log(path)
     path.write_text("t,segment,q1,qd1,tau1\n" + rows.replace(",2\n", ",0.5,2\n"))
     assert read_log(path).n_samples == 5  # qdd from qd: 2 rows are enough
+    path.write_text("t,segment,q1,qdd1,tau1\n" + rows.replace(",2\n", ",0.5,2\n"))
+    np.testing.assert_allclose(read_log(path, smoothing=None).qd[3:, 0], 1.0)  # qd from q: 2 rows too
+    path.write_text("t,segment,q1,qdd1,tau1\n0,0,1,0.5,2\n0.1,0,1,0.5,2\n0.2,1,1,0.5,2\n")
+    with pytest.raises(LogFormatError, match="row 4: segment 1 has 1 row; computing qd from q needs at least 2"):
+        read_log(path)
     path.write_text("t,segment,q1,qd1,tau1\n0,0,1,0.5,2\n0.1,1,1,0.5,2\n0.2,1,1,0.5,2\n")
     with pytest.raises(LogFormatError, match="row 2: segment 0 has 1 row; computing qdd from qd needs at least 2"):
         read_log(path)

@@ -118,6 +118,8 @@ def test_angle_joints_keeps_the_model_and_leaves_the_callers(tmp_path: Path) -> 
         for bad in ("30", [True, 1.0, 2.0], [30.0, "abc", 1.0]):  # a sidecar's strings and booleans: not converted
             with pytest.raises(ValueError, match="torque_limits: expected numbers"):
                 RigidBodyModel(model, torque_limits=bad)
+        for good in ([np.array(30.0)] * 3, [np.float32(30), np.int64(30), 30], np.full(3, 30, np.int16), 30):
+            np.testing.assert_array_equal(RigidBodyModel(model, torque_limits=good).torque_limits, [30.0] * 3)
         np.testing.assert_array_equal(model.armature, before)
         assert RigidBodyModel(model, armature=[1.0, 2.0, 3.0]).pin_model is not model
         np.testing.assert_array_equal(model.armature, before)
@@ -148,6 +150,7 @@ def test_a_joint_with_equal_limits_locks_anywhere(tmp_path: Path) -> None:
     """lower = upper (URDF's default of 0 and 0: no limits stated) is no limit, as for the fit's limits note; a
     joint with limits is still held within them."""
     text = arm_urdf(("revolute",) * 3).replace('lower="-3" upper="3"', 'lower="0" upper="0"', 1)
+    assert text.count('lower="0" upper="0"') == 1
     urdf = write(tmp_path, "zero.urdf", text)
     assert RigidBodyModel.from_urdf(urdf, joints=["j2", "j3"], locked={"j1": 0.5}).locked == {"j1": 0.5}
     with pytest.raises(ValueError, match=r"locked: 'j2': expected a finite position within the joint's limits"):
@@ -253,6 +256,10 @@ def test_a_model_with_locked_joints_saves_and_loads(tmp_path: Path) -> None:
         np.savez(tmp_path / "bad.npz", **{**z, "config_json": np.array(json.dumps({**cfg, field: value}))})
         with pytest.raises(ValueError, match=f"config_json: .*{field}: expected"):
             load_model(tmp_path / "bad.npz")
+    np.savez(tmp_path / "bad.npz", **{**z, "config_json": np.array(json.dumps({**cfg, "dof": 4}))})
+    with pytest.raises(ValueError, match=r"config_json.dof: 4 joints, but the embedded rigid-body model \(rbd/urdf\) "
+                                         r"has 3 \(j1, j2, j3\)"):
+        load_model(tmp_path / "bad.npz")
 
 
 def _csv_log(folder: Path, data: DynamicsData) -> Path:

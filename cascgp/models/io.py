@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from cascgp.checks import check_count
 from cascgp.gp import GPBank, GPFitConfig
 from cascgp.io import atomic_savez, check_format_header, read_npz
 from cascgp.models.cascade import CascadedGPModel, parse_name
@@ -123,12 +124,16 @@ def _rbd_from_file(z: dict[str, np.ndarray], path: str | os.PathLike, dof: int) 
     except ValueError as exc:
         raise ValueError(f"{path}: {exc}") from exc
     try:
-        return RigidBodyModel.from_urdf_text(
-            text, dof=dof, armature=arrays["rbd/armature"], gravity=arrays["rbd/gravity"],
+        rbd = RigidBodyModel.from_urdf_text(
+            text, armature=arrays["rbd/armature"], gravity=arrays["rbd/gravity"],
             torque_limits=limits.get("torque_limits"), velocity_limits=limits.get("velocity_limits"),
             meta=meta, source=None, joints=sel.get("joints"), locked=sel.get("locked"))
     except (ValueError, TypeError, AttributeError) as exc:
         raise ValueError(f"{path}: rbd/*: the embedded rigid-body model: {exc}") from exc
+    if rbd.dof != dof:
+        raise ValueError(f"{path}: config_json.dof: {dof} joints, but the embedded rigid-body model (rbd/urdf) has "
+                         f"{rbd.dof} ({', '.join(rbd.joint_names)})")
+    return rbd
 
 
 def _json_object(z: dict[str, np.ndarray], key: str) -> dict[str, Any]:
@@ -181,13 +186,6 @@ def check_set(model: CascadedGPModel) -> dict[str, np.ndarray]:
     return {"q": q, "qd": qd, "qdd": qdd, "q_hist": qh, "mean": mean, "var": var}
 
 
-def _config_int(value: Any, field: str) -> int:
-    """An integer of ``config_json`` (a JSON integer, not a float or a string); ``TypeError`` naming ``field``."""
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise TypeError(f"{field}: expected an integer, got {value!r}")
-    return value
-
-
 def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
     """Read a model written by :meth:`CascadedGPModel.save`.
 
@@ -205,9 +203,9 @@ def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
         if not isinstance(cfg, dict):
             raise TypeError(f"expected a JSON object, got {type(cfg).__name__}")
         gp_config = GPFitConfig.from_dict(cfg["gp_config"])
-        name, dof = cfg["name"], _config_int(cfg["dof"], "dof")
-        where = [tuple(_config_int(v, "where") for v in w) for w in cfg["where"]]
-        n_banks = _config_int(cfg["n_banks"], "n_banks")
+        name, dof = cfg["name"], check_count(cfg["dof"], "dof")
+        where = [tuple(check_count(v, "where", 0) for v in w) for w in cfg["where"]]
+        n_banks = check_count(cfg["n_banks"], "n_banks")
         df_delta, train_on_predicted = float(cfg["df_delta"]), cfg["train_on_predicted"]
         if not isinstance(train_on_predicted, bool):
             raise TypeError(f"train_on_predicted: expected true or false, got {train_on_predicted!r}")

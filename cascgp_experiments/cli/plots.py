@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import tempfile
 from pathlib import Path
 
 from cascgp_experiments.cli.options import check_input, check_output
@@ -35,13 +37,19 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     if res is None:
         ap.error(f"--json: {a.json}: expected a study's results.json or a sarcos.json (no 'jaco' or 'sarcos' "
                  f"results)")
-    try:
-        written = render_results(res, a.out)
-    except (KeyError, IndexError, TypeError) as exc:  # a hand-edited or truncated file: name what it lacks
-        what = f"missing entry {exc.args[0]!r}" if isinstance(exc, KeyError) else str(exc)
-        ap.error(f"--json: {a.json}: not a complete study results file ({what})")
-    for p in written:
-        print(p)
+    out = Path(a.out)
+    near = next(p for p in (out, *out.parents) if p.exists())  # check_output: a folder this process can write
+    with tempfile.TemporaryDirectory(dir=near) as tmp:  # drawn aside, moved into --out once all are drawn
+        try:
+            drawn = render_results(res, tmp)
+        except KeyError as exc:  # a hand-edited or truncated file: --out is left as it was
+            ap.error(f"--json: {a.json}: not a complete study results file (missing entry {exc.args[0]!r})")
+        out.mkdir(parents=True, exist_ok=True)
+        for p in drawn:
+            dest = out / p.relative_to(tmp)
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            os.replace(p, dest)
+            print(dest)
 
 
 if __name__ == "__main__":

@@ -32,6 +32,7 @@ jobs: :mod:`cascgp_experiments.execution`.
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -136,7 +137,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     jobs: dict = {}
     with session(a.ray, a.workers):
         runs = run_transfer(cfg, out, workers=a.workers, ray_address=a.ray, stats=jobs, video=a.video_options)
-    command = " ".join([prog or "cascgp transfer", *(argv if argv is not None else sys.argv[1:])])
+    command = shlex.join([*(prog or "cascgp transfer").split(), *(argv if argv is not None else sys.argv[1:])])
     write_outputs(runs, cfg, out, time.perf_counter() - t0, jobs=jobs, command=command)
     print((out / "summary.md").read_text())
     if a.video_options is not None:
