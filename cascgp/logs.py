@@ -32,10 +32,10 @@ Within each segment, :math:`\dot q` is the derivative of :math:`q` and :math:`\d
 (Savitzky-Golay, window 7, polynomial order 2, :class:`cascgp.data.SavGol`): the derivative of a local quadratic
 fitted by least squares to 7 samples, centred (no lag), assuming the segment's median sample period; segments
 shorter than the window, and ``smoothing=None``, use central differences (:func:`numpy.gradient` on the times).
-A segment needs 3 rows to compute both, 2 to compute one of them; a shorter one is
-refused with a :class:`LogFormatError` naming its first row (it would get a zero derivative).
-The filter used is recorded in ``data.meta["derivative_filter"]`` and each group's origin in
-``data.meta["qd_source"]`` / ``["qdd_source"]`` (``"column"`` or ``"computed"``). A median sample period above
+A segment needs 3 rows to compute both, 2 to compute one of them; a shorter one is refused with a
+:class:`LogFormatError` naming its first row (it would get a zero derivative). The filter used is recorded in
+``data.meta["derivative_filter"]`` and each group's origin in ``data.meta["qd_source"]`` / ``["qdd_source"]``
+(``"column"`` or ``"computed"``). A median sample period above
 :data:`SLOWEST_PERIOD_S` (0.5 s) gets a warning: ``t`` in milliseconds would make the computed velocities 1000
 times too small.
 
