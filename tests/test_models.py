@@ -247,6 +247,19 @@ def test_load_errors(fitted, arm3_rbd, tmp_path):
     np.savez(tmp_path / "alt.npz", **z)
     with pytest.raises(ValueError, match="check predictions"):
         load_model(tmp_path / "alt.npz")
+    # the file records the version that wrote it; a file without it (written before it was recorded) loads
+    import json
+
+    import cascgp
+    from cascgp.models.io import saved_config
+
+    assert saved_config(p)["cascgp_version"] == cascgp.__version__ and saved_config(p)["name"] == "np-inward"
+    z = dict(np.load(p))
+    z["config_json"] = np.array(json.dumps({k: v for k, v in json.loads(str(z["config_json"])).items()
+                                            if k != "cascgp_version"}))
+    np.savez(tmp_path / "older.npz", **z)
+    assert load_model(tmp_path / "older.npz").name == "np-inward" and "cascgp_version" not in saved_config(
+        tmp_path / "older.npz")
     # another machine's BLAS kernels round differently: a relative 1e-7 in the stored check means (several hundred
     # times the round-off measured across thread counts and MKL's code paths) still loads; 1e-4 does not
     for rel, loads in ((1e-7, True), (1e-4, False)):
@@ -278,6 +291,8 @@ def test_load_errors(fitted, arm3_rbd, tmp_path):
                  t=[0, 1]).save(tmp_path / "data.npz")
     with pytest.raises(ValueError, match="format_kind"):
         load_model(tmp_path / "data.npz")
+    with pytest.raises(ValueError, match="data.npz.*format_kind"):
+        saved_config(tmp_path / "data.npz")
     # SP: the RBD is needed, and a different one is detected
     sp = fitted["sp-inward"]
     ps = sp.save(tmp_path / "sp.npz")

@@ -140,6 +140,7 @@ def test_fit_evaluate_predict_commands(robot: Path) -> None:
     assert scores["data"]["n_scored"] == 600 and scores["model"]["name"] == "sp-inward"
     assert scores["notes"] == []  # a held-out log in the training log's units: nothing noted
     assert scores["command"][:2] == ["cascgp", "evaluate"] and scores["cascgp_version"]
+    assert scores["model"]["saved_by"] == scores["cascgp_version"]  # the version that wrote the model file
     assert "mean" in ev.stdout.splitlines()[-1]
     with (moved / "test.csv").open() as f:  # a joint whose test torque is constant: nRMSE undefined, named
         rows = list(csv.reader(f))

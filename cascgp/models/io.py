@@ -1,9 +1,9 @@
 """Model files: :func:`save_model` / :func:`load_model` (``.npz``, no pickle, written atomically).
 
-A file holds the format kind and version, the model's config as JSON (name, dof, df_delta, train_on_predicted,
-GP config, a reference to the rigid-body model), every GP bank's saved state (:mod:`cascgp.gp.state`), and check
-queries with the predictions made at save time; :func:`load_model` recomputes them and refuses a file that does
-not reproduce them.
+A file holds the format kind and version, the model's config as JSON (the cascgp version that wrote it, name, dof,
+df_delta, train_on_predicted, GP config, a reference to the rigid-body model; :func:`saved_config` reads it), every
+GP bank's saved state (:mod:`cascgp.gp.state`), and check queries with the predictions made at save time;
+:func:`load_model` recomputes them and refuses a file that does not reproduce them.
 
 Self-contained semi-parametric models: when the rigid-body model is a :class:`cascgp.rbd.RigidBodyModel` built from
 a URDF, the file embeds the URDF document, its SHA-256, the armature, gravity, limits and sidecar metadata
@@ -27,7 +27,7 @@ from cascgp.gp import GPBank, GPFitConfig
 from cascgp.io import atomic_savez, check_format_header, read_npz
 from cascgp.models.cascade import CascadedGPModel, parse_name
 
-__all__ = ["FORMAT_VERSION", "save_model", "load_model"]
+__all__ = ["FORMAT_VERSION", "save_model", "load_model", "saved_config"]
 
 #: Version of the saved-model ``.npz`` layout.
 FORMAT_VERSION = 1
@@ -45,7 +45,9 @@ def model_config(model: CascadedGPModel) -> dict[str, Any]:
                    "nominal": bool(getattr(model.rbd, "meta", None)),
                    "armature": None if arm is None else np.asarray(arm, float).tolist(),
                    "type": type(model.rbd).__name__}
-    return {"name": model.name, "dof": model.dof, "df_delta": model.df_delta,
+    from cascgp import __version__
+
+    return {"cascgp_version": __version__, "name": model.name, "dof": model.dof, "df_delta": model.df_delta,
             "train_on_predicted": model.train_on_predicted, "gp_config": asdict(model.gp_config),
             "where": [list(w) for w in model.where], "n_banks": len(model.banks), "n_train": model.n_train,
             "rbd": rbd_ref}
@@ -184,6 +186,21 @@ def check_set(model: CascadedGPModel) -> dict[str, np.ndarray]:
     qh = np.stack([q - 0.1 * qd, q - 0.2 * qd], axis=1)
     mean, var = model.predict(q, qd, qdd, qh if model.feature_kind == "df" else None)
     return {"q": q, "qd": qd, "qdd": qdd, "q_hist": qh, "mean": mean, "var": var}
+
+
+def saved_config(path: str | os.PathLike) -> dict[str, Any]:
+    """The config JSON of a model file (:func:`model_config` at save time: ``cascgp_version``, which files before
+    it was recorded lack, ``name``, ``dof``, ``gp_config``, ...), read without rebuilding the model; ``ValueError``
+    naming the file if it is not a model file."""
+    z = read_npz(path, "cascgp model")
+    check_format_header(z, path, _KIND, FORMAT_VERSION)
+    try:
+        cfg = json.loads(str(z["config_json"]))
+    except (KeyError, json.JSONDecodeError) as exc:
+        raise ValueError(f"{path}: config_json: missing or invalid ({exc})") from None
+    if not isinstance(cfg, dict):
+        raise ValueError(f"{path}: config_json: expected a JSON object, got {type(cfg).__name__}")
+    return cfg
 
 
 def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:

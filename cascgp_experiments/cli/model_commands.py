@@ -362,6 +362,7 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     from cascgp.features import history_from_data
     from cascgp.io import write_json
     from cascgp.metrics import nrmse
+    from cascgp.models.io import saved_config
 
     model = _load(a.model)
     data = _read(a.data)
@@ -403,7 +404,7 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
             "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "metric": _NRMSE_HELP,
             "model": {"file": str(a.model), "sha256": _sha256(a.model), "name": model.name, "dof": model.dof,
-                      "n_train": model.n_train},
+                      "n_train": model.n_train, "saved_by": saved_config(a.model).get("cascgp_version")},
             "data": {"file": str(a.data), "sha256": _sha256(a.data), "n_rows": data.n_samples,
                      "n_scored": int(rows.sum()), "qd_source": data.meta.get("qd_source"),
                      "qdd_source": data.meta.get("qdd_source"),
