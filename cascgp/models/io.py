@@ -114,11 +114,9 @@ def _rbd_from_file(z: dict[str, np.ndarray], path: str | os.PathLike, dof: int) 
             raise ValueError("rbd/urdf: the embedded URDF does not match its SHA-256 (corrupt file)")
         limits = _json_object(z, "rbd/limits_json")
         meta = _json_object(z, "rbd/meta_json")
-        arrays = {}
         for key in ("rbd/armature", "rbd/gravity"):
             if z[key].dtype.kind not in "fiu":
                 raise ValueError(f"{key}: expected real numbers, got dtype {z[key].dtype}")
-            arrays[key] = z[key]
         sel = _joints_from_file(z)
     except KeyError as exc:
         raise ValueError(f"{path}: {exc.args[0]}: missing (the file embeds only part of its rigid-body model)") \
@@ -127,7 +125,7 @@ def _rbd_from_file(z: dict[str, np.ndarray], path: str | os.PathLike, dof: int) 
         raise ValueError(f"{path}: {exc}") from exc
     try:
         rbd = RigidBodyModel.from_urdf_text(
-            text, armature=arrays["rbd/armature"], gravity=arrays["rbd/gravity"],
+            text, armature=z["rbd/armature"], gravity=z["rbd/gravity"],
             torque_limits=limits.get("torque_limits"), velocity_limits=limits.get("velocity_limits"),
             meta=meta, source=None, joints=sel.get("joints"), locked=sel.get("locked"))
     except (ValueError, TypeError, AttributeError) as exc:
@@ -192,15 +190,19 @@ def saved_config(path: str | os.PathLike) -> dict[str, Any]:
     """The config JSON of a model file (:func:`model_config` at save time: ``cascgp_version``, which files before
     it was recorded lack, ``name``, ``dof``, ``gp_config``, ...), read without rebuilding the model; ``ValueError``
     naming the file if it is not a model file."""
+    return _read_file(path)[1]
+
+
+def _read_file(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """A model file's arrays and its config JSON object, the format header checked; ``ValueError`` naming the file."""
     z = read_npz(path, "cascgp model")
     check_format_header(z, path, _KIND, FORMAT_VERSION)
     try:
-        cfg = json.loads(str(z["config_json"]))
-    except (KeyError, json.JSONDecodeError) as exc:
-        raise ValueError(f"{path}: config_json: missing or invalid ({exc})") from None
-    if not isinstance(cfg, dict):
-        raise ValueError(f"{path}: config_json: expected a JSON object, got {type(cfg).__name__}")
-    return cfg
+        return z, _json_object(z, "config_json")
+    except KeyError:
+        raise ValueError(f"{path}: config_json: missing") from None
+    except ValueError as exc:
+        raise ValueError(f"{path}: {exc}") from None
 
 
 def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
@@ -213,12 +215,8 @@ def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
     ``ValueError``.  Missing file: ``FileNotFoundError``; corrupt/truncated archive, missing
     fields or another format version: ``ValueError`` naming the file.
     """
-    z = read_npz(path, "cascgp model")
-    check_format_header(z, path, _KIND, FORMAT_VERSION)
+    z, cfg = _read_file(path)
     try:
-        cfg = json.loads(str(z["config_json"]))
-        if not isinstance(cfg, dict):
-            raise TypeError(f"expected a JSON object, got {type(cfg).__name__}")
         gp_config = GPFitConfig.from_dict(cfg["gp_config"])
         name, dof = cfg["name"], check_count(cfg["dof"], "dof")
         where = [tuple(check_count(v, "where", 0) for v in w) for w in cfg["where"]]
