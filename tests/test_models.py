@@ -260,6 +260,16 @@ def test_load_errors(fitted, arm3_rbd, tmp_path):
     np.savez(tmp_path / "older.npz", **z)
     assert load_model(tmp_path / "older.npz").name == "np-inward" and "cascgp_version" not in saved_config(
         tmp_path / "older.npz")
+    # provenance given at save time is stored as given and read back; one JSON cannot write is refused, no file written
+    told = {"data": {"file": "train.csv", "sha256": "ab" * 32, "n_rows": 600}, "command": ["fit", "--seed", "0"]}
+    fitted["np-inward"].save(tmp_path / "told.npz", provenance=told)
+    assert saved_config(tmp_path / "told.npz")["provenance"] == told and "provenance" not in saved_config(p)
+    assert load_model(tmp_path / "told.npz").name == "np-inward"
+    for bad, match in (([1, 2], "provenance: expected a mapping"), ({"x": float("nan")}, "provenance: .*finite"),
+                       ({1: "a"}, "provenance: .*strings, got 1"), ({"x": object()}, "provenance: .*object")):
+        with pytest.raises(TypeError, match=match):
+            fitted["np-inward"].save(tmp_path / "bad.npz", provenance=bad)
+        assert not (tmp_path / "bad.npz").exists()
     # another machine's BLAS kernels round differently: a relative 1e-7 in the stored check means (several hundred
     # times the round-off measured across thread counts and MKL's code paths) still loads; 1e-4 does not
     for rel, loads in ((1e-7, True), (1e-4, False)):

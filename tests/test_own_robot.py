@@ -9,6 +9,7 @@ model on held-out data.
 from __future__ import annotations
 
 import csv
+import hashlib
 import json
 import os
 import subprocess
@@ -141,6 +142,13 @@ def test_fit_evaluate_predict_commands(robot: Path) -> None:
     assert scores["notes"] == []  # a held-out log in the training log's units: nothing noted
     assert scores["command"][:2] == ["cascgp", "evaluate"] and scores["cascgp_version"]
     assert scores["model"]["saved_by"] == scores["cascgp_version"]  # the version that wrote the model file
+    trained = scores["model"]["trained_on"]  # what the fit recorded: its command line, the log and the URDF
+    assert trained["command"][:2] == ["cascgp", "fit"] and "--rate-hz" in trained["command"]
+    assert trained["data"]["file"] == "train.csv" and trained["data"]["sha256"] == hashlib.sha256(
+        (robot / "train.csv").read_bytes()).hexdigest()
+    assert trained["data"]["n_rows"] > trained["data"]["n_used"] == 300  # --max-samples 300 kept 300 of the rows
+    assert trained["urdf"] == {"file": "robot.urdf",
+                               "sha256": hashlib.sha256((robot / "robot.urdf").read_bytes()).hexdigest()}
     assert "mean" in ev.stdout.splitlines()[-1]
     with (moved / "test.csv").open() as f:  # a joint whose test torque is constant: nRMSE undefined, named
         rows = list(csv.reader(f))

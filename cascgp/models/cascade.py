@@ -463,11 +463,11 @@ class CascadedGPModel:
         return 0 if online is None else online.n_added
 
     # ------------------------------------------------------------------ persistence
-    def save(self, path: str | os.PathLike) -> Path:
-        """Write the fitted model to ``path`` (``.npz``, atomically); see :func:`cascgp.models.io.save_model`."""
+    def save(self, path: str | os.PathLike, provenance: Any = None) -> Path:
+        """Write the fitted model (and ``provenance``) to ``path`` atomically: :func:`cascgp.models.io.save_model`."""
         from cascgp.models.io import save_model
 
-        return save_model(self, path)
+        return save_model(self, path, provenance=provenance)
 
 
 def make_model(name: str, dof: int, rbd: Any = None, *, gp_config: Any = None, df_delta: float = 0.1,

@@ -1,9 +1,9 @@
 """Model files: :func:`save_model` / :func:`load_model` (``.npz``, no pickle, written atomically).
 
 A file holds the format kind and version, the model's config as JSON (the cascgp version that wrote it, name, dof,
-df_delta, train_on_predicted, GP config, a reference to the rigid-body model; :func:`saved_config` reads it), every
-GP bank's saved state (:mod:`cascgp.gp.state`), and check queries with the predictions made at save time;
-:func:`load_model` recomputes them and refuses a file that does not reproduce them.
+df_delta, train_on_predicted, GP config, a reference to the rigid-body model, the caller's provenance if given;
+:func:`saved_config` reads it), every GP bank's saved state (:mod:`cascgp.gp.state`), and check queries with the
+predictions made at save time; :func:`load_model` recomputes them and refuses a file that does not reproduce them.
 
 Self-contained semi-parametric models: when the rigid-body model is a :class:`cascgp.rbd.RigidBodyModel` built from
 a URDF, the file embeds the URDF document, its SHA-256, the armature, gravity, limits and sidecar metadata
@@ -18,7 +18,7 @@ import json
 import os
 from dataclasses import asdict
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -53,21 +53,30 @@ def model_config(model: CascadedGPModel) -> dict[str, Any]:
             "rbd": rbd_ref}
 
 
-def save_model(model: CascadedGPModel, path: str | os.PathLike) -> Path:
+def save_model(model: CascadedGPModel, path: str | os.PathLike, *,
+               provenance: Mapping[str, Any] | None = None) -> Path:
     """Write the fitted model to ``path`` (``.npz``, atomically).
 
     Contents: format kind/version, config JSON (name, dof, df_delta, train_on_predicted,
-    GP config, RBD reference), every bank's ``state_dict`` (normalisation, hyperparameters,
+    GP config, RBD reference, ``provenance``), every bank's ``state_dict`` (normalisation, hyperparameters,
     training inputs and targets), the rigid-body model of an SP model when it carries its URDF document (embedded
     with its SHA-256, armature, gravity, limits and sidecar metadata: see the module docstring), and check queries
     with their predictions (verified by :func:`load_model`). An online window is not saved: the file holds the
     fitted model.
+
+    ``provenance`` (optional): what the model was trained on and how, as a JSON object (say the log's file name and
+    SHA-256, the command line; ``cascgp fit`` records these), stored as it is and returned by :func:`saved_config`
+    under ``"provenance"``. ``TypeError`` naming ``provenance`` if it is not a mapping with string keys that JSON
+    can write (finite numbers, strings, booleans, ``None``, lists and such mappings).
     """
     if not model.fitted:
         raise RuntimeError(f"model {model.name!r}: not fitted; nothing to save")
+    config = model_config(model)
+    if provenance is not None:
+        config["provenance"] = _json_provenance(provenance)
     arrays: dict[str, np.ndarray] = {
         "format_kind": np.array(_KIND), "format_version": np.array(FORMAT_VERSION),
-        "config_json": np.array(json.dumps(model_config(model))),
+        "config_json": np.array(json.dumps(config)),
     }
     for k, bank in enumerate(model.banks):
         for key, val in bank.state_dict().items():
@@ -188,9 +197,23 @@ def check_set(model: CascadedGPModel) -> dict[str, np.ndarray]:
 
 def saved_config(path: str | os.PathLike) -> dict[str, Any]:
     """The config JSON of a model file (:func:`model_config` at save time: ``cascgp_version``, which files before
-    it was recorded lack, ``name``, ``dof``, ``gp_config``, ...), read without rebuilding the model; ``ValueError``
-    naming the file if it is not a model file."""
+    it was recorded lack, ``name``, ``dof``, ``gp_config``, ..., and ``provenance`` when the model was saved with
+    one), read without rebuilding the model; ``ValueError`` naming the file if it is not a model file."""
     return _read_file(path)[1]
+
+
+def _json_provenance(provenance: Any) -> dict[str, Any]:
+    """``provenance`` as a JSON object (a copy, through JSON), or ``TypeError`` naming it."""
+    if not isinstance(provenance, Mapping):
+        raise TypeError(f"provenance: expected a mapping (a JSON object) or None, got {type(provenance).__name__}")
+    try:  # json.dumps refuses non-string keys only when sort_keys; check them here for a clear message
+        bad = [k for k in provenance if not isinstance(k, str)]
+        if bad:
+            raise TypeError(f"keys must be strings, got {bad[0]!r}")
+        return dict(json.loads(json.dumps(provenance, allow_nan=False)))
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"provenance: expected values JSON can write (finite numbers, strings, booleans, None, lists "
+                        f"and mappings): {exc}") from None
 
 
 def _read_file(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[str, Any]]:

@@ -239,7 +239,7 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
     check_output(p, a.out, "--out", "file", {"--data": a.data})  # before the fit, which can take minutes
     if a.out.suffix != ".npz":
         p.error(f"--out: expected a model file name ending in .npz, got {str(a.out)!r}")
-    return _run(prog, lambda: _fit(a, prog))
+    return _run(prog, lambda: _fit(a, prog, argv))
 
 
 def _parse_joints(p: argparse.ArgumentParser, text: str | None) -> list[str] | None:
@@ -282,13 +282,26 @@ def _as_options(msg: str) -> str:
     return msg
 
 
-def _fit(a: argparse.Namespace, prog: str) -> int:
+def _command(prog: str, argv: list[str] | None) -> list[str]:
+    """The command line that ran (for a file's provenance)."""
+    return ["cascgp", *prog.split()[1:], *(sys.argv[2:] if argv is None else argv)]
+
+
+def _log_record(path: Path, data: Any) -> dict[str, Any]:
+    """A log's file, SHA-256, rows and derivative sources (for a file's provenance)."""
+    return {"file": str(path), "sha256": _sha256(path), "n_rows": data.n_samples,
+            **{k: data.meta.get(k) for k in ("qd_source", "qdd_source", "derivative_filter")}}
+
+
+def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     from cascgp.gp import GPFitConfig
     from cascgp.models import make_model
     from cascgp.rbd import load_nominal
 
     data = _read(a.data)
     _describe(prog, data, a.data)
+    provenance = {"command": _command(prog, argv), "data": _log_record(a.data, data),
+                  "urdf": None if a.urdf is None else {"file": str(a.urdf), "sha256": _sha256(a.urdf)}}
     rbd = None
     if a.urdf is not None:
         try:
@@ -337,7 +350,8 @@ def _fit(a: argparse.Namespace, prog: str) -> int:
     if model.n_train < data.n_samples:
         _note(prog, f"note: {data.n_samples - model.n_train} row(s) lack {2 * model.df_delta:g} s of history within "
                     "their segment and are left out (-df models)")
-    model.save(a.out)
+    provenance["data"]["n_used"] = data.n_samples  # after --rate-hz and --max-samples
+    model.save(a.out, provenance=provenance)
     print(f"saved {a.model} ({data.dof} joints, n_train={model.n_train}) to {a.out}")
     return 0
 
@@ -365,6 +379,7 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     from cascgp.models.io import saved_config
 
     model = _load(a.model)
+    saved = saved_config(a.model)
     data = _read(a.data)
     _describe(prog, data, a.data)
     _check_dof(model, data, a.data)
@@ -400,15 +415,13 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     if a.json is not None:
         write_json(a.json, {
             "cascgp_version": __version__,
-            "command": ["cascgp", *prog.split()[1:], *(sys.argv[2:] if argv is None else argv)],
+            "command": _command(prog, argv),
             "created_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
             "metric": _NRMSE_HELP,
             "model": {"file": str(a.model), "sha256": _sha256(a.model), "name": model.name, "dof": model.dof,
-                      "n_train": model.n_train, "saved_by": saved_config(a.model).get("cascgp_version")},
-            "data": {"file": str(a.data), "sha256": _sha256(a.data), "n_rows": data.n_samples,
-                     "n_scored": int(rows.sum()), "qd_source": data.meta.get("qd_source"),
-                     "qdd_source": data.meta.get("qdd_source"),
-                     "derivative_filter": data.meta.get("derivative_filter")},
+                      "n_train": model.n_train, "saved_by": saved.get("cascgp_version"),
+                      "trained_on": saved.get("provenance")},  # what cascgp fit recorded (None: not recorded)
+            "data": {**_log_record(a.data, data), "n_scored": int(rows.sum())},
             "nrmse": {"model": scores[model.name].tolist(),
                       "nominal": None if nominal is None else nominal.tolist()},
             "mean_nrmse": {"model": float(scores[model.name].mean()),
