@@ -19,6 +19,8 @@ CascadedGPModel     cascgp.models          the model class (fit, predict, predic
 load_model          cascgp.models          read a saved model
 GPBank              cascgp.gp              batched exact GPs
 GPFitConfig         cascgp.gp              GP fit options
+audit_bank          cascgp.fit_audit       a fit's NLL against cold starts run to convergence
+audit_model         cascgp.fit_audit       the same for each GP of a fitted model
 RigidBodyModel      cascgp.rbd             Pinocchio RNEA wrapper
 load_nominal        cascgp.rbd             RBD model from a URDF (+ its sidecar JSON, if any)
 read_log            cascgp.logs            CSV / .npz log -> DynamicsData (the CSV format's reference)

@@ -417,8 +417,9 @@ class FeedforwardController:
         return parts[0], parts[1], parts[2]
 
     def start(self, env: Any, info: dict[str, Any]) -> None:
-        """Start of an episode (:class:`Controller` protocol): zero the counters; with ``online``, open a
-        fresh online window on the model (samples of earlier episodes enter only through retraining)."""
+        """Start of an episode (:class:`Controller` protocol; ``env`` and ``info``, the environment and its reset
+        info, are not used): zero the counters; with ``online``, open a fresh online window on the model (samples
+        of earlier episodes enter only through retraining)."""
         self.reset_counters()
         self._recent, self._n_observed = [], 0
         self.n_online_samples = self.n_online_rejected = 0
@@ -474,7 +475,7 @@ class FeedforwardController:
 
     @property
     def innovation_errors(self) -> tuple[np.ndarray, np.ndarray]:
-        """The innovation gate's discounted error sums ``(S_0, S_m)`` of this episode, per joint (N m², copies;
+        """The innovation gate's discounted error sums ``(S_0, S_m)`` of this episode, per joint (N² m², copies;
         zeros without that gate)."""
         if isinstance(self.gate_rule, InnovationGate):
             return self.gate_rule.errors

@@ -194,7 +194,7 @@ class InnovationGate:
 
     @property
     def errors(self) -> tuple[np.ndarray, np.ndarray]:
-        """The discounted error sums ``(S_0, S_m)`` of this episode, per joint (N m², copies)."""
+        """The discounted error sums ``(S_0, S_m)`` of this episode, per joint (N² m², copies)."""
         return self._err_nominal.copy(), self._err_model.copy()
 
     def observe(self, t: float, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray, tau: np.ndarray) -> None:

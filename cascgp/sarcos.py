@@ -175,9 +175,11 @@ def load_ias(path: str | os.PathLike, *, dedup: bool = True, torque_scale: float
              ) -> tuple[DynamicsData, DynamicsData]:
     """Load ``ias_sarcos_data.mat`` -> ``(train, test)``.
 
-    ``dedup``: drop the test rows whose inputs also stand in the training set (to 8
+    ``path``: the file. ``dedup``: drop the test rows whose inputs also stand in the training set (to 8
     decimals).  ``torque_scale``: factor on the file's torques (``IAS_TO_GPML_TORQUE`` for
-    GPML units).  See the module docstring for time, segments and units.
+    GPML units).  ``rate_hz``: the rate that gives the rows their times (``t = row / rate_hz``);
+    ``jump_factor``: where the position step disagrees with the velocities by more than this times its median, a
+    new segment starts (``inf``: one segment). See the module docstring for time, segments and units.
     """
     _check_common(rate_hz, torque_scale, jump_factor)
     check_ias(path)
@@ -206,7 +208,8 @@ def load_ias(path: str | os.PathLike, *, dedup: bool = True, torque_scale: float
 def load_gpml(path: str | os.PathLike, *, torque_scale: float = 1.0, rate_hz: float = SARCOS_RATE_HZ,
               jump_factor: float = 20.0, variable: str | None = None) -> DynamicsData:
     """Load a GPML-format file (``sarcos_inv.mat`` or ``sarcos_inv_test.mat``; the one ``T x 28``
-    matrix, or ``variable``).  ``torque_scale=1/IAS_TO_GPML_TORQUE`` gives IAS units."""
+    matrix, or ``variable``).  ``torque_scale=1/IAS_TO_GPML_TORQUE`` gives IAS units; ``rate_hz`` and
+    ``jump_factor``: as for :func:`load_ias`."""
     _check_common(rate_hz, torque_scale, jump_factor)
     d = _loadmat(path)
     if variable is None:

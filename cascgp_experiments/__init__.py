@@ -18,6 +18,8 @@ collect              the simulated Jaco data collection (sum-of-sinusoids, veloc
 analyses             optimiser iteration counts per joint, Spearman correlation of states and torques
 study                the whole data-efficiency study (presets, ``run_study``, the SARCOS block)
 claims               the paper's claims checked on ``results.json``
+pooled_stats         the study's primary tests: paired comparisons pooled over joints, Holm-corrected
+compare              two runs of an experiment side by side (how far apart their numbers are)
 plots                figures, tables and CSVs from ``results.json`` alone (no torch/jaco_env)
 audit_suite          the GP fit equivalence audit's data sets and report
 transfer             the task-transfer experiment on ``JacoPour-v0`` (uses :mod:`cascgp.learning`)

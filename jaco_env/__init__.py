@@ -9,6 +9,8 @@ module              owns
 ``scene``           the composed scene (bottle, payload, marbles, jar, actuators), model names,
                     the payload inertia
 ``sensors``         sensor noise and the observation layout (:func:`split_obs`)
+``signal_pipeline`` how the real arm's signals are read (skew, differenced velocity, torque offset,
+                    drift, filter): :class:`SignalPipeline`
 ``kinematics``      forward kinematics, IK, the home pose
 ``trajectory``      joint-space paths and quintic time scaling
 ``tasks``           pouring tasks, their reference trajectories, the default task catalogue

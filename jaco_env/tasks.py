@@ -22,7 +22,7 @@ is solved at ``N_TIP_POINTS`` tilt angles (warm-started one from the next) and i
 a spline re-parametrised by the velocity-limit-weighted arc length; the other phases are
 straight lines in joint space; every phase is time-scaled by a quintic whose duration is the
 shortest for which no joint exceeds ``speed`` (``tip_speed`` while tipping) times its velocity
-limit (primitives in :mod:`jaco_env.trajectory`). Default tasks last 15-20 s (the tip, ~5 s
+limit (primitives in :mod:`jaco_env.trajectory`). Default tasks last 14.6-19.5 s (the tip, ~5 s
 each way, is limited by the wrist roll).
 
 :data:`DEFAULT_TASKS` holds the named tasks of ``JacoPour-v0``; :func:`get_task` resolves a

@@ -1,10 +1,9 @@
 r"""The cascaded GP model: one GP per joint, chained in cascade order (:class:`CascadedGPModel`).
 
-Owns training (one batched :class:`~cascgp.gp.GPBank` fit, or N fits in cascade order with
-``train_on_predicted``) and batched prediction; the single-query path is :mod:`cascgp.models.fastpath`, the checks
-of queries :mod:`cascgp.models.queries`, the derivatives of the mean (input noise) :mod:`cascgp.models.jacobian`,
-learning inside an episode :mod:`cascgp.models.online`, files :mod:`cascgp.models.io`. The variants and their
-meaning are in :mod:`cascgp.models`.
+Owns training (one batched :class:`~cascgp.gp.GPBank` fit, or N fits in cascade order with ``train_on_predicted``)
+and batched prediction; the single-query path is :mod:`cascgp.models.fastpath`, the checks of queries
+:mod:`cascgp.models.queries`, the derivatives of the mean (input noise) :mod:`cascgp.models.jacobian`, learning
+inside an episode :mod:`cascgp.models.online`, files :mod:`cascgp.models.io`; the variants in :mod:`cascgp.models`.
 """
 
 from __future__ import annotations
@@ -85,7 +84,7 @@ class CascadedGPModel:
         t = gp_config.noise_floor_target
         if isinstance(t, tuple) and len(t) != self.dof:
             raise ValueError(f"gp_config.noise_floor_target: expected one noise-variance floor per joint "
-                             f"({self.dof}, N m^2), got {len(t)}")
+                             f"({self.dof}, N² m²), got {len(t)}")
         self.gp_config = gp_config
         check_positive(df_delta, "df_delta", "s")
         self.df_delta = float(df_delta)
@@ -278,7 +277,7 @@ class CascadedGPModel:
         Returns:
             ``mean``, ``var``: (T, N) (or (N,) for (N,) inputs).  ``mean`` is the full torque
             (RBD added back for SP).  ``var`` is the latent (noise-free) variance of each joint's
-            torque in N m^2; add :attr:`noise_var` for the variance of a measurement.
+            torque in N² m²; add :attr:`noise_var` for the variance of a measurement.
 
         Propagation through the cascade (linearisation of the mean in the torque input, the
         "delta method"): joint :math:`j` is fed the predicted torque :math:`\hat\tau_t` of its
@@ -343,14 +342,14 @@ class CascadedGPModel:
 
     @property
     def noise_var(self) -> np.ndarray:
-        """Fitted noise variance of each joint's GP in N m^2, (N,): the measurement noise the model
+        """Fitted noise variance of each joint's GP in N² m², (N,): the measurement noise the model
         attributes to the torques (add it to ``var`` for a predictive interval of a measurement)."""
         self._require_fitted()
         return np.array([P.noise_var * P.y_std**2 for P in self._post])
 
     @property
     def signal_var(self) -> np.ndarray:
-        """Prior (signal) variance of each joint's GP in N m^2, (N,): the latent variance far from the
+        """Prior (signal) variance of each joint's GP in N² m², (N,): the latent variance far from the
         training data."""
         self._require_fitted()
         return np.array([P.signal_var * P.y_std**2 for P in self._post])
@@ -392,21 +391,22 @@ class CascadedGPModel:
 
     def predict_one(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None, *,
                     rbd_torque: Any = None) -> np.ndarray:
-        """Mean torque (N,) for ONE query: the lean path for a controller (no torch, no variance;
-        :mod:`cascgp.models.fastpath`, compiled when Numba is installed). Equals :meth:`predict` to round-off
-        (~1e-12), except while an online window is open (:meth:`start_online`): then it includes the online
-        samples, which :meth:`predict` does not. Inputs are checked for shape and finiteness (``ValueError``).
-        ``rbd_torque`` (SP models, optional): ``self.rbd.inverse_dynamics(q, qd, qdd)`` when the caller has it
-        already (a gated controller's nominal torque), so that it is not computed twice."""
+        """Mean torque (N,) for ONE query: ``q``, ``qd``, ``qdd`` (N,) (``qd``, ``qdd`` for ``-db`` and ``sp-*``
+        models), ``q_hist`` (2, N) for ``-df`` models (``q`` at ``t - df_delta`` and ``t - 2 df_delta``). The lean
+        path for a controller (no torch, no variance; :mod:`cascgp.models.fastpath`, compiled with Numba). Equals
+        :meth:`predict` to round-off (~1e-12), except while an online window is open (:meth:`start_online`): then
+        it includes the online samples, which :meth:`predict` does not. Inputs are checked for shape and finiteness
+        (``ValueError``). ``rbd_torque`` (SP models, optional): ``self.rbd.inverse_dynamics(q, qd, qdd)`` when the
+        caller has it already (a gated controller's nominal torque), so that it is not computed twice."""
         f, tau_rbd = load_query(self, q, qd, qdd, q_hist, rbd_torque)
         return f.mean(tau_rbd)
 
     def predict_one_var(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None, *,
                         rbd_torque: Any = None) -> tuple[np.ndarray, np.ndarray]:
-        """Mean torque and *propagated* latent variance (N,), (N,) for ONE query: the single-query form of
-        ``predict(..., propagate=True)`` (equal to round-off; with an online window open, of the enlarged
-        sets). The first call gathers each joint's Cholesky factor (:meth:`prepare_variance`); a query then
-        costs one ``(n, n)`` triangular solve per joint on top of :meth:`predict_one`. ``rbd_torque``: as for
+        """Mean torque and *propagated* latent variance (N,), (N,) for ONE query (arguments as for
+        :meth:`predict_one`): the single-query form of ``predict(..., propagate=True)`` (equal to round-off; with an
+        online window open, of the enlarged sets). The first call gathers each joint's Cholesky factor
+        (:meth:`prepare_variance`); a query then costs one ``(n, n)`` triangular solve per joint on top of
         :meth:`predict_one`."""
         f, tau_rbd = load_query(self, q, qd, qdd, q_hist, rbd_torque)
         return self.prepare_variance().mean_var(f, tau_rbd)
@@ -472,10 +472,10 @@ class CascadedGPModel:
 
 def make_model(name: str, dof: int, rbd: Any = None, *, gp_config: Any = None, df_delta: float = 0.1,
                train_on_predicted: bool = False, noise_var_floor: Any = None) -> CascadedGPModel:
-    r"""Build an unfitted model.  ``name`` in :data:`MODEL_NAMES`; ``rbd`` (required for ``sp-*``):
-    an object with ``dof`` and ``inverse_dynamics(q, qd, qdd)`` (e.g.
-    :class:`cascgp.rbd.RigidBodyModel`) whose DOF equals ``dof``; ``np-*`` models use none and ignore it, so that
-    one call builds any of the twelve (``model.rbd`` is then ``None``).  See :class:`CascadedGPModel`.
+    r"""Build an unfitted model.  ``name`` in :data:`MODEL_NAMES`; ``rbd`` (required for ``sp-*``): an object with
+    ``dof`` and ``inverse_dynamics(q, qd, qdd)`` (e.g. :class:`cascgp.rbd.RigidBodyModel`) whose DOF equals ``dof``;
+    ``np-*`` models ignore it, so that one call builds any of the twelve (``model.rbd`` is then ``None``).
+    ``gp_config``, ``df_delta`` (s) and ``train_on_predicted``: as :class:`CascadedGPModel`'s attributes.
 
     ``noise_var_floor`` (opt-in, default ``None``: no floor, the fit is exactly the one without it): a lower bound
     of each joint's fitted noise variance in N² m² (torque units squared), one number for every joint or one per

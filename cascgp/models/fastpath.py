@@ -196,7 +196,7 @@ class FastVariance:
 
     Attributes:
         L: per joint, :math:`L_j^\top` (a Fortran-ordered view of the factor, as BLAS reads it); scale: ``(N,)``
-            :math:`c_j`; prior: ``(N,)`` prior variances (N m^2).
+            :math:`c_j`; prior: ``(N,)`` prior variances (N² m²).
         window: online samples (:class:`cascgp.models.online.OnlineWindow`) whose variance term is added.
         Lc: the same factors for the compiled solves (:func:`~cascgp.models.fastkernel.jit_var`: ``L`` are their
             transposed views; with an online window, its term too), None when they are not used.

@@ -144,6 +144,14 @@ class JacoPayloadEnv(JacoMujocoEnv, EzPickle):
                 "qacc": self._qacc_arm.copy()}
 
     def step(self, action):
+        """Apply ``action`` for one control period (``control_dt``, 25 ms at 40 Hz) and return ``(obs, reward,
+        terminated, truncated, info)`` as the class docstring describes (``terminated`` is always ``False``;
+        ``info["qacc"]`` holds the true accelerations at the observation's time, for analysis only).
+
+        ``action`` (6,): joint torques in N m (joint velocity commands in rad/s with ``control_mode="velocity"``),
+        clipped to the action space's bounds. ``TypeError`` (not real numbers) or ``ValueError`` (another shape, NaN
+        or inf) naming ``action``, before anything changes; ``gymnasium.error.ResetNeeded`` before the first
+        ``reset``."""
         a = self._validate_action(action)
         if self._last_obs is None:
             raise error.ResetNeeded("Cannot call `env.step()` before calling `env.reset()`")
