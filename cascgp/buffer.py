@@ -81,6 +81,7 @@ class DataBuffer:
 
     @property
     def episodes(self) -> tuple[DynamicsData, ...]:
+        """The episodes held, oldest first."""
         return tuple(self._episodes)
 
     def append(self, data: DynamicsData) -> None:

@@ -58,10 +58,12 @@ class Controller(Protocol):
     """
 
     @property
-    def dof(self) -> int: ...
+    def dof(self) -> int:
+        """Number of joints N."""
 
     @property
-    def name(self) -> str: ...
+    def name(self) -> str:
+        """A label for tables and plots."""
 
     def start(self, env: Any, info: dict[str, Any]) -> None: ...
 
