@@ -47,7 +47,8 @@ import pinocchio as pin
 
 from cascgp.checks import check_real_vector
 from cascgp.data import F64, all_finite
-from cascgp.rbd_joints import angle_joints, coupling_map, joint_selection, lock_joints, mimic_joints
+from cascgp.rbd_joints import (angle_joints, coupling_map, joint_selection, lock_joints, mimic_joints,
+                               warn_inverted_limits)
 from cascgp.urdf_parser_output import parser_output, parser_reason
 
 __all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
@@ -215,6 +216,7 @@ class RigidBodyModel:
                 raise
             raise ValueError(f"URDF {str(path)!r}: {exc}") from exc
         rbd._check_dof(dof, f"URDF {str(path)!r}")
+        warn_inverted_limits(model, f"URDF {str(path)!r}")
         return rbd
 
     @classmethod

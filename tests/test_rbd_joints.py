@@ -157,6 +157,19 @@ def test_a_joint_with_equal_limits_locks_anywhere(tmp_path: Path) -> None:
         RigidBodyModel.from_urdf(urdf, joints=["j1", "j3"], locked={"j2": 3.5})
 
 
+def test_a_joint_with_inverted_limits_is_named_and_unchecked(tmp_path: Path) -> None:
+    """lower > upper (a mistake in the URDF, which Pinocchio keeps): a warning names the file and the joint, and
+    its limits are not checked, as for equal limits; a URDF without such a joint says nothing."""
+    text = arm_urdf(("revolute",) * 3).replace('lower="-3" upper="3"', 'lower="1" upper="-1"', 1)
+    urdf = write(tmp_path, "inverted.urdf", text)
+    with pytest.warns(UserWarning, match=r"inverted\.urdf'.*lower limit > upper limit.*'j1' \(1 > -1\)$"):
+        rbd = RigidBodyModel.from_urdf(urdf, joints=["j2", "j3"], locked={"j1": 2.0})
+    assert rbd.locked == {"j1": 2.0}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        RigidBodyModel.from_urdf(write(tmp_path, "arm.urdf", arm_urdf(("revolute",) * 3)))
+
+
 def test_a_joint_locked_mid_chain_is_held_still(tmp_path: Path) -> None:
     """Locking j2 at 0.4 rad: the other joints' torques are the full model's with j2 at 0.4, at rest."""
     urdf = write(tmp_path, "arm.urdf", arm_urdf(("continuous", "revolute", "revolute")))
