@@ -346,17 +346,32 @@ class DynamicsData:
 
     def thin(self, max_samples: int) -> "DynamicsData":
         """At most ``max_samples`` rows, evenly spaced over all rows (first and last kept); ``self`` if it has no
-        more. Row ``round(k (T - 1) / (max_samples - 1))`` for ``k = 0 .. max_samples - 1``, duplicates dropped."""
+        more. The rows of :meth:`thin_rows`."""
+        rows = self.thin_rows(max_samples)
+        return self if rows.size == self.n_samples else self.take(rows)
+
+    def thin_rows(self, max_samples: int) -> np.ndarray:
+        """The indices of the rows :meth:`thin` keeps (every row if there are at most ``max_samples``): row
+        ``round(k (T - 1) / (max_samples - 1))`` for ``k = 0 .. max_samples - 1``, duplicates dropped."""
         max_samples = check_count(max_samples, "thin: max_samples", 2)
         if self.n_samples <= max_samples:
-            return self
-        return self.take(np.unique(np.linspace(0, self.n_samples - 1, max_samples).round().astype(np.int64)))
+            return np.arange(self.n_samples)
+        return np.unique(np.linspace(0, self.n_samples - 1, max_samples).round().astype(np.int64))
 
     def subsample(self, rate_hz: float) -> "DynamicsData":
         """Keep rows at (about) ``rate_hz`` within each segment: the first row of a segment,
         then every row at least ``1/rate_hz`` after the last kept one (with a tolerance of a
         quarter sample period).  For regular 50 Hz data and 10 Hz this keeps every 5th row.
-        A rate at or above the data rate keeps every row.  Segments are kept."""
+        A rate at or above the data rate keeps every row.  Segments are kept. The rows of
+        :meth:`subsample_rows`; ``meta["subsampled_hz"]`` records the rate."""
+        out = self.take(self.subsample_rows(rate_hz))
+        meta = dict(out.meta)
+        meta["subsampled_hz"] = float(rate_hz)
+        return DynamicsData(q=out.q, qd=out.qd, qdd=out.qdd, tau=out.tau, t=out.t,
+                            segment=out.segment, meta=meta)
+
+    def subsample_rows(self, rate_hz: float) -> np.ndarray:
+        """The indices of the rows :meth:`subsample` keeps."""
         rate_hz = check_positive(rate_hz, "subsample: rate_hz", "Hz")
         period = 1.0 / rate_hz
         dt = self.dt
@@ -368,11 +383,7 @@ class DynamicsData:
                 if last is None or self.t[r] >= last + period - tol:
                     keep[r] = True
                     last = self.t[r]
-        out = self.take(keep)
-        meta = dict(out.meta)
-        meta["subsampled_hz"] = float(rate_hz)
-        return DynamicsData(q=out.q, qd=out.qd, qdd=out.qdd, tau=out.tau, t=out.t,
-                            segment=out.segment, meta=meta)
+        return np.flatnonzero(keep)
 
     def split(self, k: int) -> list["DynamicsData"]:
         """Split into ``k`` time-contiguous subsets of (nearly) equal row counts, in order

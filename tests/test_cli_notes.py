@@ -16,6 +16,7 @@ from tests.test_own_robot import arm_urdf, cascgp, simulate
 from cascgp.data import DynamicsData
 from cascgp.gp import GPFitConfig
 from cascgp.features import history_from_data
+from cascgp.logs import read_log
 from cascgp.models import MODEL_NAMES, load_model, make_model
 from cascgp.models.coverage import fraction_in_training, fraction_outside, training_position_range, training_positions
 
@@ -129,8 +130,11 @@ def test_fit_notes_few_rows_and_rows_without_history(logs: Path) -> None:
                "--restarts", "1", cwd=logs)
     assert r.returncode == 0, r.stderr
     n_train = load_model(logs / "df.npz").n_train
-    assert f"note: {200 - n_train} row(s) lack 0.2 s of history within their segment and are left out" in r.stderr
-    assert f"n_train={n_train})" in r.stdout
+    log = read_log(logs / "train.csv")  # the rows without history are those of the whole log, left out first
+    assert f"note: {(~history_from_data(log, 0.1)[1]).sum()} row(s) lack 0.2 s of history within their segment and " \
+           "are left out" in r.stderr
+    assert f"n_train={n_train})" in r.stdout and n_train == log.take(history_from_data(log, 0.1)[1]).subsample(
+        25.0).n_samples  # every row kept has its history: none left out after subsampling
     r = cascgp("evaluate", "--model", "df.npz", "--data", "test.csv", cwd=logs)
     assert r.returncode == 0, r.stderr
     assert "190 rows of test.csv (10 row(s) without 0.2 s of history left out)" in r.stdout  # 0.2 s at 50 Hz

@@ -9,7 +9,6 @@ inside an episode :mod:`cascgp.models.online`, files :mod:`cascgp.models.io`; th
 from __future__ import annotations
 
 import os
-import warnings
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Sequence
@@ -22,11 +21,11 @@ from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_s
 from cascgp.gp import GPBank, GPFitConfig
 from cascgp.gp.bank import SharedGPError
 from cascgp.gp.config import check_target_floor
-from cascgp.gp.checks import check_scale
 from cascgp.models.fastpath import FastPath, FastVariance
 from cascgp.models.fit_start import shared_chain_first, warm_start_banks
 from cascgp.models.jacobian import check_input_var, mean_jacobian_arrays
 from cascgp.models.queries import check_queries, clipped, load_query, state_cols
+from cascgp.models.training_rows import training_arrays
 
 __all__ = ["MODEL_NAMES", "CascadedGPModel", "make_model", "parse_name"]
 
@@ -132,37 +131,12 @@ class CascadedGPModel:
         return tau
 
     # ------------------------------------------------------------------ training
-    def _training_arrays(self, data: DynamicsData) -> dict[str, np.ndarray]:
-        if not isinstance(data, DynamicsData):
-            raise TypeError(f"data: expected DynamicsData, got {type(data).__name__}")
-        if data.dof != self.dof:
-            raise ValueError(f"data: DOF mismatch: the model has dof={self.dof}, data.dof={data.dof}")
-        if self.feature_kind == "df":
-            if np.isfinite(data.dt) and data.dt > self.df_delta * (1 + 1e-9):
-                warnings.warn(f"data: sample period {data.dt:g} s exceeds df_delta={self.df_delta:g} s: the "
-                              "derivative-free history q(t - df_delta) is interpolated between samples",
-                              stacklevel=3)
-            q_hist, valid = history_from_data(data, self.df_delta)
-        else:
-            q_hist, valid = None, np.ones(data.n_samples, dtype=bool)
-        n = int(valid.sum())
-        if n < 2:
-            raise ValueError(
-                f"data: model {self.name!r} needs at least 2 usable training samples, got {n} "
-                f"(of {data.n_samples} rows" + (f"; -df needs 2*df_delta={2 * self.df_delta:g} s of history "
-                                                 "within a segment)" if self.feature_kind == "df" else ")"))
-        out = {"q": data.q[valid], "qd": data.qd[valid], "qdd": data.qdd[valid], "tau": data.tau[valid]}
-        for key in ("q", "qd", "qdd", "tau"):
-            check_scale(out[key], f"data.{key}")
-        out["q_hist"] = q_hist[valid] if q_hist is not None else None
-        return out
-
     def _states(self, q: np.ndarray, qd: np.ndarray | None, qdd: np.ndarray | None,
                 q_hist: np.ndarray | None) -> np.ndarray:
         return states_from_arrays(self.feature_kind, q, qd, qdd, q_hist)
 
     def fit(self, data: DynamicsData, init: "CascadedGPModel | Any | None" = None, *,
-            share: "CascadedGPModel | None" = None) -> "CascadedGPModel":
+            share: "CascadedGPModel | None" = None, q_hist: Any = None) -> "CascadedGPModel":
         """Train every joint's GP on ``data`` (see the module docstring).
 
         ``init``: a fitted model of the same name and DOF (or, for the default one-bank layout,
@@ -171,9 +145,12 @@ class CascadedGPModel:
         on the same ``data`` (warm-started from the standard twin of ``init``, if any); the cascade takes its GP of
         the chain's first joint, which has the same inputs, instead of fitting it again. The result is the fit
         without ``share`` (:mod:`cascgp.models.fit_start`).
+        ``q_hist`` (``-df`` models, optional): each row's positions at ``t - df_delta`` and ``t - 2 df_delta``,
+        ``(T, 2, N)``, taken from the full record when ``data`` are rows chosen from it (rows with a non-finite
+        entry are left out); default: interpolated within ``data`` (:mod:`cascgp.models.training_rows`).
         Returns ``self``.
         """
-        arr = self._training_arrays(data)
+        arr = training_arrays(self, data, q_hist)
         S = self._states(arr["q"], arr["qd"], arr["qdd"], arr["q_hist"])
         tau = arr["tau"]
         tau_rbd = self._rbd_torque(arr["q"], arr["qd"], arr["qdd"]) if self.parametric == "sp" else None

@@ -213,8 +213,7 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
                         "GPFitConfig.n_restarts)")
     p.add_argument("--max-samples", type=int, default=1000,
                    help="keep at most this many training rows, evenly spaced over the log (default 1000; exact "
-                        "GPs cost O(n^3)); -df models build their position history from the rows kept, so thin "
-                        "them no coarser than df_delta = 0.1 s")
+                        "GPs cost O(n^3)); -df models take their position history from the whole log")
     p.add_argument("--rate-hz", type=float, default=None,
                    help="first subsample each segment to about this rate (Hz), after derivatives are computed")
     p.add_argument("--threads", type=int, default=None,
@@ -293,6 +292,40 @@ def _log_record(path: Path, data: Any) -> dict[str, Any]:
             **{k: data.meta.get(k) for k in ("qd_source", "qdd_source", "derivative_filter")}}
 
 
+def _training_rows(prog: str, a: argparse.Namespace, model: Any, data: Any) -> tuple[Any, Any, bool]:
+    """The rows to fit (``--rate-hz``, then ``--max-samples``), their ``-df`` history taken from the full log
+    (``None`` for other models), and whether ``--max-samples`` thinned them; a note for each step."""
+    from cascgp.features import history_from_data
+
+    rows, q_hist = np.arange(data.n_samples), None
+    if model.feature_kind == "df":  # before rows are chosen: chosen rows lie further apart than df_delta
+        q_hist, valid = history_from_data(data, model.df_delta)
+        if valid.sum() < 2:
+            raise _Fail(f"{a.data}: fewer than 2 rows have the {2 * model.df_delta:g} s of history within their "
+                        "segment that -df models need")
+        if not valid.all():
+            _note(prog, f"note: {int((~valid).sum())} row(s) lack {2 * model.df_delta:g} s of history within their "
+                        "segment and are left out (-df models)")
+            rows = np.flatnonzero(valid)
+            data = data.take(rows)
+    if a.rate_hz is not None:
+        n0 = data.n_samples
+        keep = data.subsample_rows(a.rate_hz)
+        if keep.size < n0:
+            data, rows = data.subsample(a.rate_hz), rows[keep]
+            _note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
+        else:
+            _note(prog, f"note: --rate-hz {a.rate_hz:g} keeps every row (the log's rate: {_log_rate(data)}): all "
+                        f"{n0} rows kept")
+    thinned = data.n_samples > a.max_samples
+    if thinned:
+        n0 = data.n_samples
+        keep = data.thin_rows(a.max_samples)
+        data, rows = data.take(keep), rows[keep]
+        _note(prog, f"thinned evenly to {data.n_samples} of {n0} rows (--max-samples)")
+    return data, None if q_hist is None else q_hist[rows], thinned
+
+
 def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     from cascgp.gp import GPFitConfig
     from cascgp.models import make_model
@@ -322,19 +355,6 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         locked += "".join(f"; {n} moves with {j} ({m:g} x {j} + {o:g})" for n, (j, m, o) in rbd.coupled.items())
         _note(prog, f"rigid-body model: {a.urdf} ({rbd.dof} joints: {', '.join(rbd.joint_names)}{locked})")
         _limits_note(prog, rbd, data)
-    if a.rate_hz is not None:
-        n0 = data.n_samples
-        rate = _log_rate(data)
-        data = data.subsample(a.rate_hz)
-        if data.n_samples < n0:
-            _note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
-        else:
-            _note(prog, f"note: --rate-hz {a.rate_hz:g} keeps every row (the log's rate: {rate}): all {n0} rows kept")
-    thinned = data.n_samples > a.max_samples
-    if thinned:
-        n0 = data.n_samples
-        data = data.thin(a.max_samples)
-        _note(prog, f"thinned evenly to {data.n_samples} of {n0} rows (--max-samples)")
     kw: dict[str, Any] = {"seed": a.seed}
     if a.restarts is not None:
         kw["n_restarts"] = a.restarts
@@ -342,14 +362,12 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         kw["threads"] = a.threads
     cfg = GPFitConfig(**kw)
     model = make_model(a.model, data.dof, rbd, gp_config=cfg)
+    data, q_hist, thinned = _training_rows(prog, a, model, data)
     _few_rows_note(prog, model, data, thinned)
     _note(prog, f"fitting {a.model}: {data.dof} GPs on {data.n_samples} rows, {cfg.n_restarts} start(s) each ...")
     t0 = time.perf_counter()
-    model.fit(data)
+    model.fit(data, q_hist=q_hist)
     _note(prog, f"fitted in {time.perf_counter() - t0:.1f} s")
-    if model.n_train < data.n_samples:
-        _note(prog, f"note: {data.n_samples - model.n_train} row(s) lack {2 * model.df_delta:g} s of history within "
-                    "their segment and are left out (-df models)")
     provenance["data"]["n_used"] = data.n_samples  # after --rate-hz and --max-samples
     model.save(a.out, provenance=provenance)
     print(f"saved {a.model} ({data.dof} joints, n_train={model.n_train}) to {a.out}")
