@@ -47,9 +47,8 @@ import pinocchio as pin
 
 from cascgp.checks import check_real_vector
 from cascgp.data import F64, all_finite
-from cascgp.rbd_joints import (angle_joints, coupling_map, joint_selection, lock_joints, mimic_joints,
-                               warn_inverted_limits)
-from cascgp.urdf_parser_output import parser_output, parser_reason
+from cascgp.rbd_joints import angle_joints, coupling_map, joint_selection, lock_joints, mimic_joints
+from cascgp.urdf_checks import parse_urdf_file, parse_urdf_text, warn_odd
 
 __all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
            "SUPPORTED_SIDECAR_VERSIONS", "SIDECAR_REQUIRED_FIELDS"]
@@ -199,15 +198,7 @@ class RigidBodyModel:
                 :attr:`RigidBodyModel.coupled`).
         """
         path = Path(path)
-        if not path.is_file():
-            raise FileNotFoundError(f"URDF file not found: {str(path)!r}")
-        said: list[str] = []  # what the parser printed (none if reading the file fails first)
-        try:
-            text = path.read_text(encoding="utf-8")
-            with parser_output() as said:
-                model = pin.buildModelFromUrdf(str(path))
-        except Exception as exc:  # Pinocchio raises a bare ValueError/RuntimeError with a terse message
-            raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}{parser_reason(said)}") from exc
+        model, text = parse_urdf_file(path)
         try:
             rbd = cls(model, armature=armature, gravity=gravity, source=str(path), urdf_text=text, joints=joints,
                       locked=locked)
@@ -216,7 +207,7 @@ class RigidBodyModel:
                 raise
             raise ValueError(f"URDF {str(path)!r}: {exc}") from exc
         rbd._check_dof(dof, f"URDF {str(path)!r}")
-        warn_inverted_limits(model, f"URDF {str(path)!r}")
+        warn_odd(model, f"URDF {str(path)!r}")
         return rbd
 
     @classmethod
@@ -225,15 +216,7 @@ class RigidBodyModel:
         the constructor (``armature``, ``gravity``, ``torque_limits``, ``velocity_limits``, ``meta``,
         ``source``, ``joints``, ``locked``). ``ValueError`` if it does not parse or has another number of joints
         than ``dof``."""
-        if not isinstance(text, str) or not text.strip():
-            raise ValueError("urdf_text: expected a non-empty URDF document")
-        said: list[str] = []
-        try:
-            with parser_output() as said:
-                model = pin.buildModelFromXML(text)
-        except Exception as exc:
-            raise ValueError(f"urdf_text: cannot parse the URDF document: {exc}{parser_reason(said)}") from exc
-        rbd = cls(model, urdf_text=text, **kwargs)
+        rbd = cls(parse_urdf_text(text), urdf_text=text, **kwargs)
         rbd._check_dof(dof, "urdf_text: the URDF")
         return rbd
 

@@ -38,8 +38,7 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["angle_joints", "lock_joints", "check_joint_selection", "joint_selection", "mimic_joints", "coupling_map",
-           "warn_inverted_limits"]
+__all__ = ["angle_joints", "lock_joints", "check_joint_selection", "joint_selection", "mimic_joints", "coupling_map"]
 
 #: How far (rad or m) a mimic joint's given position may be from the one its relation gives.
 MIMIC_TOL = 1e-9
@@ -312,16 +311,3 @@ def lock_joints(model: pin.Model, locked: Mapping[str, float]) -> pin.Model:
         drop.append(j)
     return pin.buildReducedModel(model, sorted(drop), q_ref)
 
-
-def warn_inverted_limits(model: pin.Model, source: str) -> None:
-    """A ``UserWarning`` naming ``source`` and the joints whose URDF lower position limit is above the upper one
-    (a mistake in the URDF, which Pinocchio keeps): their limits are not checked, as for equal limits."""
-    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
-    bad = []
-    for j in range(1, model.njoints):
-        i = model.idx_qs[j]
-        if model.joints[j].nq == 1 and lo[i] > hi[i]:
-            bad.append(f"{model.names[j]!r} ({lo[i]:g} > {hi[i]:g})")
-    if bad:
-        warnings.warn(f"{source}: joints with lower limit > upper limit, not checked against positions: "
-                      f"{', '.join(bad)}", UserWarning, stacklevel=3)

@@ -24,7 +24,12 @@ from cascgp.rbd_joints import angle_joints
 from cascgp_experiments.cli.model_commands import fit_main
 
 _INERTIAL = ('<inertial><origin xyz="{c}"/><mass value="{m}"/>'
-             '<inertia ixx="{i}" ixy="0.001" ixz="0" iyy="{i2}" iyz="0.0005" izz="{i}"/></inertial>')
+             '<inertia ixx="{i}" ixy="{o}" ixz="0" iyy="{i2}" iyz="{o2}" izz="{i}"/></inertial>')
+
+
+def _inertial(c: str, m: float, i: float, i2: float) -> str:
+    """A link's inertial with small products of inertia (a positive definite inertia)."""
+    return _INERTIAL.format(c=c, m=m, i=i, i2=i2, o=0.1 * i, o2=0.05 * i)
 # (name, parent, child, origin xyz, origin rpy, axis, link mass, link centre of mass)
 _ARM = [("j1", "base", "l1", "0 0 0.1", "0 0 0", "0 0 1", 1.2, "0 0.01 0.1"),
         ("j2", "l1", "l2", "0 0 0.2", "1.5707963 0 0", "0 0.6 0.8", 0.9, "0.1 0 0.02"),  # an unaligned axis
@@ -40,12 +45,12 @@ def arm_urdf(types: tuple[str, str, str], fingers: str | None = None, at: tuple[
     for (name, parent, child, xyz, rpy, axis, m, c), kind in zip(arm, types):
         limit = '<limit effort="30" velocity="2"/>' if kind == "continuous" else \
             '<limit effort="30" velocity="2" lower="-3" upper="3"/>'
-        parts += [f'<link name="{child}">{_INERTIAL.format(c=c, m=m, i=0.01 * m, i2=0.02 * m)}</link>',
+        parts += [f'<link name="{child}">{_inertial(c, m, 0.01 * m, 0.02 * m)}</link>',
                   f'<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/>'
                   f'<origin xyz="{xyz}" rpy="{rpy}"/><axis xyz="{axis}"/>{limit}</joint>']
     if fingers:
         for k, (sign, q) in enumerate(((1, at[0]), (-1, at[1])), start=1):
-            parts.append(f'<link name="f{k}">{_INERTIAL.format(c=f"0 {0.02 * sign} 0", m=0.1, i=1e-4, i2=2e-4)}'
+            parts.append(f'<link name="f{k}">{_inertial(f"0 {0.02 * sign} 0", 0.1, 1e-4, 2e-4)}'
                          '</link>')
             if fingers == "fixed":
                 parts.append(f'<joint name="finger{k}" type="fixed"><parent link="l3"/><child link="f{k}"/>'

@@ -1,0 +1,183 @@
+"""Checks of a URDF that its parser (urdfdom, inside Pinocchio) accepts but that describes a broken robot.
+
+:func:`parse_urdf_file` and :func:`parse_urdf_text` parse a URDF with Pinocchio and refuse (``ValueError`` naming
+the file and the element, :func:`refuse_broken`) what would make the rigid-body model silently wrong;
+:func:`warn_odd` warns (``UserWarning``) about what is odd but usable:
+
+=======================================================  ======  ==============================================
+what                                                     does    why
+=======================================================  ======  ==============================================
+a link that is the child of two joints                   refuse  the parser drops one of the joints
+a ``<mimic>`` of a joint the URDF lacks, or of itself    refuse  the relation would be ignored
+a negative mass or principal moment of inertia           refuse  the mass matrix is no longer positive definite
+a joint axis of (almost) zero length                     refuse  the joint moves nothing
+lower position limit above the upper one                 warn    its limits are not checked
+a joint that moves no mass or inertia (no ``<inertial>``  warn    its rigid-body torque is 0
+below it)
+=======================================================  ======  ==============================================
+
+Elements the parser could not read and dropped (``mass="heavy"``, NaN in an inertial) are refused too, with the
+parser's words (:func:`cascgp.urdf_parser_output.parser_errors`).
+"""
+
+from __future__ import annotations
+
+import warnings
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+import numpy as np
+import pinocchio as pin
+
+from cascgp.urdf_parser_output import parser_errors, parser_output, parser_reason
+
+__all__ = ["parse_urdf_file", "parse_urdf_text", "refuse_broken", "warn_odd"]
+
+
+def _local(tag: object) -> str:
+    """An element's tag without its XML namespace (``{uri}joint`` -> ``joint``)."""
+    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
+
+
+def _children(element: ET.Element, tag: str) -> list[ET.Element]:
+    return [c for c in element if _local(c.tag) == tag]
+
+
+def _floats(text: str | None, default: list[float]) -> np.ndarray:
+    try:
+        return np.array([float(v) for v in text.split()] if text else default, dtype=float)
+    except ValueError:  # the parser refused it already, or ignores it
+        return np.array(default, dtype=float)
+
+
+def _structure_errors(root: ET.Element) -> list[str]:
+    """Links with two parent joints, mimics of a missing joint or of themselves, axes of zero length."""
+    errors: list[str] = []
+    parents: dict[str | None, str | None] = {}
+    joints = [j for j in root if _local(j.tag) == "joint"]
+    names = {j.get("name") for j in joints}
+    for j in joints:
+        name = j.get("name")
+        child = next((c.get("link") for c in _children(j, "child")), None)
+        if child is not None and child in parents:
+            errors.append(f"link {child!r} is the child of two joints ({parents[child]!r} and {name!r})")
+        parents.setdefault(child, name)
+        for mimic in _children(j, "mimic"):
+            of = mimic.get("joint")
+            if of == name:
+                errors.append(f"joint {name!r} mimics itself")
+            elif of not in names:
+                errors.append(f"joint {name!r} mimics {of!r}, which the URDF does not have")
+        axis = next((a for a in _children(j, "axis")), None)
+        if j.get("type") in ("revolute", "continuous", "prismatic") and axis is not None:
+            if np.linalg.norm(_floats(axis.get("xyz"), [1.0, 0.0, 0.0])) < 1e-9:
+                errors.append(f"joint {name!r} has an axis of zero length ({axis.get('xyz')!r})")
+    return errors
+
+
+def _inertial_errors(root: ET.Element) -> list[str]:
+    """Links with a negative mass or principal moment of inertia (rounded CAD values may break the triangle
+    inequality of the principal moments, which no rigid body does; that leaves the mass matrix positive definite
+    and is not reported)."""
+    errors = []
+    for link in (e for e in root if _local(e.tag) == "link"):
+        for inertial in _children(link, "inertial"):
+            mass = next((_floats(m.get("value"), [0.0])[0] for m in _children(inertial, "mass")), 0.0)
+            if mass < 0:
+                errors.append(f"link {link.get('name')!r} has a negative mass ({mass:g} kg)")
+            el = next(iter(_children(inertial, "inertia")), None)
+            if el is None:
+                continue
+            k = {n: _floats(el.get(n), [0.0])[0] for n in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")}
+            inertia = np.array([[k["ixx"], k["ixy"], k["ixz"]], [k["ixy"], k["iyy"], k["iyz"]],
+                                [k["ixz"], k["iyz"], k["izz"]]])
+            lam = np.linalg.eigvalsh(inertia)
+            scale = float(np.abs(lam).max())
+            if lam[0] < -1e-9 * scale:
+                errors.append(f"link {link.get('name')!r} has an inertia with a negative principal moment "
+                              f"({lam[0]:.3g} kg m^2)")
+    return errors
+
+
+def _massless_joints(model: pin.Model) -> list[str]:
+    """Joints whose diagonal entry of the mass matrix is 0 at the neutral and at a seeded random configuration."""
+    data = model.createData()
+    q0 = pin.neutral(model)
+    q1 = pin.integrate(model, q0, np.random.default_rng(0).uniform(-1.0, 1.0, model.nv))
+    zero = np.ones(model.nv, dtype=bool)
+    for q in (q0, q1):
+        zero &= np.abs(np.diag(pin.crba(model, data, q))) <= 1e-12
+    return [model.names[j] for j in range(1, model.njoints)
+            if model.joints[j].nv == 1 and zero[model.joints[j].idx_v]]
+
+
+def refuse_broken(said: list[str], urdf_text: str, what: str) -> None:
+    """``ValueError`` starting with ``what`` (the file) if the parser reported an element it could not read
+    (``said``: its output, :func:`cascgp.urdf_parser_output.parser_output`) or the URDF describes a broken robot
+    (the module table's refusals)."""
+    dropped = parser_errors(said)
+    errors = [f"the parser dropped what it could not read (urdfdom: {'; '.join(dropped)})"] if dropped else []
+    try:
+        root = ET.fromstring(urdf_text)
+    except (ET.ParseError, ValueError):  # Pinocchio parsed it; ElementTree is stricter (a DTD, say): skip
+        root = None
+    if root is not None:
+        errors += _structure_errors(root) + _inertial_errors(root)
+    if errors:
+        raise ValueError(f"{what}: " + "; ".join(errors))
+
+
+def warn_odd(model: pin.Model, what: str) -> None:
+    """A ``UserWarning`` starting with ``what`` (the file) for each oddity of the module table of a URDF that
+    :func:`refuse_broken` accepted; ``model``: Pinocchio's model of it."""
+    lo, hi = model.lowerPositionLimit, model.upperPositionLimit
+    notes, inverted = [], []
+    for j in range(1, model.njoints):
+        i = model.idx_qs[j]
+        if model.joints[j].nq == 1 and lo[i] > hi[i]:
+            inverted.append(f"{model.names[j]!r} ({lo[i]:g} > {hi[i]:g})")
+    if inverted:
+        notes.append(f"joints with lower limit > upper limit, not checked against positions: {', '.join(inverted)}")
+    massless = _massless_joints(model)
+    if massless:
+        notes.append(f"joints that move no mass or inertia (no <inertial> in the links they move), whose rigid-body "
+                     f"torque is 0: {', '.join(map(repr, massless))}")
+    for note in notes:
+        warnings.warn(f"{what}: {note}", UserWarning, stacklevel=3)
+
+
+def parse_urdf_file(path: Path) -> tuple[pin.Model, str]:
+    """Pinocchio's model of the URDF file ``path`` and its text. ``FileNotFoundError`` if it is not a file;
+    ``ValueError`` naming it if it does not parse (with the parser's reason) or describes a broken robot (the XML's
+    problems first: Pinocchio's message for a link with two parents, say, is terse or missing)."""
+    if not path.is_file():
+        raise FileNotFoundError(f"URDF file not found: {str(path)!r}")
+    said: list[str] = []  # what the parser printed (none if reading the file fails first)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}") from exc
+    refuse_broken([], text, f"URDF {str(path)!r}")
+    try:
+        with parser_output() as said:
+            model = pin.buildModelFromUrdf(str(path))
+    except Exception as exc:  # Pinocchio raises a bare ValueError/RuntimeError with a terse message
+        raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}{parser_reason(said)}") from exc
+    refuse_broken(said, text, f"URDF {str(path)!r}")
+    return model, text
+
+
+def parse_urdf_text(text: Any) -> pin.Model:
+    """Pinocchio's model of the URDF document ``text`` (e.g. embedded in a model file); ``ValueError`` naming
+    ``urdf_text`` as :func:`parse_urdf_file` does the file."""
+    if not isinstance(text, str) or not text.strip():
+        raise ValueError("urdf_text: expected a non-empty URDF document")
+    refuse_broken([], text, "urdf_text: the URDF document")
+    said: list[str] = []
+    try:
+        with parser_output() as said:
+            model = pin.buildModelFromXML(text)
+    except Exception as exc:
+        raise ValueError(f"urdf_text: cannot parse the URDF document: {exc}{parser_reason(said)}") from exc
+    refuse_broken(said, text, "urdf_text: the URDF document")
+    return model
