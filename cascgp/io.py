@@ -213,8 +213,8 @@ def read_npz(path: str | os.PathLike, what: str, max_bytes: int = MAX_NPZ_BYTES)
     try:
         with np.load(path, allow_pickle=False) as z:
             return {k: np.asarray(z[k]) for k in z.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as exc:
-        raise ValueError(
+    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError, zlib.error) as exc:  # zlib: a damaged
+        raise ValueError(                                                                     # compressed member
             f"{path}: not a readable {what} .npz file (corrupt or truncated?): "
             f"{type(exc).__name__}: {exc}") from exc
 

@@ -145,6 +145,9 @@ def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[i
         if not cells or all(not c.strip() for c in cells):
             continue
         if len(cells) != k:
+            lines = sum(c.rstrip("\n").count("\n") for c in cells)
+            if lines:  # a quoted cell runs over line ends: a quote that is not closed
+                raise LogFormatError(f"{path}: row {r - lines}: a quote (\") opened in this row is not closed")
             col = names[len(cells)] if len(cells) < k else names[-1]
             what = (f"column {col!r}: missing (the row has {len(cells)} cells, the header {k})" if len(cells) < k else
                     f"column {col!r}: {len(cells) - k} extra cell(s) after it (the row has {len(cells)} cells, "
@@ -171,6 +174,27 @@ def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[i
     return np.array(values, dtype=np.float64), rownos
 
 
+class _CsvRows:
+    """``csv.reader`` over ``text`` (``line_num`` too) whose errors (a cell longer than the csv module's field limit,
+    say) are ``LogFormatError``s naming the file and row."""
+
+    def __init__(self, path: Path, text: str) -> None:
+        self._path, self._reader = path, csv.reader(io.StringIO(text), skipinitialspace=True)
+
+    @property
+    def line_num(self) -> int:
+        return self._reader.line_num
+
+    def __iter__(self) -> "_CsvRows":
+        return self
+
+    def __next__(self) -> list[str]:
+        try:
+            return next(self._reader)
+        except csv.Error as exc:
+            raise LogFormatError(f"{self._path}: row {self._reader.line_num}: not a row of numbers ({exc})") from None
+
+
 def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> DynamicsData:
     try:
         text = path.read_text(encoding="utf-8-sig")
@@ -180,7 +204,7 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
                 else "")
         raise LogFormatError(f"{path}: not a UTF-8 text file ({exc}); expected a CSV log or a .npz file of "
                              f"DynamicsData.save{hint}") from None
-    reader = csv.reader(io.StringIO(text), skipinitialspace=True)
+    reader = _CsvRows(path, text)
     header = next(reader, None)
     while header is not None and not any(c.strip() for c in header):  # leading blank lines
         header = next(reader, None)

@@ -448,7 +448,7 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints
     """
     urdf_path = Path(urdf_path)
     if not urdf_path.is_file():
-        raise FileNotFoundError(f"URDF file not found: {str(urdf_path)!r}")
+        parse_urdf_file(urdf_path)  # raises: FileNotFoundError, or ValueError for a folder
     js = sidecar_path(urdf_path)
     if not js.exists():
         return _without_sidecar(urdf_path, js, dof, joints, locked)

@@ -150,8 +150,10 @@ def parse_urdf_file(path: Path) -> tuple[pin.Model, str]:
     """Pinocchio's model of the URDF file ``path`` and its text. ``FileNotFoundError`` if it is not a file;
     ``ValueError`` naming it if it does not parse (with the parser's reason) or describes a broken robot (the XML's
     problems first: Pinocchio's message for a link with two parents, say, is terse or missing)."""
-    if not path.is_file():
+    if not path.exists():
         raise FileNotFoundError(f"URDF file not found: {str(path)!r}")
+    if not path.is_file():
+        raise ValueError(f"URDF {str(path)!r}: not a file (a folder?)")
     said: list[str] = []  # what the parser printed (none if reading the file fails first)
     try:
         text = path.read_text(encoding="utf-8")

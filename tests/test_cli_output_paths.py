@@ -66,6 +66,8 @@ def test_an_output_that_is_an_input_is_refused(places: dict[str, Path], capsys) 
         (["evaluate_main", "--model", str(model), "--data", str(log), "--json", str(log)], "--json", "--data"),
         (["predict_main", "--model", str(model), "--data", str(log), "--out", str(model)], "--out", "--model"),
         (["predict_main", "--model", str(model), "--data", str(log), "--out", str(log)], "--out", "--data"),
+        (["fit_main", "--data", str(log), "--model", "sp-standard", "--urdf", str(model), "--out", str(model)],
+         "--out", "--urdf"),
     ]
     for argv, option, other_option in cases:
         err = _refused("model_commands", list(argv), capsys)

@@ -254,3 +254,16 @@ def test_other_failures(tmp_path: Path, data: DynamicsData) -> None:
     with pytest.raises(TypeError, match="data"):
         write_log(tmp_path / "x.csv", {"q": data.q})
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_csv_errors_of_the_csv_module_name_the_file_and_row(tmp_path: Path) -> None:
+    """A cell longer than the csv module's field limit, and a quote that is not closed (which runs over every line
+    after it), are LogFormatErrors naming the row where they start."""
+    long = tmp_path / "long.csv"
+    long.write_text("t,q1,tau1\n0,1,2\n0.1," + "1" * 200_000 + ",2\n0.2,1,2\n")
+    with pytest.raises(LogFormatError, match=r"long\.csv: row 3: not a row of numbers \(field larger than field limit"):
+        read_log(long)
+    quote = tmp_path / "quote.csv"
+    quote.write_text('t,q1,tau1\n0,1,2\n"0.1,1,2\n0.2,1,2\n0.3,1,2\n')
+    with pytest.raises(LogFormatError, match=r'quote\.csv: row 3: a quote \(\"\) opened in this row is not closed'):
+        read_log(quote)

@@ -84,6 +84,21 @@ def test_read_npz_refuses_archives_that_inflate_beyond_the_cap(tmp_path: Path) -
     assert read_npz(bomb, "test", max_bytes=1 << 25)["q"].shape == (2_000_000,)
 
 
+def test_a_damaged_compressed_member_is_named(tmp_path: Path) -> None:
+    """A DEFLATE-compressed member whose data is damaged (a zlib error, not a CRC error) names the file."""
+    path = tmp_path / "damaged.npz"
+    rng = np.random.default_rng(1)
+    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        with zf.open("q.npy", "w") as fh:
+            np.lib.format.write_array(fh, rng.integers(0, 4, 50_000).astype(float))  # compresses, not to nothing
+    raw = bytearray(path.read_bytes())
+    start = raw.index(b"q.npy") + len(b"q.npy") + 200  # inside the compressed stream, past the array header
+    raw[start:start + 64] = bytes(64)
+    path.write_bytes(bytes(raw))
+    with pytest.raises(ValueError, match=r"damaged\.npz: not a readable test \.npz file .*Error -3 while decompress"):
+        read_npz(path, "test")
+
+
 def test_loaders_refuse_a_zip_bomb_under_the_size_cap(tmp_path: Path) -> None:
     bomb = tmp_path / "bomb.npz"
     with zipfile.ZipFile(bomb, "w", compression=zipfile.ZIP_DEFLATED) as zf:

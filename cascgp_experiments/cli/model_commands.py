@@ -235,8 +235,8 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
             p.error(f"--{opt}: chooses joints of the URDF; it needs --urdf (an sp-* model)")
     a.joints = _parse_joints(p, a.joints)
     a.lock = _parse_lock(p, a.lock)
-    check_output(p, a.out, "--out", "file", {"--data": a.data})  # before the fit, which can take minutes
-    if a.out.suffix != ".npz":
+    check_output(p, a.out, "--out", "file", {"--data": a.data, "--urdf": a.urdf})  # before the fit (minutes)
+    if a.out.suffix.lower() != ".npz":
         p.error(f"--out: expected a model file name ending in .npz, got {str(a.out)!r}")
     return _run(prog, lambda: _fit(a, prog, argv))
 
@@ -311,6 +311,9 @@ def _training_rows(prog: str, a: argparse.Namespace, model: Any, data: Any) -> t
     if a.rate_hz is not None:
         n0 = data.n_samples
         keep = data.subsample_rows(a.rate_hz)
+        if keep.size < 2:
+            raise _Fail(f"--rate-hz {a.rate_hz:g} keeps {keep.size} of {n0} rows (the log's rate: {_log_rate(data)}, "
+                        f"{n0} rows); a fit needs at least 2: choose a higher rate")
         if keep.size < n0:
             data, rows = data.subsample(a.rate_hz), rows[keep]
             _note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
@@ -333,8 +336,7 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
 
     data = _read(a.data)
     _describe(prog, data, a.data)
-    provenance = {"command": _command(prog, argv), "data": _log_record(a.data, data),
-                  "urdf": None if a.urdf is None else {"file": str(a.urdf), "sha256": _sha256(a.urdf)}}
+    provenance: dict[str, Any] = {"command": _command(prog, argv), "data": _log_record(a.data, data), "urdf": None}
     rbd = None
     if a.urdf is not None:
         try:
@@ -345,6 +347,7 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
             raise _Fail(_as_options(str(exc))) from None
         for w in said:
             _note(prog, f"note: {_as_options(str(w.message))}")
+        provenance["urdf"] = {"file": str(a.urdf), "sha256": _sha256(a.urdf)}
         if rbd.dof != data.dof:
             more = ("; name the log's joints with --joints, or lock the others with --lock NAME=Q,..."
                     if rbd.dof > data.dof else "")
@@ -416,10 +419,17 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         raise _Fail(f"{a.data}: column 'tau{flat[0] + 1}' is constant ({tau[0, flat[0]]:g}) over the "
                     f"{int(rows.sum())} rows scored; nRMSE (RMSE over the torque's range) is undefined: evaluate on a "
                     "log in which every joint's torque varies")
-    scores = {model.name: nrmse(mean[rows], tau)}
-    if model.rbd is not None:
-        scores["nominal (rigid body)"] = nrmse(model.rbd.inverse_dynamics(data.q[rows], data.qd[rows],
-                                                                          data.qdd[rows]), tau)
+    with np.errstate(over="ignore", invalid="ignore"):  # a square that overflows: refused below
+        scores = {model.name: nrmse(mean[rows], tau)}
+        if model.rbd is not None:
+            scores["nominal (rigid body)"] = nrmse(model.rbd.inverse_dynamics(data.q[rows], data.qd[rows],
+                                                                              data.qdd[rows]), tau)
+    for name, s in scores.items():
+        if not np.isfinite(s).all():
+            j = int(np.flatnonzero(~np.isfinite(s))[0])
+            raise _Fail(f"{a.data}: column 'tau{j + 1}': the nRMSE of {name} overflows (torques up to "
+                        f"{np.abs(tau[:, j]).max():.3g}, predictions up to {np.abs(mean[rows, j]).max():.3g}); "
+                        "torques must be in N m (N for a prismatic joint)")
     nominal = scores.get("nominal (rigid body)")
     names = list(scores)
     width = max(12, *map(len, names))

@@ -1,0 +1,61 @@
+"""cascgp fit / evaluate refuse input that would give a wrong or meaningless result, with a message naming the
+option, file or column, exit status 2 and no traceback."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cascgp.data import DynamicsData
+from cascgp.gp import GPFitConfig
+from cascgp.logs import write_log
+from cascgp.models import make_model
+from cascgp_experiments.cli.model_commands import evaluate_main, fit_main
+from tests.conftest import make_arm, sinusoid_data
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    root = tmp_path_factory.mktemp("bad_input")
+    train = sinusoid_data(make_arm(2), 4.0, 50.0, seed=1, noise=0.01)
+    write_log(root / "train.csv", train)
+    make_model("np-standard", 2, gp_config=GPFitConfig(n_restarts=1, max_iter=50)).fit(train.thin(60)).save(
+        root / "model.npz")
+    return {"root": root, "train": root / "train.csv", "model": root / "model.npz"}
+
+
+def _refused(main, argv: list[str], capsys: pytest.CaptureFixture[str]) -> str:
+    status = main(argv)
+    err = capsys.readouterr().err
+    assert status == 2 and "Traceback" not in err, err
+    return err.strip().splitlines()[-1]
+
+
+def test_evaluate_refuses_torques_whose_nrmse_overflows(files: dict[str, Path], capsys) -> None:
+    test = sinusoid_data(make_arm(2), 2.0, 50.0, seed=2)
+    tau = test.tau.copy()
+    tau[5, 1] = 1e308  # finite, but its square is not
+    write_log(files["root"] / "huge.csv", DynamicsData(q=test.q, qd=test.qd, qdd=test.qdd, tau=tau, t=test.t))
+    out = files["root"] / "scores.json"
+    err = _refused(evaluate_main, ["--model", str(files["model"]), "--data", str(files["root"] / "huge.csv"),
+                                   "--json", str(out)], capsys)
+    assert "huge.csv: column 'tau2': the nRMSE of np-standard overflows (torques up to 1e+308" in err
+    assert not out.exists()
+
+
+def test_fit_names_a_rate_that_keeps_too_few_rows_and_a_urdf_folder(files: dict[str, Path], capsys) -> None:
+    err = _refused(fit_main, ["--data", str(files["train"]), "--model", "np-standard", "--rate-hz", "0.01",
+                              "--out", str(files["root"] / "m.npz")], capsys)
+    assert "--rate-hz 0.01 keeps 1 of 200 rows (the log's rate: about 50 Hz, 200 rows)" in err, err
+    err = _refused(fit_main, ["--data", str(files["train"]), "--model", "sp-standard", "--urdf", str(files["root"]),
+                              "--out", str(files["root"] / "m.npz")], capsys)
+    assert f"URDF {str(files['root'])!r}: not a file (a folder?)" in err, err
+    assert not (files["root"] / "m.npz").exists()
+
+
+def test_fit_accepts_a_model_file_name_in_capitals(files: dict[str, Path], capsys) -> None:
+    out = files["root"] / "MODEL.NPZ"
+    assert fit_main(["--data", str(files["train"]), "--model", "np-standard", "--restarts", "1",
+                     "--max-samples", "40", "--out", str(out)]) == 0
+    assert out.is_file() and not (files["root"] / "MODEL.NPZ.npz").exists()
