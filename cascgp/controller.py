@@ -32,7 +32,7 @@ from typing import Any, Callable, Protocol
 
 import numpy as np
 
-from cascgp.data import F64 as _F64, all_finite
+from cascgp.data import F64 as _F64, all_finite, as_real_array
 from cascgp.checks import check_count
 from cascgp.gates import (GATE_RULES, GATE_SUFFIXES, INNOVATION_HALF_LIFE_S, GateRule, InnovationGate, gate_weights,
                           innovation_weights, make_gate)
@@ -79,10 +79,10 @@ class InverseDynamics(Protocol):
 
 
 def _as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:  # the class NumPy raises: TypeError for None or a dict, ValueError for "a"
-        raise type(exc)(f"{name} must be one real number or {dof} of them (one per joint), got {value!r}") from None
+    try:  # TypeError for complex (a cast drops the imaginary part), boolean, text, None
+        arr = as_real_array(name, value, f"one real number or {dof} of them (one per joint)")
+    except TypeError:
+        raise TypeError(f"{name} must be one real number or {dof} of them (one per joint), got {value!r}") from None
     try:
         gain = np.broadcast_to(arr, (dof,)).copy()
     except ValueError:

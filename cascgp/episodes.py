@@ -121,13 +121,28 @@ def run_episode(
         callback: optional ``callback(env.unwrapped, info)`` called after every step (e.g. to log
             extra metrics from the simulator's state).
 
-    ``smoothing`` and ``meta`` are checked before the reset (``TypeError``/``ValueError`` naming them). A tick whose
+    ``env``, ``controller``, ``smoothing``, ``meta`` and ``callback`` are checked before the reset (``TypeError`` /
+    ``ValueError`` naming them: the env's observation space must hold ``[q, qd, tau, t]`` of the controller's
+    joints, its actions one per joint). A tick whose
     measured ``t``, ``q``, ``qd`` or torque is not finite (a sensor fault; the controller copes with it) is left out
     of the record, which starts a new segment after it, and so is a run of good ticks between faults too short to
     differentiate (under 3 ticks, or the ``smoothing`` window); ``data.meta["n_dropped_ticks"]`` counts them. The
     errors are computed on the recorded ticks.
     """
+    if not all(hasattr(env, a) for a in ("reset", "step", "unwrapped")):
+        raise TypeError(f"env: expected a Gymnasium environment, got {type(env).__name__}")
+    if not (callable(controller) and hasattr(controller, "dof") and hasattr(controller, "start")):
+        raise TypeError("controller: expected a controller (dof, start(env, info), controller(t, q, qd, reference); "
+                        f"cascgp.controller.Controller), got {type(controller).__name__}")
+    if callback is not None and not callable(callback):
+        raise TypeError(f"callback: expected a callable or None, got {type(callback).__name__}")
     dof = controller.dof
+    shape = getattr(getattr(env, "observation_space", None), "shape", None)
+    actions = getattr(getattr(env, "action_space", None), "shape", None)
+    if (shape is not None and (len(shape) != 1 or shape[0] < 3 * dof + 1)) or (actions is not None
+                                                                                and tuple(actions) != (dof,)):
+        raise ValueError(f"controller: {dof} joints, but the env's actions have shape {actions} and its observations "
+                         f"{shape} (one torque per joint, and [q, qd, tau, t] of the joints first)")
     savgol = as_savgol(smoothing)  # checked before the episode runs
     if meta is not None:
         if not isinstance(meta, dict):

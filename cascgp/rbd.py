@@ -46,7 +46,7 @@ import numpy as np
 import pinocchio as pin
 
 from cascgp.checks import check_real_vector
-from cascgp.data import F64, all_finite
+from cascgp.data import F64, all_finite, as_real_array
 from cascgp.rbd_joints import angle_joints, coupling_map, joint_selection, lock_joints, mimic_joints
 from cascgp.urdf_checks import parse_urdf_file, parse_urdf_text, warn_odd
 
@@ -259,13 +259,13 @@ class RigidBodyModel:
 
     # ------------------------------------------------------------------ dynamics
     def _check(self, name: str, x: Any) -> np.ndarray:
-        arr = np.asarray(x, dtype=np.float64)
+        arr = as_real_array(name, x, f"({self.dof},) or (T, {self.dof})")  # TypeError for complex, bool, text
         if arr.ndim not in (1, 2) or arr.shape[-1] != self.dof:
             raise ValueError(f"{name} must have shape ({self.dof},) or (T, {self.dof}), got {arr.shape}")
         if not np.isfinite(arr).all():
             bad = np.argwhere(~np.isfinite(arr))[0]
             raise ValueError(f"{name} must be finite; first non-finite entry at index {tuple(int(i) for i in bad)}")
-        return np.ascontiguousarray(arr)
+        return arr
 
     def _check_states(self, q: Any, qd: Any, qdd: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         q, qd, qdd = self._check("q", q), self._check("qd", qd), self._check("qdd", qdd)

@@ -58,6 +58,11 @@ def split_obs(obs: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, floa
     return obs[..., OBS_Q], obs[..., OBS_QD], obs[..., OBS_TAU], float(t) if obs.ndim == 1 else t
 
 
+#: Largest standard deviation of a :class:`SensorNoise` field, in its unit (rad, rad/s, N m): far beyond any sensor
+#: (the arm's torque limits are 6.8-30.5 N m), and small enough that noisy measurements stay finite.
+MAX_NOISE_STD = 1e3
+
+
 @dataclass(frozen=True)
 class SensorNoise:
     """Additive zero-mean Gaussian noise on each measured joint quantity (standard deviations).
@@ -78,8 +83,9 @@ class SensorNoise:
             v = getattr(self, name)
             if not is_real_number(v):
                 raise TypeError(f"SensorNoise.{name} must be a real number, got {type(v).__name__} {v!r}")
-            if not np.isfinite(v) or v < 0:
-                raise ValueError(f"SensorNoise.{name} must be a finite number >= 0, got {v!r}")
+            if not np.isfinite(v) or not 0 <= v <= MAX_NOISE_STD:
+                raise ValueError(f"SensorNoise.{name} must be a number in [0, {MAX_NOISE_STD:g}] (rad, rad/s or N m), "
+                                 f"got {v!r}")
 
     @functools.cached_property
     def _std(self) -> np.ndarray:

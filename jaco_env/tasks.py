@@ -32,17 +32,25 @@ name or a task.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from jaco_env import robot, scene
-from jaco_env.checks import is_real_number
+from jaco_env.checks import is_real_number, real_array
 from jaco_env.kinematics import HOME_MOUTH, home_pose, solve_ik, target_rotation
 from jaco_env.trajectory import Segment, line_path, segment_duration, spline_path
 
 #: Tilt angles at which the tip phase is solved by IK (the spline's knots).
 N_TIP_POINTS = 13
+
+
+#: Slowest ``speed`` / ``tip_speed`` of a :class:`PouringTask` (a fraction of the velocity limits: at 0.01 a default
+#: task lasts about 20 minutes; slower ones overflow the time scaling's arithmetic long before they are useful).
+MIN_SPEED = 0.01
+#: Longest ``hold`` / ``settle`` of a :class:`PouringTask` (s).
+MAX_HOLD_S = 600.0
 
 
 @dataclass
@@ -60,10 +68,10 @@ class PouringTask:
         pre_height: height of the mouth above the rim before tipping (m).
         pour_offset: horizontal offset (m) of the mouth centre from the jar axis, against the
             tilt direction, so that the marbles leaving the lower lip fall into the middle.
-        hold: time the tilted pose is held (s).
-        settle: time the home pose is held at the end (s).
-        speed: fraction of the joint velocity limits used by the time scaling.
-        tip_speed: fraction of the velocity limits used while tipping and un-tipping.
+        hold: time the tilted pose is held (s), at most ``MAX_HOLD_S``.
+        settle: time the home pose is held at the end (s), at most ``MAX_HOLD_S``.
+        speed: fraction of the joint velocity limits used by the time scaling, in [``MIN_SPEED``, 1].
+        tip_speed: fraction of the velocity limits used while tipping and un-tipping, in [``MIN_SPEED``, 1].
     """
 
     name: str
@@ -81,9 +89,7 @@ class PouringTask:
     _bounds: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        self.jar_pos = np.asarray(self.jar_pos, dtype=float).copy()
-        if self.jar_pos.shape != (3,) or not np.all(np.isfinite(self.jar_pos)):
-            raise ValueError(f"PouringTask.jar_pos must be 3 finite numbers, got {self.jar_pos!r}")
+        self.jar_pos = real_array(self.jar_pos, (3,), "PouringTask.jar_pos")  # 3 finite real numbers
         if self.jar_pos[2] < 0:
             raise ValueError(f"PouringTask.jar_pos: the jar's bottom must be on the table top (z = 0) or above "
                              f"it, got z = {self.jar_pos[2]} m")
@@ -111,11 +117,12 @@ class PouringTask:
         if not 0 < self.tilt <= np.pi:
             raise ValueError(f"PouringTask.tilt must be in (0, pi] rad, got {self.tilt}")
         for f in ("hold", "settle"):
-            if not getattr(self, f) >= 0:
-                raise ValueError(f"PouringTask.{f} must be >= 0, got {getattr(self, f)}")
+            if not 0 <= getattr(self, f) <= MAX_HOLD_S:
+                raise ValueError(f"PouringTask.{f} must be in [0, {MAX_HOLD_S:g}] s, got {getattr(self, f)}")
         for f in ("speed", "tip_speed"):
-            if not 0 < getattr(self, f) <= 1:
-                raise ValueError(f"PouringTask.{f} must be in (0, 1], got {getattr(self, f)}")
+            if not MIN_SPEED <= getattr(self, f) <= 1:
+                raise ValueError(f"PouringTask.{f} must be in [{MIN_SPEED:g}, 1] (a fraction of the velocity limits: "
+                                 f"at {MIN_SPEED:g} a task lasts about 20 minutes), got {getattr(self, f)}")
 
     def __eq__(self, other: object) -> bool:
         """Equal fields (the generated ``__eq__`` compared ``jar_pos`` as a tuple item, which NumPy refuses)."""
@@ -253,7 +260,12 @@ class PouringTask:
 
     def reference_position(self, t: float) -> np.ndarray:
         """``reference(t)[0]`` for one finite real time ``t`` (s), without the derivatives: q_d (N_JOINTS,)
-        (the same arithmetic, bit for bit; the environment's step needs only q_d)."""
+        (the same arithmetic, bit for bit; the environment's step needs only q_d). ``TypeError`` / ``ValueError``
+        naming ``t`` for another ``t``."""
+        if type(t) is not float and not is_real_number(t):
+            raise TypeError(f"PouringTask.reference_position: t must be a real number (s), got {t!r}")
+        if not math.isfinite(t):
+            raise ValueError(f"PouringTask.reference_position: t must be finite, got {t!r}")
         segments, bounds = self._plan()
         tt = np.array([t], dtype=float)
         k = min(max(int(np.searchsorted(bounds, tt[0], side="right")) - 1, 0), len(segments) - 1)

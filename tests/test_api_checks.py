@@ -120,10 +120,34 @@ def test_retraining_plans_and_arguments_are_checked_before_anything_runs(tmp_pat
     ({"hold": np.inf}, ValueError, "hold must be finite"),
     ({"hold": "1"}, TypeError, "hold must be a finite real number"),
     ({"speed": "0.5"}, TypeError, "speed"),
+    ({"speed": 1e-300}, ValueError, r"speed must be in \[0.01, 1\]"),
+    ({"tip_speed": 0.0}, ValueError, r"tip_speed must be in \[0.01, 1\]"),
+    ({"settle": 1e308}, ValueError, r"settle must be in \[0, 600\] s"),
+    ({"jar_pos": [0.5 + 3j, 0.1, 0.0]}, TypeError, "jar_pos must be an array of real numbers, got dtype complex"),
+    ({"jar_pos": [0.5, 0.1, np.nan]}, ValueError, "jar_pos must be finite"),
 ])
 def test_a_pouring_task_checks_its_fields(change, exc, match):
     with pytest.raises(exc, match=match):
         DEFAULT_TASKS["front"].replace(**change)
+
+
+def test_a_reference_position_needs_a_finite_real_time():
+    task = DEFAULT_TASKS["front"]
+    for t, exc in ((np.nan, ValueError), (np.inf, ValueError), (None, TypeError), ("1", TypeError),
+                   (True, TypeError), ([1.0], TypeError)):
+        with pytest.raises(exc, match="reference_position: t must be"):
+            task.reference_position(t)
+    np.testing.assert_array_equal(task.reference_position(np.float64(1.5)), task.reference(1.5)[0])
+    np.testing.assert_array_equal(task.reference_position(2), task.reference(2.0)[0])
+
+
+def test_sensor_noise_is_bounded_so_that_measurements_stay_finite():
+    from jaco_env.sensors import MAX_NOISE_STD, SensorNoise
+
+    for field in ("q_std", "qd_std", "tau_std"):
+        with pytest.raises(ValueError, match=rf"SensorNoise.{field} must be a number in \[0, 1000\]"):
+            SensorNoise(**{field: 1e308})
+    assert SensorNoise(MAX_NOISE_STD, MAX_NOISE_STD, MAX_NOISE_STD).tau_std == 1e3
 
 
 @pytest.mark.parametrize("kwargs, exc, match", [

@@ -33,8 +33,9 @@ def test_gains_can_be_scheduled_by_assignment_and_are_validated():
             twin.kd[0] = -1.0
     ctrl.kp = np.r_[5.0, ctrl.kp[1:]]  # one joint's gain, checked
     assert ctrl(0.3, q, qd, reference)[0] == pytest.approx(5.0 * 0.01)
-    for bad, err in ((-1.0, ValueError), (np.nan, ValueError), (np.ones(5), ValueError), ("stiff", ValueError),
-                     ([1.0, None, 1.0, 1.0, 1.0, 1.0], ValueError), ({}, TypeError), (1j, TypeError)):
+    for bad, err in ((-1.0, ValueError), (np.nan, ValueError), (np.ones(5), ValueError), ("stiff", TypeError),
+                     ([1.0, None, 1.0, 1.0, 1.0, 1.0], ValueError), ({}, TypeError), (1j, TypeError),
+                     (np.full(6, 10 + 5j), TypeError), (True, TypeError), (np.ones(6, bool), TypeError)):
         for name in ("kp", "kd"):
             before = getattr(ctrl, name).copy()
             with pytest.raises(err, match=name):

@@ -127,12 +127,20 @@ def test_good_ticks_between_faults_too_few_to_differentiate_are_left_out_too():
 @pytest.mark.parametrize("kwargs, exc, match", [({"smoothing": 4}, ValueError, "SavGol.window"),
                                                 ({"smoothing": "5"}, TypeError, "smoothing: expected"),
                                                 ({"meta": [1]}, TypeError, "meta: expected a dict"),
-                                                ({"meta": {"x": object()}}, TypeError, "meta: expected a JSON")])
+                                                ({"meta": {"x": object()}}, TypeError, "meta: expected a JSON"),
+                                                ({"callback": 3}, TypeError, "callback: expected a callable"),
+                                                ({"controller": None}, TypeError, "controller: expected a controller"),
+                                                ({"controller": FeedforwardController(None, 1.0, 1.0, np.ones(3))},
+                                                 ValueError, r"controller: 3 joints, but the env's actions have "
+                                                             r"shape \(2,\)")])
 def test_bad_arguments_are_refused_before_the_reset(kwargs, exc, match):
     env = FaultyEnv()
+    controller = kwargs.pop("controller", FeedforwardController(None, 20.0, 5.0, np.full(2, 10.0)))
     with pytest.raises(exc, match=match):
-        run_episode(env, FeedforwardController(None, 20.0, 5.0, np.full(2, 10.0)), seed=0, **kwargs)
+        run_episode(env, controller, seed=0, **kwargs)
     assert env.n_resets == 0
+    with pytest.raises(TypeError, match="env: expected a Gymnasium environment, got NoneType"):
+        run_episode(None, controller, seed=0)
 
 
 def test_exact_feedforward_tracks_better_than_pd():

@@ -6,6 +6,8 @@ from typing import Any
 
 import numpy as np
 
+from cascgp.data import as_real_array
+
 __all__ = ["as_list", "check_matrix", "check_vector", "check_scale", "json_num"]
 
 
@@ -22,11 +24,16 @@ def as_list(v: Any, field_name: str) -> list[np.ndarray]:
     return list(v)
 
 
+def _real(a: Any, field_name: str, shape: str) -> np.ndarray:
+    """``a`` as float64; ``TypeError`` naming the field for complex, boolean, text or other non-numeric input (a
+    cast would drop an imaginary part or turn flags into numbers)."""
+    if isinstance(a, np.ndarray) and a.dtype == np.float64:
+        return a
+    return as_real_array(field_name, a, shape)
+
+
 def check_matrix(a: Any, field_name: str, d: int | None = None, n: int | None = None) -> np.ndarray:
-    try:
-        a = np.asarray(a, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"{field_name}: expected a numeric array ({e})") from None
+    a = _real(a, field_name, "(n, d)")
     if a.ndim != 2:
         raise ValueError(f"{field_name}: expected a 2-D array (n, d), got shape {a.shape}")
     if a.shape[1] < 1:
@@ -42,10 +49,7 @@ def check_matrix(a: Any, field_name: str, d: int | None = None, n: int | None = 
 
 
 def check_vector(a: Any, field_name: str, n: int) -> np.ndarray:
-    try:
-        a = np.asarray(a, dtype=np.float64)
-    except (TypeError, ValueError) as e:
-        raise ValueError(f"{field_name}: expected a numeric array ({e})") from None
+    a = _real(a, field_name, f"({n},)")
     if a.ndim != 1 or a.shape[0] != n:
         raise ValueError(f"{field_name}: expected shape ({n},), got {a.shape}")
     if not np.all(np.isfinite(a)):

@@ -87,6 +87,8 @@ class CascadedGPModel:
         self.gp_config = gp_config
         check_positive(df_delta, "df_delta", "s")
         self.df_delta = float(df_delta)
+        if not isinstance(train_on_predicted, (bool, np.bool_)):  # bool("no") is True
+            raise TypeError(f"train_on_predicted: expected True or False, got {train_on_predicted!r}")
         self.train_on_predicted = bool(train_on_predicted)
         N = self.dof
         self.order: tuple[int, ...] = tuple(range(N - 1, -1, -1)) if self.structure == "inward" else tuple(range(N))
