@@ -218,10 +218,10 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
     seg = np.zeros(len(t), dtype=np.int64)
     if seg_col is not None:
         raw = a[:, seg_col]
-        bad = np.flatnonzero(raw != np.round(raw))
+        bad = np.flatnonzero((raw != np.round(raw)) | (np.abs(raw) > 2.0**53))  # 2^53: exact in float64 and int64
         if bad.size:
-            raise LogFormatError(f"{path}: row {rownos[bad[0]]}, column 'segment': expected an integer id, "
-                                 f"got {float(raw[bad[0]])!r}")
+            raise LogFormatError(f"{path}: row {rownos[bad[0]]}, column 'segment': expected an integer id (of at most "
+                                 f"2^53 in magnitude), got {float(raw[bad[0]])!r}")
         seg = raw.astype(np.int64)
         dec = np.flatnonzero(np.diff(seg) < 0)
         if dec.size:
@@ -247,19 +247,36 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
             meta["derivative_filter"] += f"; central differences on segments shorter than {smoothing.window} rows"
     q, qd, qdd, tau = arr["q"], arr["qd"], arr["qdd"], arr["tau"]
     assert q is not None  # _header refuses a log without q1..qN
-    if qd is None:  # rows with given velocities may be independent samples (a shuffled data set): not checked
-        _check_no_wrap(path, q, seg, rownos)
-        qd = differentiate(t, q, seg, smoothing)
-        meta["qd_source"] = "computed"
-    if qdd is None:
-        qdd = differentiate(t, qd, seg, smoothing)
-        meta["qdd_source"] = "computed"
+    with np.errstate(all="ignore"):  # a derivative that overflows is refused below, naming column t
+        if qd is None:  # rows with given velocities may be independent samples (a shuffled data set): not checked
+            _check_no_wrap(path, q, seg, rownos)
+            qd = _derivative(path, t, q, seg, smoothing)
+            meta["qd_source"] = "computed"
+        if qdd is None:
+            qdd = _derivative(path, t, qd, seg, smoothing)
+            meta["qdd_source"] = "computed"
     if tau is None:
         tau = np.zeros_like(q)  # placeholder: meta["has_tau"] is False
     try:
         return DynamicsData(q=q, qd=qd, qdd=qdd, tau=tau, t=t, segment=seg, meta=meta)
     except (ValueError, TypeError) as exc:  # not expected after the checks above; still name the file
         raise LogFormatError(f"{path}: {exc}") from exc
+
+
+def _derivative(path: Path, t: np.ndarray, x: np.ndarray, seg: np.ndarray, smoothing: SavGol | None) -> np.ndarray:
+    """``differentiate`` with a ``LogFormatError`` naming column ``t`` where the result is not finite (time steps so
+    small, 1e-300 s say, that a difference quotient overflows)."""
+    try:
+        out = differentiate(t, x, seg, smoothing)
+    except ValueError as exc:  # SciPy's "array must not contain infs or NaNs" from a step that overflowed
+        if "infs or NaNs" not in str(exc):
+            raise
+        out = np.full_like(x, np.nan)
+    if not np.isfinite(out).all():
+        d = np.diff(t)[np.diff(seg) == 0]
+        raise LogFormatError(f"{path}: column 't': time steps as small as {d.min():.3g} s make the computed "
+                             "velocities or accelerations overflow; t must be in seconds")
+    return out
 
 
 def _check_no_wrap(path: Path, q: np.ndarray, seg: np.ndarray, rownos: list[int]) -> None:
