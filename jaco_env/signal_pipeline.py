@@ -98,6 +98,9 @@ class SignalPipeline:
     tau_noise_scale: tuple[float, ...] = (1.0,) * N_JOINTS
 
     def __post_init__(self) -> None:
+        if not isinstance(self.velocity_source, str):
+            raise TypeError(f"SignalPipeline.velocity_source must be one of {VELOCITY_SOURCES}, "
+                            f"got {type(self.velocity_source).__name__} {self.velocity_source!r}")
         if self.velocity_source not in VELOCITY_SOURCES:
             raise ValueError(f"SignalPipeline.velocity_source must be one of {VELOCITY_SOURCES}, "
                              f"got {self.velocity_source!r}")
@@ -105,8 +108,8 @@ class SignalPipeline:
             v = getattr(self, name)
             if name in _PER_JOINT:
                 vals = (v,) if is_real_number(v) else v
-                if not (isinstance(vals, (tuple, list, np.ndarray)) and len(vals) in (1, N_JOINTS)
-                        and all(is_real_number(x) for x in vals)):
+                if not (isinstance(vals, (tuple, list, np.ndarray)) and np.ndim(vals) == 1
+                        and len(vals) in (1, N_JOINTS) and all(is_real_number(x) for x in vals)):
                     raise TypeError(f"SignalPipeline.{name} must be a real number or {N_JOINTS} real numbers "
                                     f"in [{lo}, {hi}], got {v!r}")
                 vals = tuple(float(x) for x in vals) * (N_JOINTS if len(vals) == 1 else 1)

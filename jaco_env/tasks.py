@@ -89,6 +89,9 @@ class PouringTask:
     _bounds: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name:
+            raise TypeError(f"PouringTask.name must be a non-empty string, got {type(self.name).__name__} "
+                            f"{self.name!r}")
         self.jar_pos = real_array(self.jar_pos, (3,), "PouringTask.jar_pos")  # 3 finite real numbers
         if self.jar_pos[2] < 0:
             raise ValueError(f"PouringTask.jar_pos: the jar's bottom must be on the table top (z = 0) or above "

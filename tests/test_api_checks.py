@@ -125,6 +125,7 @@ def test_retraining_plans_and_arguments_are_checked_before_anything_runs(tmp_pat
     ({"settle": 1e308}, ValueError, r"settle must be in \[0, 600\] s"),
     ({"jar_pos": [0.5 + 3j, 0.1, 0.0]}, TypeError, "jar_pos must be an array of real numbers, got dtype complex"),
     ({"jar_pos": [0.5, 0.1, np.nan]}, ValueError, "jar_pos must be finite"),
+    ({"name": None}, TypeError, "PouringTask.name must be a non-empty string, got NoneType"),
 ])
 def test_a_pouring_task_checks_its_fields(change, exc, match):
     with pytest.raises(exc, match=match):
@@ -179,3 +180,16 @@ def test_an_excitation_checks_its_settings(kwargs, match):
 
     with pytest.raises(ValueError, match=match):
         SumOfSinusoids(home_pose(), **kwargs)
+
+
+def test_array_settings_of_the_right_shape_are_accepted_and_others_named():
+    from jaco_env.signal_pipeline import SignalPipeline
+
+    env = gym.make("JacoPour-v0", payload_range=np.array([0.7, 1.0]))  # as a tuple
+    env.close()
+    for kwargs, match in (({"tau_offset_std": np.array(0.1)}, "tau_offset_std must be a real number or 6"),
+                          ({"velocity_source": None}, "velocity_source must be one of"),
+                          ({"velocity_source": np.array(["true"])}, "velocity_source must be one of")):
+        with pytest.raises(TypeError, match=match):
+            SignalPipeline(**kwargs)
+    assert SignalPipeline(tau_offset_std=np.full(6, 0.1)).tau_offset_std == (0.1,) * 6

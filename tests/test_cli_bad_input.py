@@ -59,3 +59,12 @@ def test_fit_accepts_a_model_file_name_in_capitals(files: dict[str, Path], capsy
     assert fit_main(["--data", str(files["train"]), "--model", "np-standard", "--restarts", "1",
                      "--max-samples", "40", "--out", str(out)]) == 0
     assert out.is_file() and not (files["root"] / "MODEL.NPZ.npz").exists()
+
+
+def test_fit_names_a_torque_column_too_large_to_normalise(files: dict[str, Path], capsys) -> None:
+    log = sinusoid_data(make_arm(2), 2.0, 50.0, seed=3)
+    tau = log.tau * [1.0, 1e300]
+    write_log(files["root"] / "big.csv", DynamicsData(q=log.q, qd=log.qd, qdd=log.qdd, tau=tau, t=log.t))
+    err = _refused(fit_main, ["--data", str(files["root"] / "big.csv"), "--model", "np-standard", "--restarts", "1",
+                              "--out", str(files["root"] / "big.npz")], capsys)
+    assert "big.csv: column 'tau2': values too large to normalise: largest magnitude" in err, err

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import re
 import sys
 import textwrap
 import time
@@ -292,6 +293,15 @@ def _log_record(path: Path, data: Any) -> dict[str, Any]:
             **{k: data.meta.get(k) for k in ("qd_source", "qdd_source", "derivative_filter")}}
 
 
+def _in_log_terms(msg: str, path: Path) -> str:
+    """A library message about ``data.<field>`` (a 0-based column index) in a log's terms: the file, and the column
+    by its name (``data.tau: ... (column 0): ...`` -> ``train.csv: column 'tau1': ...: ...``)."""
+    m = re.match(r"data\.(q|qd|qdd|tau): (.*?) \(column (\d+)\)(.*)", msg, re.S)
+    if m:
+        return f"{path}: column '{m[1]}{int(m[3]) + 1}': {m[2]}{m[4]}"
+    return f"{path}: {msg}" if msg.startswith("data") else msg
+
+
 def _training_rows(prog: str, a: argparse.Namespace, model: Any, data: Any) -> tuple[Any, Any, bool]:
     """The rows to fit (``--rate-hz``, then ``--max-samples``), their ``-df`` history taken from the full log
     (``None`` for other models), and whether ``--max-samples`` thinned them; a note for each step."""
@@ -369,7 +379,10 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     _few_rows_note(prog, model, data, thinned)
     _note(prog, f"fitting {a.model}: {data.dof} GPs on {data.n_samples} rows, {cfg.n_restarts} start(s) each ...")
     t0 = time.perf_counter()
-    model.fit(data, q_hist=q_hist)
+    try:
+        model.fit(data, q_hist=q_hist)
+    except ValueError as exc:  # about the log's values: in its terms
+        raise _Fail(_in_log_terms(str(exc), a.data)) from None
     _note(prog, f"fitted in {time.perf_counter() - t0:.1f} s")
     provenance["data"]["n_used"] = data.n_samples  # after --rate-hz and --max-samples
     model.save(a.out, provenance=provenance)

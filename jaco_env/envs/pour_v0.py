@@ -219,8 +219,8 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         self._tracking_cost_weight = float(tracking_cost_weight)
         self._pour_reward_weight = float(pour_reward_weight)
         self._fixed_mass = scene.bottle_mass(n_marbles)
-        if not (isinstance(payload_range, (tuple, list)) and len(payload_range) == 2
-                and all(is_real_number(x) for x in payload_range)):
+        if not (isinstance(payload_range, (tuple, list, np.ndarray)) and np.ndim(payload_range) == 1
+                and len(payload_range) == 2 and all(is_real_number(x) for x in payload_range)):
             raise TypeError(f"payload_range must be two real numbers (low, high) in kg, got {payload_range!r}")
         lo, hi = (float(x) for x in payload_range)
         if not (self._fixed_mass < lo <= hi <= scene.MAX_PAYLOAD):
