@@ -250,10 +250,10 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
     with np.errstate(all="ignore"):  # a derivative that overflows is refused below, naming column t
         if qd is None:  # rows with given velocities may be independent samples (a shuffled data set): not checked
             _check_no_wrap(path, q, seg, rownos)
-            qd = _derivative(path, t, q, seg, smoothing)
+            qd = _derivative(path, t, q, seg, smoothing, "velocities qd from q")
             meta["qd_source"] = "computed"
         if qdd is None:
-            qdd = _derivative(path, t, qd, seg, smoothing)
+            qdd = _derivative(path, t, qd, seg, smoothing, "accelerations qdd from qd")
             meta["qdd_source"] = "computed"
     if tau is None:
         tau = np.zeros_like(q)  # placeholder: meta["has_tau"] is False
@@ -263,9 +263,10 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
         raise LogFormatError(f"{path}: {exc}") from exc
 
 
-def _derivative(path: Path, t: np.ndarray, x: np.ndarray, seg: np.ndarray, smoothing: SavGol | None) -> np.ndarray:
-    """``differentiate`` with a ``LogFormatError`` naming column ``t`` where the result is not finite (time steps so
-    small, 1e-300 s say, that a difference quotient overflows)."""
+def _derivative(path: Path, t: np.ndarray, x: np.ndarray, seg: np.ndarray, smoothing: SavGol | None,
+                what: str) -> np.ndarray:
+    """``differentiate`` with a ``LogFormatError`` naming ``what`` where the result is not finite (time steps so
+    small, 1e-300 s say, or values so large that a difference quotient overflows)."""
     try:
         out = differentiate(t, x, seg, smoothing)
     except ValueError as exc:  # SciPy's "array must not contain infs or NaNs" from a step that overflowed
@@ -274,8 +275,8 @@ def _derivative(path: Path, t: np.ndarray, x: np.ndarray, seg: np.ndarray, smoot
         out = np.full_like(x, np.nan)
     if not np.isfinite(out).all():
         d = np.diff(t)[np.diff(seg) == 0]
-        raise LogFormatError(f"{path}: column 't': time steps as small as {d.min():.3g} s make the computed "
-                             "velocities or accelerations overflow; t must be in seconds")
+        raise LogFormatError(f"{path}: computing the {what} overflows (time steps as small as {d.min():.3g} s in "
+                             f"column 't', values up to {np.abs(x).max():.3g}); t must be in seconds")
     return out
 
 

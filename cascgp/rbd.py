@@ -207,7 +207,7 @@ class RigidBodyModel:
                 raise
             raise ValueError(f"URDF {str(path)!r}: {exc}") from exc
         rbd._check_dof(dof, f"URDF {str(path)!r}")
-        warn_odd(model, f"URDF {str(path)!r}")
+        warn_odd(model, f"URDF {str(path)!r}", rbd.joint_names)
         return rbd
 
     @classmethod

@@ -310,4 +310,3 @@ def lock_joints(model: pin.Model, locked: Mapping[str, float]) -> pin.Model:
         q_ref[model.idx_qs[j]] = x
         drop.append(j)
     return pin.buildReducedModel(model, sorted(drop), q_ref)
-

@@ -1,23 +1,22 @@
 """Checks of a URDF that its parser (urdfdom, inside Pinocchio) accepts but that describes a broken robot.
 
-:func:`parse_urdf_file` and :func:`parse_urdf_text` parse a URDF with Pinocchio and refuse (``ValueError`` naming
-the file and the element, :func:`refuse_broken`) what would make the rigid-body model silently wrong;
-:func:`warn_odd` warns (``UserWarning``) about what is odd but usable:
+:func:`parse_urdf_file` parses a URDF file with Pinocchio and refuses (``ValueError`` naming the file and the
+element, :func:`refuse_broken`) what would make the rigid-body model silently wrong:
 
-=======================================================  ======  ==============================================
-what                                                     does    why
-=======================================================  ======  ==============================================
-a link that is the child of two joints                   refuse  the parser drops one of the joints
-a ``<mimic>`` of a joint the URDF lacks, or of itself    refuse  the relation would be ignored
-a negative mass or principal moment of inertia           refuse  the mass matrix is no longer positive definite
-a joint axis of (almost) zero length                     refuse  the joint moves nothing
-lower position limit above the upper one                 warn    its limits are not checked
-a joint that moves no mass or inertia (no ``<inertial>``  warn    its rigid-body torque is 0
-below it)
-=======================================================  ======  ==============================================
+- an ``<inertial>`` the parser could not read and dropped (``mass="heavy"``, NaN: the link has no mass), with the
+  parser's words (:func:`cascgp.urdf_parser_output.dropped_inertials`);
+- a link that is the child of two joints (the parser drops one of the joints);
+- a ``<mimic>`` of a joint the URDF lacks, or of itself (the relation would be ignored);
+- a negative mass, or a principal moment of inertia below -1 % of the link's largest one (not a rigid body: a sign
+  or a product of inertia is wrong; rounded CAD values stay far above that);
+- a joint axis of (almost) zero length (the joint moves nothing).
 
-Elements the parser could not read and dropped (``mass="heavy"``, NaN in an inertial) are refused too, with the
-parser's words (:func:`cascgp.urdf_parser_output.parser_errors`).
+:func:`warn_odd` warns (``UserWarning``) about what is odd but usable: a lower position limit above the upper one
+(the limits are not checked), and a joint of the model that moves no mass or inertia (no ``<inertial>`` below it:
+its rigid-body torque is its armature's only).
+
+:func:`parse_urdf_text` parses a document held in a string (a model file's copy of the URDF it was fitted with) as
+the parser reads it, without these checks, so that a model file loads as it was saved.
 """
 
 from __future__ import annotations
@@ -25,11 +24,11 @@ from __future__ import annotations
 import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 import numpy as np
 import pinocchio as pin
 
-from cascgp.urdf_parser_output import parser_errors, parser_output, parser_reason
+from cascgp.urdf_parser_output import dropped_inertials, parser_output, parser_reason
 
 __all__ = ["parse_urdf_file", "parse_urdf_text", "refuse_broken", "warn_odd"]
 
@@ -92,14 +91,13 @@ def _inertial_errors(root: ET.Element) -> list[str]:
             inertia = np.array([[k["ixx"], k["ixy"], k["ixz"]], [k["ixy"], k["iyy"], k["iyz"]],
                                 [k["ixz"], k["iyz"], k["izz"]]])
             lam = np.linalg.eigvalsh(inertia)
-            scale = float(np.abs(lam).max())
-            if lam[0] < -1e-9 * scale:
+            if lam[0] < -0.01 * float(np.abs(lam).max()):  # rounded CAD values of a thin link: far smaller
                 errors.append(f"link {link.get('name')!r} has an inertia with a negative principal moment "
-                              f"({lam[0]:.3g} kg m^2)")
+                              f"({lam[0]:.3g} kg m^2, its largest {lam[2]:.3g}): not a rigid body")
     return errors
 
 
-def _massless_joints(model: pin.Model) -> list[str]:
+def _massless_joints(model: pin.Model, joints: Sequence[str]) -> list[str]:
     """Joints whose diagonal entry of the mass matrix is 0 at the neutral and at a seeded random configuration."""
     data = model.createData()
     q0 = pin.neutral(model)
@@ -108,15 +106,15 @@ def _massless_joints(model: pin.Model) -> list[str]:
     for q in (q0, q1):
         zero &= np.abs(np.diag(pin.crba(model, data, q))) <= 1e-12
     return [model.names[j] for j in range(1, model.njoints)
-            if model.joints[j].nv == 1 and zero[model.joints[j].idx_v]]
+            if model.names[j] in joints and model.joints[j].nv == 1 and zero[model.joints[j].idx_v]]
 
 
 def refuse_broken(said: list[str], urdf_text: str, what: str) -> None:
-    """``ValueError`` starting with ``what`` (the file) if the parser reported an element it could not read
+    """``ValueError`` starting with ``what`` (the file) if the parser dropped an ``<inertial>`` it could not read
     (``said``: its output, :func:`cascgp.urdf_parser_output.parser_output`) or the URDF describes a broken robot
     (the module table's refusals)."""
-    dropped = parser_errors(said)
-    errors = [f"the parser dropped what it could not read (urdfdom: {'; '.join(dropped)})"] if dropped else []
+    dropped = dropped_inertials(said)
+    errors = [f"the parser dropped an <inertial> it could not read (urdfdom: {'; '.join(dropped)})"] if dropped else []
     try:
         root = ET.fromstring(urdf_text)
     except (ET.ParseError, ValueError):  # Pinocchio parsed it; ElementTree is stricter (a DTD, say): skip
@@ -127,9 +125,10 @@ def refuse_broken(said: list[str], urdf_text: str, what: str) -> None:
         raise ValueError(f"{what}: " + "; ".join(errors))
 
 
-def warn_odd(model: pin.Model, what: str) -> None:
+def warn_odd(model: pin.Model, what: str, joints: Sequence[str]) -> None:
     """A ``UserWarning`` starting with ``what`` (the file) for each oddity of the module table of a URDF that
-    :func:`refuse_broken` accepted; ``model``: Pinocchio's model of it."""
+    :func:`refuse_broken` accepted; ``model``: Pinocchio's model of it, ``joints``: the rigid-body model's joints
+    (not the locked ones)."""
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
     notes, inverted = [], []
     for j in range(1, model.njoints):
@@ -138,18 +137,18 @@ def warn_odd(model: pin.Model, what: str) -> None:
             inverted.append(f"{model.names[j]!r} ({lo[i]:g} > {hi[i]:g})")
     if inverted:
         notes.append(f"joints with lower limit > upper limit, not checked against positions: {', '.join(inverted)}")
-    massless = _massless_joints(model)
+    massless = _massless_joints(model, joints)
     if massless:
         notes.append(f"joints that move no mass or inertia (no <inertial> in the links they move), whose rigid-body "
-                     f"torque is 0: {', '.join(map(repr, massless))}")
+                     f"torque is only their armature's: {', '.join(map(repr, massless))}")
     for note in notes:
         warnings.warn(f"{what}: {note}", UserWarning, stacklevel=3)
 
 
 def parse_urdf_file(path: Path) -> tuple[pin.Model, str]:
-    """Pinocchio's model of the URDF file ``path`` and its text. ``FileNotFoundError`` if it is not a file;
-    ``ValueError`` naming it if it does not parse (with the parser's reason) or describes a broken robot (the XML's
-    problems first: Pinocchio's message for a link with two parents, say, is terse or missing)."""
+    """Pinocchio's model of the URDF file ``path`` and its text. ``FileNotFoundError`` if it does not exist;
+    ``ValueError`` naming it if it is not a file, does not parse (with the parser's reason) or describes a broken
+    robot (the XML's problems first: Pinocchio's message for a link with two parents, say, is terse or missing)."""
     if not path.exists():
         raise FileNotFoundError(f"URDF file not found: {str(path)!r}")
     if not path.is_file():
@@ -170,16 +169,15 @@ def parse_urdf_file(path: Path) -> tuple[pin.Model, str]:
 
 
 def parse_urdf_text(text: Any) -> pin.Model:
-    """Pinocchio's model of the URDF document ``text`` (e.g. embedded in a model file); ``ValueError`` naming
-    ``urdf_text`` as :func:`parse_urdf_file` does the file."""
+    """Pinocchio's model of the URDF document ``text`` (e.g. embedded in a model file), as the parser reads it
+    (not checked by :func:`refuse_broken`: a model file loads as it was saved); ``ValueError`` naming
+    ``urdf_text`` if it does not parse."""
     if not isinstance(text, str) or not text.strip():
         raise ValueError("urdf_text: expected a non-empty URDF document")
-    refuse_broken([], text, "urdf_text: the URDF document")
     said: list[str] = []
     try:
         with parser_output() as said:
             model = pin.buildModelFromXML(text)
     except Exception as exc:
         raise ValueError(f"urdf_text: cannot parse the URDF document: {exc}{parser_reason(said)}") from exc
-    refuse_broken(said, text, "urdf_text: the URDF document")
     return model

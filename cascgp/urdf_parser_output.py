@@ -21,8 +21,8 @@ def parser_output() -> Iterator[list[str]]:
     number=2``) is printed there, not put in the exception, so the error message takes it from here (rather than
     a raw C++ line before it). Output of a parse that succeeds is passed on to stderr unchanged. Parses in several
     threads take turns; other threads' output to stderr during a parse is captured with it. Where stderr cannot
-    be redirected (no temporary file, no fd 2), the block runs as is. A parse that succeeded but reported errors
-    (an element it could not read and dropped, :func:`parser_errors`) is not passed on: the caller refuses it."""
+    be redirected (no temporary file, no fd 2), the block runs as is. A parse that succeeded but dropped an
+    inertial it could not read (:func:`dropped_inertials`) is not passed on: the caller refuses it."""
     said: list[str] = []
     with _PARSER_OUTPUT_LOCK:
         try:
@@ -54,7 +54,7 @@ def parser_output() -> Iterator[list[str]]:
                 tmp.seek(0)
                 text = tmp.read().decode("utf-8", "replace")
                 said.append(text)
-                if text and not failed and not parser_errors(said) and sys.stderr is not None:
+                if text and not failed and not dropped_inertials(said) and sys.stderr is not None:
                     sys.stderr.write(text)  # warnings of a parse that succeeded (errors: the caller refuses it)
 
 
@@ -66,9 +66,12 @@ def parser_reason(said: list[str]) -> str:
     return f" (urdfdom: {text})" if text else ""
 
 
-def parser_errors(said: list[str]) -> list[str]:
-    """The errors the parser reported (from :func:`parser_output`), without their source location. urdfdom reports
-    an element it cannot read (``<mass value="heavy"/>``, NaN in an inertial) and drops it, and the parse
-    succeeds: a link then has no mass. Non-empty means the file describes another robot than it says."""
-    return [" ".join(line.strip().removeprefix("Error:").split()) for line in "".join(said).splitlines()
-            if line.strip().startswith("Error:")]
+def dropped_inertials(said: list[str]) -> list[str]:
+    """The errors the parser reported (from :func:`parser_output`, without their source location) if it dropped a
+    link's ``<inertial>`` it could not read (``<mass value="heavy"/>``, NaN in its origin), else none. urdfdom then
+    prints "Could not parse inertial element for Link [...]" and the parse succeeds: the link has no mass, and the
+    file describes another robot than it says. (An unreadable visual, collision or material loses only geometry,
+    which the dynamics do not use: urdfdom reads a link's inertial first; such errors are passed on as they are.)"""
+    errors = [" ".join(line.strip().removeprefix("Error:").split()) for line in "".join(said).splitlines()
+              if line.strip().startswith("Error:")]
+    return errors if any("inertial element" in e for e in errors) else []

@@ -46,8 +46,8 @@ from jaco_env.trajectory import Segment, line_path, segment_duration, spline_pat
 N_TIP_POINTS = 13
 
 
-#: Slowest ``speed`` / ``tip_speed`` of a :class:`PouringTask` (a fraction of the velocity limits: at 0.01 a default
-#: task lasts about 20 minutes; slower ones overflow the time scaling's arithmetic long before they are useful).
+#: Slowest ``speed`` / ``tip_speed`` of a :class:`PouringTask` (a fraction of the velocity limits: with both at 0.01 a
+#: default task lasts about 20 minutes; slower ones overflow the time scaling's arithmetic long before any use).
 MIN_SPEED = 0.01
 #: Longest ``hold`` / ``settle`` of a :class:`PouringTask` (s).
 MAX_HOLD_S = 600.0
@@ -124,8 +124,9 @@ class PouringTask:
                 raise ValueError(f"PouringTask.{f} must be in [0, {MAX_HOLD_S:g}] s, got {getattr(self, f)}")
         for f in ("speed", "tip_speed"):
             if not MIN_SPEED <= getattr(self, f) <= 1:
-                raise ValueError(f"PouringTask.{f} must be in [{MIN_SPEED:g}, 1] (a fraction of the velocity limits: "
-                                 f"at {MIN_SPEED:g} a task lasts about 20 minutes), got {getattr(self, f)}")
+                raise ValueError(f"PouringTask.{f} must be in [{MIN_SPEED:g}, 1] (a fraction of the velocity limits; "
+                                 f"with both speeds at {MIN_SPEED:g} a task lasts about 20 minutes), got "
+                                 f"{getattr(self, f)}")
 
     def __eq__(self, other: object) -> bool:
         """Equal fields (the generated ``__eq__`` compared ``jar_pos`` as a tuple item, which NumPy refuses)."""

@@ -36,7 +36,8 @@ def test_a_given_history_of_the_wrong_kind_is_refused_and_changes_nothing() -> N
     m = make_model("np-standard-df", 2, gp_config=FAST)
     for bad, kind, match in ((q_hist[1:], ValueError, r"q_hist: expected shape \(80, 2, 2\)"),
                              (q_hist[:, :1], ValueError, r"q_hist: expected shape"),
-                             ("history", TypeError, "q_hist: expected real numbers")):
+                             ("history", TypeError, "q_hist: expected a real numeric"),
+                             (q_hist + 1j, TypeError, "q_hist: expected a real numeric")):
         with pytest.raises(kind, match=match):
             m.fit(data, q_hist=bad)
         assert not m.fitted
@@ -55,6 +56,8 @@ def test_row_indices_are_the_rows_thin_and_subsample_keep() -> None:
         np.testing.assert_array_equal(data.t[rows], kept.t)
         np.testing.assert_array_equal(data.q[rows], kept.q)
     np.testing.assert_array_equal(data.thin_rows(10_000), np.arange(data.n_samples))
+    np.testing.assert_array_equal(data.thin_rows(3), [0, 124, 249])  # first, middle (124.5 rounds to even), last
+    np.testing.assert_array_equal(data.subsample_rows(10.0), np.arange(0, 250, 5))  # 50 Hz -> every 5th row
 
 
 @pytest.mark.parametrize("options", [["--max-samples", "60"], ["--rate-hz", "4"]])

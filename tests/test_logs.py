@@ -272,8 +272,8 @@ def test_csv_errors_of_the_csv_module_name_the_file_and_row(tmp_path: Path) -> N
 def test_time_steps_too_small_and_segment_ids_too_large_are_named(tmp_path: Path) -> None:
     tiny = tmp_path / "tiny.csv"
     tiny.write_text("t,q1,tau1\n0,0.1,1\n5e-324,0.2,1\n1e-323,0.3,1\n1.5e-323,0.35,1\n")
-    with pytest.raises(LogFormatError, match=r"tiny\.csv: column 't': time steps as small as 4.94e-324 s make the "
-                                             r"computed velocities or accelerations overflow"):
+    with pytest.raises(LogFormatError, match=r"tiny\.csv: computing the velocities qd from q overflows \(time steps "
+                                             r"as small as 4.94e-324 s in column 't', values up to 0.35\)"):
         read_log(tiny)
     seg = tmp_path / "seg.csv"
     seg.write_text("t,segment,q1,tau1\n0,1e19,0.1,1\n0.1,1e19,0.2,1\n0.2,1e19,0.3,1\n")

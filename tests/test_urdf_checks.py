@@ -6,6 +6,7 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from cascgp.rbd import RigidBodyModel
@@ -16,8 +17,8 @@ ARM = arm_urdf(("revolute",) * 3)
 
 @pytest.mark.parametrize("old, new, match", [
     ('<mass value="0.9"/>', '<mass value="heavy"/>',
-     r"the parser dropped what it could not read \(urdfdom: Inertial: mass \[heavy\] is not a float; Could not parse "
-     r"inertial element for Link \[l2\]\)"),
+     r"the parser dropped an <inertial> it could not read \(urdfdom: Inertial: mass \[heavy\] is not a float; Could "
+     r"not parse inertial element for Link \[l2\]\)"),
     ('<mass value="0.9"/>', '<mass value="nan"/>', r"urdfdom: Inertial: mass \[nan\] is not a float"),
     ('<mass value="0.9"/>', '<mass value="-0.9"/>', r"link 'l2' has a negative mass \(-0.9 kg\)"),
     ('iyy="0.018000000000000002"', 'iyy="-0.018"', r"link 'l2' has an inertia with a negative principal moment"),
@@ -34,8 +35,24 @@ def test_a_broken_urdf_is_refused_naming_the_file_and_the_element(tmp_path: Path
     text = ARM.replace(old, new)
     with pytest.raises(ValueError, match=r"broken\.urdf'.*" + match):
         RigidBodyModel.from_urdf(write(tmp_path, "broken.urdf", text))
-    with pytest.raises(ValueError, match=r"urdf_text: the URDF document: .*" + match):  # a model file's copy too
-        RigidBodyModel.from_urdf_text(text)
+
+
+def test_a_model_files_copy_of_its_urdf_is_read_as_it_was_saved() -> None:
+    """from_urdf_text (a model file's embedded URDF) parses without the file checks: a file saved before them
+    loads as it was saved (its check predictions say whether it is the same model)."""
+    rbd = RigidBodyModel.from_urdf_text(ARM.replace('<mass value="0.9"/>', '<mass value="-0.9"/>'))
+    assert rbd.dof == 3
+
+
+def test_an_unreadable_visual_is_passed_on_not_refused(tmp_path: Path) -> None:
+    """urdfdom reads a link's inertial first; a visual it cannot read loses only geometry: the same dynamics."""
+    visual = '<visual><geometry><capsule radius="0.1" length="0.2"/></geometry></visual></link>'
+    at = ARM.index("</link>", ARM.index('<link name="l2">'))
+    text = ARM[:at] + visual + ARM[at + len("</link>"):]
+    rbd = RigidBodyModel.from_urdf(write(tmp_path, "capsule.urdf", text))
+    ref = RigidBodyModel.from_urdf(write(tmp_path, "arm.urdf", ARM))
+    q = np.linspace(-1.0, 1.0, 9).reshape(3, 3)
+    np.testing.assert_array_equal(rbd.inverse_dynamics(q, q, q), ref.inverse_dynamics(q, q, q))
 
 
 def test_joints_that_move_no_mass_are_named_in_a_warning(tmp_path: Path) -> None:

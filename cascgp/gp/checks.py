@@ -27,7 +27,7 @@ def as_list(v: Any, field_name: str) -> list[np.ndarray]:
 def _real(a: Any, field_name: str, shape: str) -> np.ndarray:
     """``a`` as float64; ``TypeError`` naming the field for complex, boolean, text or other non-numeric input (a
     cast would drop an imaginary part or turn flags into numbers)."""
-    if isinstance(a, np.ndarray) and a.dtype == np.float64:
+    if type(a) is np.ndarray and a.dtype == np.float64:  # not a subclass (a masked array's NaN would pass)
         return a
     return as_real_array(field_name, a, shape)
 

@@ -149,7 +149,8 @@ class CascadedGPModel:
         without ``share`` (:mod:`cascgp.models.fit_start`).
         ``q_hist`` (``-df`` models, optional): each row's positions at ``t - df_delta`` and ``t - 2 df_delta``,
         ``(T, 2, N)``, taken from the full record when ``data`` are rows chosen from it (rows with a non-finite
-        entry are left out); default: interpolated within ``data`` (:mod:`cascgp.models.training_rows`).
+        entry are left out: set those without history to NaN, which ``history_from_data`` clamps instead);
+        default: interpolated within ``data`` (:mod:`cascgp.models.training_rows`).
         Returns ``self``.
         """
         arr = training_arrays(self, data, q_hist)

@@ -65,9 +65,10 @@ def save_model(model: CascadedGPModel, path: str | os.PathLike, *,
     fitted model.
 
     ``provenance`` (optional): what the model was trained on and how, as a JSON object (say the log's file name and
-    SHA-256, the command line; ``cascgp fit`` records these), stored as it is and returned by :func:`saved_config`
-    under ``"provenance"``. ``TypeError`` naming ``provenance`` if it is not a mapping with string keys that JSON
-    can write (finite numbers, strings, booleans, ``None``, lists and such mappings).
+    SHA-256, the command line; ``cascgp fit`` records these), stored as JSON writes it (tuples become lists, inner
+    keys strings) and returned by :func:`saved_config` under ``"provenance"``. ``TypeError`` naming ``provenance``
+    if it is not a mapping with string keys that JSON can write (finite numbers, strings, booleans, ``None``, lists
+    and such mappings).
     """
     if not model.fitted:
         raise RuntimeError(f"model {model.name!r}: not fitted; nothing to save")

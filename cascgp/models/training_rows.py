@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cascgp.data import DynamicsData
+from cascgp.data import DynamicsData, as_real_array
 from cascgp.features import history_from_data
 from cascgp.gp.checks import check_scale
 
@@ -28,11 +28,7 @@ __all__ = ["training_arrays"]
 
 def _given_history(q_hist: Any, data: DynamicsData) -> tuple[np.ndarray, np.ndarray]:
     """``q_hist`` checked against ``data`` (shape ``(T, 2, N)``, real numbers) and its rows that are all finite."""
-    try:
-        h = np.asarray(q_hist, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise TypeError(f"q_hist: expected real numbers of shape ({data.n_samples}, 2, {data.dof}), got "
-                        f"{type(q_hist).__name__}") from None
+    h = as_real_array("q_hist", q_hist, f"({data.n_samples}, 2, {data.dof})")  # TypeError: complex, bool, text
     if h.shape != (data.n_samples, 2, data.dof):
         raise ValueError(f"q_hist: expected shape ({data.n_samples}, 2, {data.dof}) (every row of data: q at "
                          f"t - df_delta and t - 2 df_delta), got {h.shape}")

@@ -322,8 +322,8 @@ def _training_rows(prog: str, a: argparse.Namespace, model: Any, data: Any) -> t
         n0 = data.n_samples
         keep = data.subsample_rows(a.rate_hz)
         if keep.size < 2:
-            raise _Fail(f"--rate-hz {a.rate_hz:g} keeps {keep.size} of {n0} rows (the log's rate: {_log_rate(data)}, "
-                        f"{n0} rows); a fit needs at least 2: choose a higher rate")
+            raise _Fail(f"--rate-hz {a.rate_hz:g} keeps {keep.size} of {n0} rows (the log's rate: {_log_rate(data)}); "
+                        "a fit needs at least 2: choose a higher rate")
         if keep.size < n0:
             data, rows = data.subsample(a.rate_hz), rows[keep]
             _note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
