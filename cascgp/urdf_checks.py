@@ -25,6 +25,7 @@ import warnings
 import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Any, Sequence
+
 import numpy as np
 import pinocchio as pin
 
@@ -63,6 +64,8 @@ def _structure_errors(root: ET.Element) -> list[str]:
         parents.setdefault(child, name)
         for mimic in _children(j, "mimic"):
             of = mimic.get("joint")
+            if of is None:  # the parser names that
+                continue
             if of == name:
                 errors.append(f"joint {name!r} mimics itself")
             elif of not in names:
@@ -75,9 +78,9 @@ def _structure_errors(root: ET.Element) -> list[str]:
 
 
 def _inertial_errors(root: ET.Element) -> list[str]:
-    """Links with a negative mass or principal moment of inertia (rounded CAD values may break the triangle
-    inequality of the principal moments, which no rigid body does; that leaves the mass matrix positive definite
-    and is not reported)."""
+    """Links with a negative mass or a principal moment of inertia below -1 % of their largest (rounded CAD values
+    may also break the triangle inequality of the principal moments, which no rigid body does; that leaves the mass
+    matrix positive definite and is not reported)."""
     errors = []
     for link in (e for e in root if _local(e.tag) == "link"):
         for inertial in _children(link, "inertial"):

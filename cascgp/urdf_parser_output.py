@@ -55,7 +55,7 @@ def parser_output() -> Iterator[list[str]]:
                 text = tmp.read().decode("utf-8", "replace")
                 said.append(text)
                 if text and not failed and not dropped_inertials(said) and sys.stderr is not None:
-                    sys.stderr.write(text)  # warnings of a parse that succeeded (errors: the caller refuses it)
+                    sys.stderr.write(text)  # what a parse that succeeded printed (unless the caller refuses it)
 
 
 def parser_reason(said: list[str]) -> str:
