@@ -247,7 +247,7 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
             meta["derivative_filter"] += f"; central differences on segments shorter than {smoothing.window} rows"
     q, qd, qdd, tau = arr["q"], arr["qd"], arr["qdd"], arr["tau"]
     assert q is not None  # _header refuses a log without q1..qN
-    with np.errstate(all="ignore"):  # a derivative that overflows is refused below, naming column t
+    with np.errstate(all="ignore"):  # a derivative that overflows is refused in _derivative, naming it
         if qd is None:  # rows with given velocities may be independent samples (a shuffled data set): not checked
             _check_no_wrap(path, q, seg, rownos)
             qd = _derivative(path, t, q, seg, smoothing, "velocities qd from q")
