@@ -48,7 +48,7 @@ import pinocchio as pin
 from cascgp.checks import check_real_vector
 from cascgp.data import F64, all_finite, as_real_array
 from cascgp.rbd_joints import angle_joints, coupling_map, joint_selection, lock_joints, mimic_joints
-from cascgp.urdf_checks import parse_urdf_file, parse_urdf_text, warn_odd
+from cascgp.urdf_checks import check_urdf_path, parse_urdf_file, parse_urdf_text, warn_odd
 
 __all__ = ["RigidBodyModel", "load_nominal", "sidecar_path", "SIDECAR_FORMAT_VERSION",
            "SUPPORTED_SIDECAR_VERSIONS", "SIDECAR_REQUIRED_FIELDS"]
@@ -447,8 +447,7 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints
             is not valid JSON, lacks a field, or disagrees with the URDF.
     """
     urdf_path = Path(urdf_path)
-    if not urdf_path.is_file():
-        parse_urdf_file(urdf_path)  # raises: FileNotFoundError, or ValueError for a folder
+    check_urdf_path(urdf_path)
     js = sidecar_path(urdf_path)
     if not js.exists():
         return _without_sidecar(urdf_path, js, dof, joints, locked)

@@ -1,7 +1,7 @@
 """Checks of a URDF that its parser (urdfdom, inside Pinocchio) accepts but that describes a broken robot.
 
 :func:`parse_urdf_file` parses a URDF file with Pinocchio and refuses (``ValueError`` naming the file and the
-element, :func:`refuse_broken`) what would make the rigid-body model silently wrong:
+element) what would make the rigid-body model silently wrong:
 
 - an ``<inertial>`` the parser could not read and dropped (``mass="heavy"``, NaN: the link has no mass), with the
   parser's words (:func:`cascgp.urdf_parser_output.dropped_inertials`);
@@ -29,14 +29,10 @@ from typing import Any, Sequence
 import numpy as np
 import pinocchio as pin
 
+from cascgp.rbd_joints import _local
 from cascgp.urdf_parser_output import dropped_inertials, parser_output, parser_reason
 
-__all__ = ["parse_urdf_file", "parse_urdf_text", "refuse_broken", "warn_odd"]
-
-
-def _local(tag: object) -> str:
-    """An element's tag without its XML namespace (``{uri}joint`` -> ``joint``)."""
-    return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
+__all__ = ["check_urdf_path", "parse_urdf_file", "parse_urdf_text", "warn_odd"]
 
 
 def _children(element: ET.Element, tag: str) -> list[ET.Element]:
@@ -112,25 +108,22 @@ def _massless_joints(model: pin.Model, joints: Sequence[str]) -> list[str]:
             if model.names[j] in joints and model.joints[j].nv == 1 and zero[model.joints[j].idx_v]]
 
 
-def refuse_broken(said: list[str], urdf_text: str, what: str) -> None:
-    """``ValueError`` starting with ``what`` (the file) if the parser dropped an ``<inertial>`` it could not read
-    (``said``: its output, :func:`cascgp.urdf_parser_output.parser_output`) or the URDF describes a broken robot
-    (the module table's refusals)."""
-    dropped = dropped_inertials(said)
-    errors = [f"the parser dropped an <inertial> it could not read (urdfdom: {'; '.join(dropped)})"] if dropped else []
+def _refuse_broken_xml(urdf_text: str, what: str) -> None:
+    """``ValueError`` starting with ``what`` (the file) if the URDF's XML describes a broken robot (the module
+    docstring's refusals but the parser's dropped inertials, which :func:`parse_urdf_file` checks after the
+    parse)."""
     try:
         root = ET.fromstring(urdf_text)
-    except (ET.ParseError, ValueError):  # Pinocchio parsed it; ElementTree is stricter (a DTD, say): skip
-        root = None
-    if root is not None:
-        errors += _structure_errors(root) + _inertial_errors(root)
+    except (ET.ParseError, ValueError):  # Pinocchio parses it or says why not; ElementTree is stricter (a DTD, say)
+        return
+    errors = _structure_errors(root) + _inertial_errors(root)
     if errors:
         raise ValueError(f"{what}: " + "; ".join(errors))
 
 
 def warn_odd(model: pin.Model, what: str, joints: Sequence[str]) -> None:
-    """A ``UserWarning`` starting with ``what`` (the file) for each oddity of the module table of a URDF that
-    :func:`refuse_broken` accepted; ``model``: Pinocchio's model of it, ``joints``: the rigid-body model's joints
+    """A ``UserWarning`` starting with ``what`` (the file) for each oddity of the module docstring of a URDF that
+    :func:`parse_urdf_file` accepted; ``model``: Pinocchio's model of it, ``joints``: the rigid-body model's joints
     (not the locked ones)."""
     lo, hi = model.lowerPositionLimit, model.upperPositionLimit
     notes, inverted = [], []
@@ -152,28 +145,36 @@ def parse_urdf_file(path: Path) -> tuple[pin.Model, str]:
     """Pinocchio's model of the URDF file ``path`` and its text. ``FileNotFoundError`` if it does not exist;
     ``ValueError`` naming it if it is not a file, does not parse (with the parser's reason) or describes a broken
     robot (the XML's problems first: Pinocchio's message for a link with two parents, say, is terse or missing)."""
-    if not path.exists():
-        raise FileNotFoundError(f"URDF file not found: {str(path)!r}")
-    if not path.is_file():
-        raise ValueError(f"URDF {str(path)!r}: not a file (a folder?)")
+    check_urdf_path(path)
     said: list[str] = []  # what the parser printed (none if reading the file fails first)
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}") from exc
-    refuse_broken([], text, f"URDF {str(path)!r}")
+    _refuse_broken_xml(text, f"URDF {str(path)!r}")  # before the parse: Pinocchio's own message is terse or none
     try:
         with parser_output() as said:
             model = pin.buildModelFromUrdf(str(path))
     except Exception as exc:  # Pinocchio raises a bare ValueError/RuntimeError with a terse message
         raise ValueError(f"cannot parse URDF {str(path)!r}: {exc}{parser_reason(said)}") from exc
-    refuse_broken(said, text, f"URDF {str(path)!r}")
+    dropped = dropped_inertials(said)
+    if dropped:
+        raise ValueError(f"URDF {str(path)!r}: the parser dropped an <inertial> it could not read (urdfdom: "
+                         f"{'; '.join(dropped)})")
     return model, text
+
+
+def check_urdf_path(path: Path) -> None:
+    """``FileNotFoundError`` if ``path`` does not exist, ``ValueError`` naming it if it is not a file."""
+    if not path.exists():
+        raise FileNotFoundError(f"URDF file not found: {str(path)!r}")
+    if not path.is_file():
+        raise ValueError(f"URDF {str(path)!r}: not a file (a folder?)")
 
 
 def parse_urdf_text(text: Any) -> pin.Model:
     """Pinocchio's model of the URDF document ``text`` (e.g. embedded in a model file), as the parser reads it
-    (not checked by :func:`refuse_broken`: a model file loads as it was saved); ``ValueError`` naming
+    (without the checks of :func:`parse_urdf_file`: a model file loads as it was saved); ``ValueError`` naming
     ``urdf_text`` if it does not parse."""
     if not isinstance(text, str) or not text.strip():
         raise ValueError("urdf_text: expected a non-empty URDF document")

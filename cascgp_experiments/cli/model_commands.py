@@ -246,7 +246,7 @@ def _training_rows(prog: str, a: argparse.Namespace, model: Any, data: Any) -> t
             raise _Fail(f"--rate-hz {a.rate_hz:g} keeps {keep.size} of {n0} rows (the log's rate: {_log_rate(data)}); "
                         "a fit needs at least 2: choose a higher rate")
         if keep.size < n0:
-            data, rows = data.subsample(a.rate_hz), rows[keep]
+            data, rows = data.take(keep), rows[keep]  # the rows of data.subsample (its loop once)
             _note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
         else:
             _note(prog, f"note: --rate-hz {a.rate_hz:g} keeps every row (the log's rate: {_log_rate(data)}): all "
@@ -334,7 +334,6 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     from cascgp.models.io import saved_config
 
     model = _load(a.model)
-    saved = saved_config(a.model)
     data = _read(a.data)
     _describe(prog, data, a.data)
     _check_dof(model, data, a.data)
@@ -375,6 +374,7 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         print(f"{j + 1:>5}  " + "  ".join(f"{scores[n][j]:>{width}.4f}" for n in names))
     print(f"{'mean':>5}  " + "  ".join(f"{scores[n].mean():>{width}.4f}" for n in names))
     if a.json is not None:
+        saved = saved_config(a.model)  # the config JSON alone: the version and provenance it was saved with
         write_json(a.json, {
             "cascgp_version": __version__,
             "command": _command(prog, argv),
