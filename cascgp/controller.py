@@ -220,7 +220,7 @@ class FeedforwardController:
                 raise ValueError(f"online: expected None or a window of >= 1 samples, got {online!r}")
             from cascgp.models.online import check_supported
 
-            check_supported(model)
+            check_supported(model, int(online), "online")  # also its memory: refused here, not at start()
         online_every = check_count(online_every, "online_every")
         self.online = None if online is None else int(online)
         self.online_every = online_every

@@ -281,7 +281,8 @@ class RigidBodyModel:
                 each (N,) or all (T, N).
 
         Returns:
-            tau: (N,) or (T, N) in N m, float64.
+            tau: (N,) or (T, N) in N m, float64. ``ValueError`` naming the argument for non-finite or non-real
+            input, or naming ``qd, qdd`` when finite input overflows the torque.
         """
         model, data = self.pin_model, self._data
         if (self._E is None and type(q) is np.ndarray and type(qd) is np.ndarray and type(qdd) is np.ndarray
@@ -298,13 +299,15 @@ class RigidBodyModel:
             E = self._E
             q, qd, qdd = q @ E.T + self._b, qd @ E.T, qdd @ E.T
         if q.ndim == 1:
-            tau = pin.rnea(model, data, q, qd, qdd).copy()
-            return tau if self._E is None else self._E.T @ tau
-        out = np.empty_like(q)
-        rnea = pin.rnea
-        for t in range(q.shape[0]):
-            out[t] = rnea(model, data, q[t], qd[t], qdd[t])
-        return out if self._E is None else out @ self._E
+            out = pin.rnea(model, data, q, qd, qdd).copy()
+        else:
+            out = np.empty_like(q)
+            for t in range(q.shape[0]):
+                out[t] = pin.rnea(model, data, q[t], qd[t], qdd[t])
+        if not np.isfinite(out).all():  # finite inputs (checked) whose products overflow: |qd| of 1e300, say
+            raise ValueError(f"qd, qdd: the torque overflowed (|qd| up to {np.abs(qd).max():.3g} rad/s, |qdd| up to "
+                             f"{np.abs(qdd).max():.3g} rad/s^2); expected velocities and accelerations a robot reaches")
+        return out if self._E is None else (self._E.T @ out if out.ndim == 1 else out @ self._E)
 
     def inverse_dynamics_derivatives(self, q: Any, qd: Any, qdd: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         r"""Partial derivatives of :meth:`inverse_dynamics`, by Pinocchio's analytic RNEA derivatives

@@ -220,6 +220,8 @@ def test_study_max_seconds_below_the_sarcos_grid_skips_sarcos(tmp_path: Path, mo
     ("fit", ["--data", "x.csv", "--model", "np-inward", "--seed", "-1"], "--seed: expected an integer >= 0, got -1"),
     ("fit", ["--data", "x.csv", "--model", "np-inward", "--threads", "0"],
      "--threads: expected an integer >= 1, got 0"),
+    ("fit", ["--data", "x.csv", "--model", "np-inward", "--threads", str(10**30)],  # torch's C int overflowed
+     f"--threads: expected at most 1024, got {10**30}"),
 ])
 def test_commands_refuse_bad_options_before_any_work(command, argv, message, tmp_path: Path, monkeypatch,
                                                      capsys) -> None:

@@ -467,3 +467,14 @@ def test_online_learning_is_refused_for_a_cascade_trained_on_predicted_torques(a
         FeedforwardController(model, 1.0, 0.1, np.full(3, 10.0), online=5)
     with pytest.raises(ValueError, match="predicted neighbour torques"):
         model.start_online(5)
+
+
+def test_an_online_window_too_large_for_memory_is_refused_at_construction(arm3_train):
+    from cascgp.gp import GPFitConfig
+    from cascgp.models import make_model
+
+    model = make_model("np-inward", 3, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(
+        arm3_train.take(np.arange(40)))
+    with pytest.raises(ValueError, match=r"^online: 1000000000000 samples per joint would need about .* GB"):
+        FeedforwardController(model, 1.0, 0.1, np.full(3, 10.0), online=10**12)  # refused only at start() before
+    assert FeedforwardController(model, 1.0, 0.1, np.full(3, 10.0), online=5).online == 5

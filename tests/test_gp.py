@@ -332,6 +332,9 @@ def test_input_errors_name_the_field():
     for field, bad in (("snr_max", True), ("catch_up_windows", True)):
         with pytest.raises(ValueError, match=field):
             GPFitConfig(**{field: bad})
+    assert GPFitConfig(threads=1024).threads == 1024
+    with pytest.raises(ValueError, match="threads: expected at most 1024, got 1025"):
+        GPFitConfig(threads=1025)
     changed = GPFitConfig(n_restarts=1)
     changed.n_restarts = 0  # set after construction: the fit checks the settings again
     with pytest.raises(ValueError, match=r"config\.n_restarts: expected an integer >= 1, got 0"):
@@ -347,5 +350,9 @@ def test_input_errors_name_the_field():
         bank.predict([Xq])
     with pytest.raises(ValueError, match="X"):
         bank.predict([Xq, Xq])
+    for bad in (0, 2.5, True):  # range() refused 0 and 2.5 without naming chunk; True was a chunk of 1
+        with pytest.raises(ValueError, match="chunk: expected an integer >= 1"):
+            bank.predict([X], chunk=bad)
+    np.testing.assert_allclose(bank.predict([X], chunk=1)[0], bank.predict([X])[0], rtol=1e-12, atol=1e-12)
     with pytest.raises(ValueError, match="b"):
         bank.posterior(1)

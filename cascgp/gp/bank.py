@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from cascgp.checks import check_count
 from cascgp.gp.checks import as_list, check_matrix, check_scale, check_vector, json_num
 from cascgp.gp.config import GPFitConfig, noise_var
 from cascgp.gp.kernels import get_kernel, scaled_sqdist
@@ -426,7 +427,7 @@ class GPBank:
         Args:
             X: per GP ``(m, d_b)`` query inputs (the same ``m`` for every GP).
             return_var: also return the variance of the latent function (no noise).
-            chunk: queries per batched block (memory bound: ``B * chunk * n`` floats).
+            chunk: queries per batched block, an integer >= 1 (memory bound: ``B * chunk * n`` floats).
 
         Returns:
             ``mean (m, B)`` and ``var (m, B)`` (or ``None``) in original target units.
@@ -434,8 +435,7 @@ class GPBank:
         s = self._require_fitted()
         f = self._factors
         assert f is not None  # _require_fitted checks it
-        X = as_list(X, "X")
-        B = self.n_gps
+        X, chunk, B = as_list(X, "X"), check_count(chunk, "chunk"), self.n_gps
         if len(X) != B:
             raise ValueError(f"X: expected {B} query arrays (one per GP), got {len(X)}")
         Q0 = check_matrix(X[0], "X[0]", d=int(s.dims[0]))

@@ -12,7 +12,7 @@ import numpy as np
 from cascgp.checks import check_count, check_positive
 from cascgp.gp.kernels import check_kernel
 
-__all__ = ["GPFitConfig", "INIT_SPREAD_MAX", "check_target_floor", "noise_var"]
+__all__ = ["GPFitConfig", "INIT_SPREAD_MAX", "MAX_THREADS", "check_target_floor", "noise_var"]
 
 
 #: Values of fields added after the first saved format, for configs saved without them (old behaviour).
@@ -22,6 +22,9 @@ _LEGACY_DEFAULTS: dict[str, Any] = {"snr_max": None, "stall_window": None}
 #: move, and far larger spreads overflow. Checked when a fit starts, not when a config is made, so that model files
 #: saved with a larger value still load (the spread plays no part in prediction).
 INIT_SPREAD_MAX = 20.0
+#: The most ``threads`` a config accepts: a bound on a typo (torch's ``set_num_threads`` takes a C ``int``, and
+#: OpenMP starts a worker per thread), far above the cores of one machine.
+MAX_THREADS = 1024
 
 
 @dataclass
@@ -70,10 +73,10 @@ class GPFitConfig:
             ``python -m scripts.bench_fit_threads``: on 2 quiet cores torch's default two threads took 0.85x the
             one-thread time, beside one busy process 2.7x); parallelism across fits belongs to processes
             (``--workers``), and ``threads=2`` suits a dedicated machine. ``None`` leaves the caller's settings
-            untouched; an integer ``k >= 1`` uses ``k`` threads. Another thread count sums in another order: the
-            NLL and predictions agree to round-off, but where the NLL is flat (a lengthscale of an input that does
-            not matter) the optimiser can stop elsewhere, with the same predictions to about 1e-3 of the target's
-            scale.
+            untouched; an integer ``k`` from 1 to :data:`MAX_THREADS` uses ``k`` threads. Another thread count sums
+            in another order: the NLL and predictions agree to round-off, but where the NLL is flat (a lengthscale
+            of an input that does not matter) the optimiser can stop elsewhere, with the same predictions to about
+            1e-3 of the target's scale.
     """
 
     kernel: str = "matern52"
@@ -125,6 +128,8 @@ class GPFitConfig:
             setattr(self, name, check_positive(getattr(self, name), name, zero=True))  # a Python float (JSON)
         for name in ("drop_after", "stall_window", "race_at", "threads"):
             check_count(getattr(self, name), name, optional=True)
+        if self.threads is not None and self.threads > MAX_THREADS:
+            raise ValueError(f"threads: expected at most {MAX_THREADS}, got {self.threads!r}")
         check_count(self.seed, "seed", minimum=0)  # NumPy's generators take seeds >= 0
         if self.snr_max is not None and (isinstance(self.snr_max, bool) or not isinstance(self.snr_max, (int, float))
                                          or not math.isfinite(self.snr_max) or self.snr_max <= 0):

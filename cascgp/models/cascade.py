@@ -297,7 +297,10 @@ class CascadedGPModel:
         mean, var = self._predict_arrays(q, qd, qdd, q_hist, return_var=True, propagate=propagate)
         if input_var is not None:
             J = mean_jacobian_arrays(self, q, qd, qdd, mean)  # the chained inputs are this prediction's mean
-            var = var + (J * J) @ input_var.reshape(-1)  # sum_s J_js^2 sigma_s^2 (see above)
+            with np.errstate(over="ignore"):
+                var = var + (J * J) @ input_var.reshape(-1)  # sum_s J_js^2 sigma_s^2 (see above)
+            if not np.isfinite(var).all():
+                raise ValueError(f"input_var: the variance overflowed (input_var up to {input_var.max():.3g})")
         return (mean[0], var[0]) if single else (mean, var)
 
     def mean_jacobian(self, q: Any, qd: Any, qdd: Any) -> np.ndarray:

@@ -232,12 +232,16 @@ def _read_file(path: str | os.PathLike) -> tuple[dict[str, np.ndarray], dict[str
 def load_model(path: str | os.PathLike, rbd: Any = None) -> CascadedGPModel:
     """Read a model written by :meth:`CascadedGPModel.save`.
 
-    SP models need their rigid-body model: pass ``rbd=``; without it the model embedded in the
-    file is rebuilt (see the module docstring); a file without one falls back to the URDF path
-    recorded at save time (``rbd.source``).  After loading, the
-    stored check predictions are recomputed; any difference (corrupt file, another RBD) raises
-    ``ValueError``.  Missing file: ``FileNotFoundError``; corrupt/truncated archive, missing
-    fields or another format version: ``ValueError`` naming the file.
+    Args:
+        path: the model file (``.npz``).
+        rbd: the rigid-body model of an SP model (an object with ``dof`` and ``inverse_dynamics``). Without it
+            the model embedded in the file is rebuilt (see the module docstring); a file without one falls back
+            to the URDF path recorded at save time (``rbd.source``). NP models ignore it, as :func:`make_model`
+            does.
+
+    After loading, the stored check predictions are recomputed; any difference (corrupt file, another RBD)
+    raises ``ValueError``. Missing file: ``FileNotFoundError``; corrupt/truncated archive, missing fields or
+    another format version: ``ValueError`` naming the file.
     """
     z, cfg = _read_file(path)
     try:

@@ -182,27 +182,31 @@ class _JointWindow:
         return float(v @ dsymv(1.0, self.Sinv, v, lower=1))
 
 
-def check_supported(model: Any) -> None:
+def check_supported(model: Any, window: int | None = None, name: str = "window") -> None:
     """``ValueError`` naming the model unless online samples can enter it: derivative-based features, and
-    neighbour torques in training that were measured (online samples carry measured ones)."""
+    neighbour torques in training that were measured (online samples carry measured ones). With ``window``
+    (samples, checked by the caller), also ``ValueError`` naming ``name`` unless the fitted model's window arrays
+    fit in this machine's physical memory."""
     if model.feature_kind != "db":
         raise ValueError(f"online: model {model.name!r}: online updates support derivative-based models only")
     if getattr(model, "train_on_predicted", False) and model.structure != "standard":
         raise ValueError(f"online: model {model.name!r} was trained on predicted neighbour torques; online "
                          "samples carry measured ones, so they would not match its training inputs")
+    if window is not None:
+        _check_window_memory(window, model.posteriors(), name)
 
 
-def _check_window_memory(window: int, posts: list[Any]) -> None:
-    """``ValueError`` naming ``window`` when its arrays (per joint two window x window matrices and the window's rows
-    against the fitted set) would not fit in this machine's physical memory, instead of NumPy's ``MemoryError`` or
-    the system's out-of-memory kill later, when the pages are written."""
+def _check_window_memory(window: int, posts: list[Any], name: str = "window") -> None:
+    """``ValueError`` naming ``name`` when the window's arrays (per joint two window x window matrices and the
+    window's rows against the fitted set) would not fit in this machine's physical memory, instead of NumPy's
+    ``MemoryError`` or the system's out-of-memory kill later, when the pages are written."""
     try:
         phys = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
     except (AttributeError, ValueError, OSError):  # not POSIX: no bound known
         return
     need = sum(8 * (2 * window * window + 3 * window * (P.Z.shape[0] + P.Z.shape[1])) for P in posts)
     if need > phys:
-        raise ValueError(f"window: {window} samples per joint would need about {need / 1e9:.3g} GB, more than this "
+        raise ValueError(f"{name}: {window} samples per joint would need about {need / 1e9:.3g} GB, more than this "
                          f"machine's {phys / 1e9:.3g} GB of physical memory; choose a smaller window")
 
 

@@ -40,7 +40,7 @@ from cascgp_experiments.cli.log_notes import limits_note as _limits_note
 from cascgp_experiments.cli.log_notes import log_rate as _log_rate
 from cascgp_experiments.cli.log_notes import note as _note
 from cascgp_experiments.cli.log_notes import periods as _periods
-from cascgp_experiments.cli.options import check_output, require_at_least
+from cascgp_experiments.cli.options import check_output, require_at_least, settings_error
 
 _NRMSE_HELP = ("nRMSE of joint i = RMSE_i / (max_i - min_i): the root-mean-square error of the predicted torques "
                "divided by the range of the measured test torques of that joint (0 = perfect; predicting the "
@@ -145,6 +145,10 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
     require_at_least(p, a, 1, "restarts", "threads")
     require_at_least(p, a, 2, "max_samples")  # a GP needs two rows
     require_at_least(p, a, 0, "seed")
+    try:
+        _fit_config(a)
+    except ValueError as exc:  # --threads beyond GPFitConfig's bound, say
+        settings_error(p, exc, {"threads": "--threads", "n_restarts": "--restarts", "seed": "--seed"})
     if a.rate_hz is not None and not (np.isfinite(a.rate_hz) and a.rate_hz > 0):
         p.error(f"--rate-hz: expected a positive rate, got {a.rate_hz}")
     if a.model.startswith("sp-") and a.urdf is None:
@@ -260,8 +264,19 @@ def _training_rows(prog: str, a: argparse.Namespace, model: Any, data: Any) -> t
     return data, None if q_hist is None else q_hist[rows], thinned
 
 
-def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
+def _fit_config(a: argparse.Namespace) -> Any:
+    """The fit's ``GPFitConfig`` from ``--seed``, ``--restarts`` and ``--threads`` (``ValueError`` naming a field)."""
     from cascgp.gp import GPFitConfig
+
+    kw: dict[str, Any] = {"seed": a.seed}
+    if a.restarts is not None:
+        kw["n_restarts"] = a.restarts
+    if a.threads is not None:
+        kw["threads"] = a.threads
+    return GPFitConfig(**kw)
+
+
+def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     from cascgp.models import make_model
     from cascgp.rbd import load_nominal
 
@@ -289,12 +304,7 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         locked += "".join(f"; {n} moves with {j} ({m:g} x {j} + {o:g})" for n, (j, m, o) in rbd.coupled.items())
         _note(prog, f"rigid-body model: {a.urdf} ({rbd.dof} joints: {', '.join(rbd.joint_names)}{locked})")
         _limits_note(prog, rbd, data)
-    kw: dict[str, Any] = {"seed": a.seed}
-    if a.restarts is not None:
-        kw["n_restarts"] = a.restarts
-    if a.threads is not None:
-        kw["threads"] = a.threads
-    cfg = GPFitConfig(**kw)
+    cfg = _fit_config(a)
     model = make_model(a.model, data.dof, rbd, gp_config=cfg)
     data, q_hist, thinned = _training_rows(prog, a, model, data)
     _few_rows_note(prog, model, data, thinned)
