@@ -61,7 +61,13 @@ ModelFactory = Callable[[str, Any, GPFitConfig], Any]
 
 @dataclass(frozen=True)
 class Feedback:
-    """The robot-specific parts of every controller: PD gains and symmetric torque limits (per joint)."""
+    """The robot-specific parts of every controller (each an (N,) array, one entry per joint).
+
+    Attributes:
+        kp: proportional gains (N m/rad).
+        kd: derivative gains (N m s/rad).
+        torque_limits: symmetric torque limits (N m): every command is clipped to ``[-limit, limit]``.
+    """
 
     kp: np.ndarray
     kd: np.ndarray
@@ -70,17 +76,25 @@ class Feedback:
 
 @dataclass(frozen=True)
 class RetrainConfig:
-    """How episodes are seeded and how a learning controller is refitted after a training attempt."""
+    """How episodes are seeded and how a learning controller is refitted after a training attempt.
+
+    Attributes:
+        seed: attempt ``i`` resets the env with seed ``seed * 1000 + i`` and refits with GP seed ``seed + i``
+            (an integer >= 0).
+        rate_hz: rate (Hz) to which the buffer's episodes are subsampled for a refit.
+        cap: the most training rows of a refit (evenly spaced over the subsampled buffer; at least 2).
+        restarts: GP optimiser starts per joint's GP in a refit.
+    """
 
     seed: int = 0
-    rate_hz: float = 10.0   # training data rate (Hz)
-    cap: int = 500          # maximum training-set size
-    restarts: int = 3       # GP optimiser restarts per refit
+    rate_hz: float = 10.0
+    cap: int = 500
+    restarts: int = 3
 
     def __post_init__(self) -> None:
         # As Python numbers (the settings go into JSON records); episode seeds are seed * 1000 + i, and Gymnasium
         # takes seeds >= 0.
-        for name, least in (("seed", 0), ("cap", 1), ("restarts", 1)):
+        for name, least in (("seed", 0), ("cap", 2), ("restarts", 1)):  # a GP needs two rows
             object.__setattr__(self, name, check_count(getattr(self, name), name, least))
         object.__setattr__(self, "rate_hz", check_positive(self.rate_hz, "rate_hz", "Hz"))
 
@@ -305,8 +319,18 @@ def run_controllers(names: Sequence[str], make_env: Callable[[], Any], plan: Seq
                     feedback: Feedback, config: RetrainConfig = RetrainConfig(), *,
                     reset_options: dict[str, Any] | None = None, model_factory: ModelFactory = default_model_factory,
                     buffer_root: str | Path | None = None, hooks: Sequence[RunHooks] = ()) -> list[ControllerRun]:
-    """:func:`run_controller` for each of ``names`` in turn on one env from ``make_env()`` (closed at the end);
-    controller ``name``'s buffer goes to ``buffer_root / name`` when ``buffer_root`` is given."""
+    """:func:`run_controller` for each of ``names`` in turn on one env from ``make_env()`` (closed at the end).
+
+    Args:
+        names: controller names (:func:`check_controller`), all checked before the env is made.
+        make_env: makes the env that every controller runs on (closed at the end, also after an error).
+        plan, rbd, feedback, config, reset_options, model_factory, hooks: as for :func:`run_controller`.
+        buffer_root: folder under which controller ``name``'s buffer is kept, as ``buffer_root / name`` (each
+            must be empty); ``None``: in memory.
+
+    Returns:
+        One :class:`ControllerRun` per name, in the order of ``names``.
+    """
     for name in names:
         check_controller(name)
     env = make_env()

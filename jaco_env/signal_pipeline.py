@@ -84,6 +84,17 @@ def _joints(big: float, small: float) -> tuple[float, ...]:
 class SignalPipeline:
     """Named factors of the sensing pipeline (module docstring); validated at construction.
 
+    Attributes:
+        q_lead_s: how long before the torque read q is read (s, in [0, 0.05]; rounded to physics steps).
+        qd_lead_s: how long before the torque read qd is read (s, in [0, 0.05]).
+        velocity_source: ``"true"`` (the simulated joint velocity) or ``"differentiated"`` (a backward difference
+            of q over ``velocity_window_s``).
+        velocity_window_s: the difference's window (s, in [1e-4, 0.1]).
+        tau_offset_std: standard deviation of the torque offset drawn at each reset (N m, per joint, in [0, 10]).
+        tau_drift_std: the offset's random-walk drift (N m/sqrt(s), per joint, in [0, 1]).
+        tau_filter_hz: cut-off of the first-order low-pass filter of the torque (Hz, in [0, 1000]; 0: none).
+        tau_noise_scale: scale of ``SensorNoise``'s torque noise (per joint, in [0, 10]).
+
     Per-joint fields take one real number (all joints) or ``N_JOINTS`` of them and are stored as a tuple.
     Invalid values raise ``TypeError`` / ``ValueError`` naming the field and its allowed range.
     """

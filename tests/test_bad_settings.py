@@ -36,7 +36,7 @@ def test_check_count_and_check_positive() -> None:
 @pytest.mark.parametrize("field, value, message", [
     ("seed", -1, "seed: expected an integer >= 0"),
     ("rate_hz", 0.0, "rate_hz: expected a finite number > 0"),
-    ("cap", 0, "cap: expected an integer >= 1"),
+    ("cap", 1, "cap: expected an integer >= 2"),
     ("restarts", 1.5, "restarts: expected an integer >= 1"),
 ])
 def test_retrain_config_refuses_bad_fields(field, value, message) -> None:
@@ -97,7 +97,7 @@ def test_retrain_config_keeps_python_numbers() -> None:
     ("n_marbles", 61, "n_marbles: expected at most 60"),
     ("controllers", ("pd", "sp-sideways"), "unknown controller 'sp-sideways'"),
     ("seed", -2, "seed: expected an integer >= 0"),
-    ("cap", 0, "cap: expected an integer >= 1"),
+    ("cap", 1, "cap: expected an integer >= 2"),
     ("rate_hz", float("nan"), "rate_hz: expected a finite number > 0"),
     ("fit_seed_offset", -1, "fit_seed_offset: expected an integer >= 0"),
     ("sensor_pipeline", "real", "sensor_pipeline: expected"),
@@ -190,7 +190,7 @@ def test_study_max_seconds_below_the_sarcos_grid_skips_sarcos(tmp_path: Path, mo
 
 
 @pytest.mark.parametrize("command, argv, message", [
-    ("transfer", ["--cap", "0"], "--cap: expected an integer >= 1, got 0"),
+    ("transfer", ["--cap", "1"], "--cap: expected an integer >= 2, got 1"),  # failed after the first episode
     ("transfer", ["--restarts", "0"], "--restarts: expected an integer >= 1, got 0"),
     ("transfer", ["--attempts", "0"], "--attempts: expected an integer >= 1, got 0"),
     ("transfer", ["--seed", "-2"], "--seed: expected an integer >= 0, got -2"),

@@ -219,6 +219,10 @@ def check_options(options: dict | None, allowed: tuple[str, ...]) -> dict:
 class JacoMujocoEnv(MujocoEnv):
     """Common machinery of both environments (not registered).
 
+    Its keyword arguments are the environments' own (``JacoPayloadEnv`` and ``JacoPourEnv`` document them and
+    hold the defaults): ``control_mode``, ``control_freq`` (Hz), ``sensor_noise``, ``n_marbles``, ``render_mode``,
+    ``width`` / ``height`` (pixels), ``camera_name``, ``sensor_pipeline`` and ``link_inertials``.
+
     Public read-only attributes besides Gymnasium's: ``control_mode``, ``control_dt`` (s),
     ``torque_limits``, ``n_marbles``, ``payload_mass`` (kg, this episode), ``time`` (s since reset)
     and the MuJoCo addresses of the arm: ``arm_qpos_adr``, ``arm_dof_adr`` (index ``data.qpos`` /
