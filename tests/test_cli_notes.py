@@ -145,3 +145,16 @@ def test_a_urdf_with_more_joints_names_both_ways_out(logs: Path) -> None:
                cwd=logs)
     assert r.returncode == 2, r.stderr
     assert "name the log's joints with --joints, or lock the others with --lock NAME=Q" in r.stderr
+
+
+def test_fit_takes_a_kernel_that_the_model_file_keeps(logs: Path) -> None:
+    """``--kernel`` reaches every GP of the model and its file; an unknown one is refused before any work."""
+    r = cascgp("fit", "--data", "train.csv", "--urdf", "robot.urdf", "--model", "sp-inward", "--out", "m32.npz",
+               "--max-samples", "60", "--restarts", "1", "--kernel", "matern32", cwd=logs)
+    assert r.returncode == 0, r.stderr
+    model = load_model(logs / "m32.npz")
+    assert model.gp_config.kernel == "matern32" and {P.kernel for P in model.posteriors()} == {"matern32"}
+    r = cascgp("fit", "--data", "train.csv", "--urdf", "robot.urdf", "--model", "sp-inward", "--out", "m12.npz",
+               "--kernel", "matern12", cwd=logs)
+    assert r.returncode == 2 and "--kernel: expected one of ('matern52', 'matern32', 'rbf'), got 'matern12'" \
+        in r.stderr and not (logs / "m12.npz").exists()

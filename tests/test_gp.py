@@ -25,6 +25,8 @@ def ref_kernel(kernel: str, X1: np.ndarray, X2: np.ndarray, ls: np.ndarray, sf2:
     if kernel == "rbf":
         return sf2 * np.exp(-0.5 * r2)
     r = np.sqrt(r2)
+    if kernel == "matern32":
+        return sf2 * (1 + math.sqrt(3) * r) * np.exp(-math.sqrt(3) * r)
     return sf2 * (1 + math.sqrt(5) * r + 5.0 / 3.0 * r2) * np.exp(-math.sqrt(5) * r)
 
 
@@ -45,6 +47,8 @@ def ref_nll_grad(theta: np.ndarray, X: np.ndarray, y: np.ndarray, active: np.nda
     r2 = (diff**2).sum(-1)
     if kernel == "rbf":
         dk_dr2 = -0.5 * sf2 * np.exp(-0.5 * r2)
+    elif kernel == "matern32":  # d/d(r^2) of (1 + sqrt(3) r) e^{-sqrt(3) r}, by hand: -3/2 e^{-sqrt(3) r}
+        dk_dr2 = -1.5 * sf2 * np.exp(-math.sqrt(3) * np.sqrt(r2))
     else:
         r = np.sqrt(r2)
         dk_dr2 = -5.0 / 6.0 * sf2 * (1 + math.sqrt(5) * r) * np.exp(-math.sqrt(5) * r)
@@ -64,7 +68,7 @@ def make_data(rng, n, dims, noise=0.05):
 
 
 # ------------------------------------------------------------------------------------------------ NLL and grad
-@pytest.mark.parametrize("kernel", ["matern52", "rbf"])
+@pytest.mark.parametrize("kernel", ["matern52", "matern32", "rbf"])
 def test_nll_and_grad_equal_numpy_reference_padded_batch(kernel):
     rng = np.random.default_rng(1)
     n, dims = 40, [3, 5, 2, 5]
@@ -116,8 +120,37 @@ def test_kernel_of_r2_numpy_matches_closed_form():
     np.testing.assert_allclose(kernel_of_r2("matern52", r2),
                                (1 + np.sqrt(5) * r + 5 / 3 * r2) * np.exp(-np.sqrt(5) * r), rtol=1e-14)
     np.testing.assert_allclose(kernel_of_r2("rbf", r2), np.exp(-r2 / 2), rtol=1e-14)
+    np.testing.assert_allclose(kernel_of_r2("matern32", r2), (1 + np.sqrt(3) * r) * np.exp(-np.sqrt(3) * r),
+                               rtol=1e-14)
     with pytest.raises(ValueError, match="kernel"):
         kernel_of_r2("periodic", r2)
+
+
+@pytest.mark.parametrize("kernel", ["matern52", "matern32", "rbf"])
+def test_every_form_of_a_kernel_equals_its_closed_form_and_derivative(kernel):
+    """The NumPy, torch, in-place and scaled forms (:mod:`cascgp.gp.kernels`) give one function: the closed form
+    of ``ref_kernel`` and, for the derivatives, central differences of it in r^2."""
+    from cascgp.gp.kernels import get_kernel
+
+    k = get_kernel(kernel)
+    r2 = np.array([0.0, 1e-12, 0.01, 0.3, 2.0, 9.0, 50.0])
+    ref = ref_kernel(kernel, np.sqrt(r2)[:, None], np.zeros((1, 1)), np.ones(1), 1.0)[:, 0]
+    h = 1e-6
+    ref_d = (ref_kernel(kernel, np.sqrt(r2 + h)[:, None], np.zeros((1, 1)), np.ones(1), 1.0)[:, 0]
+             - ref_kernel(kernel, np.sqrt(np.maximum(r2 - h, 0.0))[:, None], np.zeros((1, 1)), np.ones(1), 1.0)[:, 0]
+             ) / ((r2 + h) - np.maximum(r2 - h, 0.0))
+    np.testing.assert_allclose(k.value(r2), ref, rtol=1e-13, atol=1e-300)
+    np.testing.assert_allclose(k.value_torch(torch.tensor(r2)).numpy(), ref, rtol=1e-13)
+    np.testing.assert_allclose(k.grad_r2(r2)[2:], ref_d[2:], rtol=1e-5)  # away from 0 (one-sided differences)
+    a = k.r2_scale * r2
+    np.testing.assert_allclose(k.value_scaled_np_(a.copy()), ref, rtol=1e-13)
+    kappa, dkappa = k.value_and_grad_scaled_np(a)
+    np.testing.assert_allclose(kappa, ref, rtol=1e-13)
+    np.testing.assert_allclose(dkappa * k.r2_scale, k.grad_r2(r2), rtol=1e-13)  # d/d(r^2) = s d/da
+    A, B, C = torch.tensor(a), torch.empty(len(a), dtype=torch.float64), torch.empty(len(a), dtype=torch.float64)
+    c = k.value_and_grad_(A, B, C)
+    np.testing.assert_allclose(A.numpy(), ref, rtol=1e-13)
+    np.testing.assert_allclose(c * B.numpy(), k.grad_r2(r2), rtol=1e-13)
 
 
 def test_cholesky_jitter_only_for_failing_members():
@@ -188,7 +221,7 @@ def closed_form(X, y, Xq, hp, kernel="matern52"):
     return mu, var
 
 
-@pytest.mark.parametrize("kernel", ["matern52", "rbf"])
+@pytest.mark.parametrize("kernel", ["matern52", "matern32", "rbf"])
 def test_predict_and_posterior_equal_closed_form(kernel):
     rng = np.random.default_rng(6)
     X, y = make_data(rng, 50, [3, 4])

@@ -25,7 +25,7 @@ def _data(rng: np.random.Generator, n: int, d: int, B: int, noise: float = 0.05)
 
 
 # ------------------------------------------------------------------------------------------------ chunking
-@pytest.mark.parametrize("kernel", ["matern52", "rbf"])
+@pytest.mark.parametrize("kernel", ["matern52", "matern32", "rbf"])
 def test_nll_and_grad_independent_of_chunk(kernel):
     rng = np.random.default_rng(3)
     k, n, D = 7, 35, 4

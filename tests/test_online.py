@@ -56,12 +56,13 @@ def _closed_form(model, extra, q, qd, qdd):
     return mean, var
 
 
-@pytest.mark.parametrize("name", ["np-inward", "sp-outward", "np-standard"])
+@pytest.mark.parametrize("name", ["np-inward", "sp-outward", "np-standard", "matern32:sp-outward"])
 def test_online_samples_equal_the_closed_form_gp_and_the_window_drops_the_oldest(name: str) -> None:
+    kernel, _, name = name.rpartition(":")
     arm = make_arm(3, friction=0.3)
     train = sinusoid_data(arm, 4.0, 10.0, seed=1, noise=0.02)
     model = make_model(name, 3, make_arm(3) if name.startswith("sp") else None,
-                       gp_config=GPFitConfig(n_restarts=1, max_iter=40)).fit(train)
+                       gp_config=GPFitConfig(kernel=kernel or "matern52", n_restarts=1, max_iter=40)).fit(train)
     new = sinusoid_data(make_arm(3, friction=0.8), 1.2, 10.0, seed=7, noise=0.02)  # another robot: new data
     samples = [(new.q[i], new.qd[i], new.qdd[i], new.tau[i]) for i in range(new.n_samples)]
     model.start_online(window=5)
@@ -240,14 +241,17 @@ def _use_path(model, path: str) -> None:
         pytest.skip("the compiled online sample needs numba (the fast extra) and CASCGP_JIT not 0")
 
 
-@pytest.mark.parametrize("name", ["np-inward", "sp-outward", "np-standard", "sp-inward"])
+@pytest.mark.parametrize("name", ["np-inward", "sp-outward", "np-standard", "sp-inward", "matern32:sp-outward",
+                                  "rbf:np-inward"])
 def test_compiled_and_numpy_samples_agree_as_the_window_turns_over(name: str) -> None:
     """The compiled sample (:mod:`cascgp.models.online_kernel`) and the NumPy path keep the same window (its
     inverse, weights, rows, the fast path's rows) to round-off through fills, drops and the periodic
     recomputation, and give the same predictions."""
+    kernel, _, name = name.rpartition(":")
     arm = make_arm(3, friction=0.3)
     model = make_model(name, 3, make_arm(3) if name.startswith("sp") else None,
-                       gp_config=GPFitConfig(n_restarts=1, max_iter=30)).fit(sinusoid_data(arm, 3.0, 10.0, seed=1))
+                       gp_config=GPFitConfig(kernel=kernel or "matern52", n_restarts=1, max_iter=30)).fit(
+        sinusoid_data(arm, 3.0, 10.0, seed=1))
     new = sinusoid_data(make_arm(3, friction=0.8), 3.0, 10.0, seed=13, noise=0.02)
     model.start_online(window=4)
     _use_path(model, "compiled")

@@ -20,7 +20,7 @@ from tests.conftest import make_arm, sinusoid_data
 
 needs_jit = pytest.mark.skipif(not jit_enabled(), reason="numba is not installed (or CASCGP_JIT=0)")
 CFG = GPFitConfig(n_restarts=1, max_iter=30)
-MODELS = [*MODEL_NAMES, "rbf:sp-inward"]
+MODELS = [*MODEL_NAMES, "rbf:sp-inward", "matern32:sp-inward", "matern32:np-outward"]
 
 
 @pytest.fixture(scope="module")
@@ -30,7 +30,7 @@ def models() -> dict:
     out = {}
     for key in MODELS:
         name = key.split(":")[-1]
-        cfg = dataclasses.replace(CFG, kernel="rbf") if key.startswith("rbf:") else CFG
+        cfg = dataclasses.replace(CFG, kernel=key.split(":")[0]) if ":" in key else CFG
         out[key] = make_model(name, 3, make_arm(3) if name.startswith("sp") else None, gp_config=cfg).fit(train)
     return out
 

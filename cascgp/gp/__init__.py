@@ -11,7 +11,7 @@ Inputs and targets are normalised per GP: :math:`\tilde x = (x - \mu_x) / \sigma
     \varepsilon \sim \mathcal N(0, s_n^2), \quad
     r^2 = \sum_k (\tilde x_k - \tilde x'_k)^2 / \ell_k^2
 
-with a Matern 5/2 (default) or squared-exponential kernel :math:`k` (:mod:`cascgp.gp.kernels`). The
+with a Matern 5/2 (default), Matern 3/2 or squared-exponential kernel :math:`k` (:mod:`cascgp.gp.kernels`). The
 hyperparameters are optimised in log space,
 
 .. math::

@@ -32,7 +32,7 @@ class GPFitConfig:
     r"""Hyperparameter optimisation settings.
 
     Attributes:
-        kernel: ``"matern52"`` (paper) or ``"rbf"``.
+        kernel: ``"matern52"`` (paper), ``"matern32"`` or ``"rbf"`` (:mod:`cascgp.gp.kernels`).
         n_restarts: starts per GP (>= 1); the best is kept.
         max_iter: L-BFGS iterations per start.
         grad_tol: stop when max |dNLL/dtheta| <= grad_tol.

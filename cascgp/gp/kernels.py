@@ -14,13 +14,20 @@ lengthscale :math:`\ell_k` per input) with unit signal variance; the GP code mul
       k = \left(1 + \rho + \tfrac13 \rho^2\right) e^{-\rho},
       \qquad \frac{\partial k}{\partial (r^2)} = -\tfrac56 \left(1 + \rho\right) e^{-\rho}.
 
+* Matern 3/2 (``"matern32"``), with :math:`\rho = \sqrt{3 r^2}`: rougher functions (once differentiable):
+
+  .. math::
+
+      k = \left(1 + \rho\right) e^{-\rho},
+      \qquad \frac{\partial k}{\partial (r^2)} = -\tfrac32 e^{-\rho}.
+
 * Squared exponential (``"rbf"``):
 
   .. math::
 
       k = e^{-r^2/2}, \qquad \frac{\partial k}{\partial (r^2)} = -\tfrac12 e^{-r^2/2}.
 
-Both derivatives are finite at :math:`r = 0`, so the lengthscale gradient needs no special case on the diagonal.
+All three derivatives are finite at :math:`r = 0`, so the lengthscale gradient needs no special case on the diagonal.
 
 Each kernel object offers the formula in the forms its callers need, all written here once:
 
@@ -39,7 +46,7 @@ method                          used by
 ==============================  ================================================================================
 
 ``r2_scale`` :math:`s` is folded into the inputs (or distances) by the callers of the two in-place forms,
-which saves one pass over the data: 5 for Matern 5/2 (:math:`s r^2 = \rho^2`), 1/2 for the RBF
+which saves one pass over the data: 5 for Matern 5/2 and 3 for Matern 3/2 (:math:`s r^2 = \rho^2`), 1/2 for the RBF
 (:math:`s r^2` is the exponent). Scaling by a power of two is exact in floating point.
 """
 
@@ -51,7 +58,8 @@ from abc import ABC, abstractmethod
 import numpy as np
 import torch
 
-__all__ = ["Kernel", "Matern52", "RBF", "KERNELS", "get_kernel", "check_kernel", "kernel_of_r2", "scaled_sqdist"]
+__all__ = ["Kernel", "Matern52", "Matern32", "RBF", "KERNELS", "get_kernel", "check_kernel", "kernel_of_r2",
+           "scaled_sqdist"]
 
 
 class Kernel(ABC):
@@ -133,6 +141,46 @@ class Matern52(Kernel):
         return a
 
 
+class Matern32(Kernel):
+    """Matern 3/2."""
+
+    name = "matern32"
+    r2_scale = 3.0
+    _SQRT3 = math.sqrt(3.0)
+
+    def value(self, r2: np.ndarray) -> np.ndarray:
+        sr = self._SQRT3 * np.sqrt(np.maximum(np.asarray(r2, dtype=np.float64), 0.0))
+        return (1.0 + sr) * np.exp(-sr)
+
+    def grad_r2(self, r2: np.ndarray) -> np.ndarray:
+        sr = self._SQRT3 * np.sqrt(np.maximum(np.asarray(r2, dtype=np.float64), 0.0))
+        return -1.5 * np.exp(-sr)
+
+    def value_torch(self, r2: torch.Tensor) -> torch.Tensor:
+        sr = torch.sqrt(r2).mul_(self._SQRT3)
+        e = torch.exp(-sr)
+        return sr.add_(1.0).mul_(e)
+
+    def value_and_grad_(self, A: torch.Tensor, B: torch.Tensor, C: torch.Tensor) -> float:
+        torch.sqrt(A, out=C)  # rho
+        torch.neg(C, out=B).exp_()  # u = e^{-rho}
+        C.add_(1.0)
+        torch.mul(C, B, out=A)  # k = (1 + rho) e^{-rho}
+        return -1.5
+
+    def value_and_grad_scaled_np(self, a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        s = np.sqrt(a)  # rho
+        e = np.exp(-s)
+        return (1.0 + s) * e, -0.5 * e
+
+    def value_scaled_np_(self, a: np.ndarray) -> np.ndarray:
+        np.sqrt(a, out=a)  # rho
+        e = np.exp(-a)
+        a += 1.0
+        a *= e
+        return a
+
+
 class RBF(Kernel):
     """Squared exponential."""
 
@@ -163,7 +211,7 @@ class RBF(Kernel):
         return e, -e
 
 
-_REGISTRY: dict[str, Kernel] = {k.name: k for k in (Matern52(), RBF())}
+_REGISTRY: dict[str, Kernel] = {k.name: k for k in (Matern52(), Matern32(), RBF())}
 #: Names of the kernels this module implements.
 KERNELS: tuple[str, ...] = tuple(_REGISTRY)
 

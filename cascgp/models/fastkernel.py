@@ -37,7 +37,7 @@ from cascgp.data import F64 as _F64
 
 __all__ = ["jit_mean", "jit_enabled", "jit_var", "jit_var_factors", "warn_dropped"]
 
-_KERNEL_IDS = {"matern52": 0, "rbf": 1}
+_KERNEL_IDS = {"matern52": 0, "rbf": 1, "matern32": 2}
 # exp(x), x = -s <= 0, as 2^k e^r: k = round(x / ln 2), r = x - k ln 2 (Cody-Waite: ln 2 in two parts, the first
 # with trailing zero bits so that k ln2_hi is exact), |r| <= ln(2) / 2, e^r by its Taylor polynomial of degree 13
 # (remainder below 1e-17 relative), 2^k from its exponent bits. Below e^-708 (k near the smallest normal
@@ -108,8 +108,8 @@ def _source(ints: np.ndarray, flts: np.ndarray, WT: np.ndarray, W2: np.ndarray, 
         else:
             for k in range(n):
                 a[k] = max(W2[j, k] - 2.0 * dot[k] + zz, 0.0)
-        if kid == 0:  # Matern 5/2 in a = 5 r^2: kappa = (1 + rho + a / 3) e^{-rho}, rho = sqrt(a)
-            for k in range(n):
+        if kid != 1:  # Matern 5/2 in a = 5 r^2: kappa = (1 + rho + a / 3) e^{-rho}, rho = sqrt(a); 3/2 in a = 3 r^2:
+            for k in range(n):  # kappa = (1 + rho) e^{-rho}
                 s[k] = np.sqrt(a[k])
         else:  # RBF in a = r^2 / 2: kappa = e^{-a}
             for k in range(n):
@@ -127,6 +127,9 @@ def _source(ints: np.ndarray, flts: np.ndarray, WT: np.ndarray, W2: np.ndarray, 
         if kid == 0:
             for k in range(n):
                 kv[k] = (1.0 + s[k] + a[k] * _THIRD) * e[k]
+        elif kid == 2:
+            for k in range(n):
+                kv[k] = (1.0 + s[k]) * e[k]
         else:
             for k in range(n):
                 kv[k] = e[k]
@@ -144,10 +147,13 @@ def _source(ints: np.ndarray, flts: np.ndarray, WT: np.ndarray, W2: np.ndarray, 
         if want_var:
             for k in range(n):
                 K[j, k] = kv[k]
-            if tj >= 0:  # d kappa / d a: -(1 + rho) e^{-rho} / 6 (Matern), -e^{-a} (RBF)
+            if tj >= 0:  # d kappa / d a: -(1 + rho) e^{-rho} / 6 (Matern 5/2), -e^{-rho} / 2 (3/2), -e^{-a} (RBF)
                 if kid == 0:
                     for k in range(n):
                         gacc -= ((1.0 + s[k]) * e[k] * _SIXTH) * (tq - Zt[j, k]) * alpha[j, k]
+                elif kid == 2:
+                    for k in range(n):
+                        gacc -= (0.5 * e[k]) * (tq - Zt[j, k]) * alpha[j, k]
                 else:
                     for k in range(n):
                         gacc -= e[k] * (tq - Zt[j, k]) * alpha[j, k]

@@ -30,6 +30,7 @@ __all__ = ["CONSTS", "blas", "propose", "commit"]
 numba: Any = importlib.import_module("numba")
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")  # x / 0 is inf or NaN, as in NumPy
 _SQRT5 = math.sqrt(5.0)
+_SQRT3 = math.sqrt(3.0)
 #: Columns of the per-joint constants :func:`propose` and :func:`commit` take: signal variance, noise (plus
 #: jitter), target mean, target scale, the fast path's weight scale (target scale times signal variance).
 CONSTS = ("signal_var", "noise", "y_mean", "y_std", "scale")
@@ -37,11 +38,14 @@ CONSTS = ("signal_var", "noise", "y_mean", "y_std", "scale")
 
 @_jit
 def _kval(kid: int, r2: float) -> float:  # pragma: no cover - runs compiled
-    """:meth:`cascgp.gp.kernels.Kernel.value` of one squared distance (0: Matern 5/2, 1: RBF)."""
+    """:meth:`cascgp.gp.kernels.Kernel.value` of one squared distance (0: Matern 5/2, 1: RBF, 2: Matern 3/2)."""
     r2 = max(r2, 0.0)
     if kid == 0:
         sr = _SQRT5 * math.sqrt(r2)
         return (1.0 + sr + (5.0 / 3.0) * r2) * math.exp(-sr)
+    if kid == 2:
+        sr = _SQRT3 * math.sqrt(r2)
+        return (1.0 + sr) * math.exp(-sr)
     return math.exp(-0.5 * r2)
 
 

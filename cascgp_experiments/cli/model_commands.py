@@ -138,6 +138,8 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
                         "GPs cost O(n^3)); -df models take their position history from the whole log")
     p.add_argument("--rate-hz", type=float, default=None,
                    help="first subsample each segment to about this rate (Hz), after derivatives are computed")
+    p.add_argument("--kernel", default=None,
+                   help="covariance function of every GP: matern52 (the paper's; default), matern32 or rbf")
     p.add_argument("--threads", type=int, default=None,
                    help="torch/BLAS threads during the fit (default: the library's, one thread)")
     p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's random starts (default 0)")
@@ -148,7 +150,8 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
     try:
         _fit_config(a)
     except ValueError as exc:  # --threads beyond GPFitConfig's bound, say
-        settings_error(p, exc, {"threads": "--threads", "n_restarts": "--restarts", "seed": "--seed"})
+        settings_error(p, exc, {"threads": "--threads", "n_restarts": "--restarts", "seed": "--seed",
+                                "kernel": "--kernel"})
     if a.rate_hz is not None and not (np.isfinite(a.rate_hz) and a.rate_hz > 0):
         p.error(f"--rate-hz: expected a positive rate, got {a.rate_hz}")
     if a.model.startswith("sp-") and a.urdf is None:
@@ -265,14 +268,14 @@ def _training_rows(prog: str, a: argparse.Namespace, model: Any, data: Any) -> t
 
 
 def _fit_config(a: argparse.Namespace) -> Any:
-    """The fit's ``GPFitConfig`` from ``--seed``, ``--restarts`` and ``--threads`` (``ValueError`` naming a field)."""
+    """The fit's ``GPFitConfig`` from ``--seed``, ``--restarts``, ``--kernel`` and ``--threads`` (``ValueError``
+    naming a field)."""
     from cascgp.gp import GPFitConfig
 
     kw: dict[str, Any] = {"seed": a.seed}
-    if a.restarts is not None:
-        kw["n_restarts"] = a.restarts
-    if a.threads is not None:
-        kw["threads"] = a.threads
+    for option, field in (("restarts", "n_restarts"), ("kernel", "kernel"), ("threads", "threads")):
+        if getattr(a, option) is not None:
+            kw[field] = getattr(a, option)
     return GPFitConfig(**kw)
 
 
