@@ -108,8 +108,10 @@ def _source(ints: np.ndarray, flts: np.ndarray, WT: np.ndarray, W2: np.ndarray, 
         else:
             for k in range(n):
                 a[k] = max(W2[j, k] - 2.0 * dot[k] + zz, 0.0)
-        if kid != 1:  # Matern 5/2 in a = 5 r^2: kappa = (1 + rho + a / 3) e^{-rho}, rho = sqrt(a); 3/2 in a = 3 r^2:
-            for k in range(n):  # kappa = (1 + rho) e^{-rho}
+        # Matern 5/2 in a = 5 r^2: kappa = (1 + rho + a / 3) e^{-rho}, rho = sqrt(a); Matern 3/2 in a = 3 r^2:
+        # kappa = (1 + rho) e^{-rho}
+        if kid != 1:
+            for k in range(n):
                 s[k] = np.sqrt(a[k])
         else:  # RBF in a = r^2 / 2: kappa = e^{-a}
             for k in range(n):

@@ -121,8 +121,9 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
     ## Rewards
     ``reward = reward_tracking + reward_pour`` (:meth:`_get_rew`) with
     ``reward_tracking = -tracking_cost_weight * control_dt * ||q_d(t) - q(t)||`` (true q, rad;
-    default weight ``W_TRACK`` = 10) and ``reward_pour = pour_reward_weight * (newly landed marbles
-    in the jar) / n_marbles`` (default weight ``W_POUR`` = 10, so a full pour earns 10).
+    default weight ``W_TRACK`` = 10) and ``reward_pour = pour_reward_weight * (change of the marbles
+    in the jar) / n_marbles`` (default weight ``W_POUR`` = 10): positive as marbles land, negative if one
+    leaves the jar, so a full pour earns 10.
 
     ## Starting State
     The arm at rest at ``q_d(0)`` (the common home pose), marbles stacked in the bottle with a
