@@ -282,7 +282,7 @@ class RigidBodyModel:
 
         Returns:
             tau: (N,) or (T, N) in N m, float64. ``ValueError`` naming the argument for non-finite or non-real
-            input, or naming ``qd, qdd`` when finite input overflows the torque.
+            input, or naming ``q, qd, qdd`` when finite input overflows the torque.
         """
         model, data = self.pin_model, self._data
         if (self._E is None and type(q) is np.ndarray and type(qd) is np.ndarray and type(qdd) is np.ndarray
@@ -294,7 +294,7 @@ class RigidBodyModel:
             tau = pin.rnea(model, data, q, qd, qdd)
             if all_finite(tau):
                 return tau.copy()
-        q, qd, qdd = self._check_states(q, qd, qdd)
+        states = q, qd, qdd = self._check_states(q, qd, qdd)
         if self._E is not None:
             E = self._E
             q, qd, qdd = q @ E.T + self._b, qd @ E.T, qdd @ E.T
@@ -305,8 +305,8 @@ class RigidBodyModel:
             for t in range(q.shape[0]):
                 out[t] = pin.rnea(model, data, q[t], qd[t], qdd[t])
         if not np.isfinite(out).all():  # finite inputs (checked) whose products overflow: |qd| of 1e300, say
-            raise ValueError(f"qd, qdd: the torque overflowed (|qd| up to {np.abs(qd).max():.3g} rad/s, |qdd| up to "
-                             f"{np.abs(qdd).max():.3g} rad/s^2); expected velocities and accelerations a robot reaches")
+            raise ValueError("q, qd, qdd: the torque overflowed (largest |q|, |qd|, |qdd|: "
+                             f"{', '.join(f'{np.abs(x).max():.3g}' for x in states)}); expected states a robot reaches")
         return out if self._E is None else (self._E.T @ out if out.ndim == 1 else out @ self._E)
 
     def inverse_dynamics_derivatives(self, q: Any, qd: Any, qdd: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -365,9 +365,11 @@ def test_input_errors_name_the_field():
     for field, bad in (("snr_max", True), ("catch_up_windows", True)):
         with pytest.raises(ValueError, match=field):
             GPFitConfig(**{field: bad})
-    assert GPFitConfig(threads=1024).threads == 1024
+    assert GPFitConfig(threads=1024).for_fit().threads == 1024
     with pytest.raises(ValueError, match="threads: expected at most 1024, got 1025"):
-        GPFitConfig(threads=1025)
+        GPFitConfig(threads=1025).for_fit()
+    with pytest.raises(ValueError, match=r"config\.threads: expected at most 1024, got 1025"):
+        GPBank(GPFitConfig(threads=1025)).fit([X], [y])  # checked when a fit starts: a saved config still loads
     changed = GPFitConfig(n_restarts=1)
     changed.n_restarts = 0  # set after construction: the fit checks the settings again
     with pytest.raises(ValueError, match=r"config\.n_restarts: expected an integer >= 1, got 0"):

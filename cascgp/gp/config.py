@@ -22,8 +22,9 @@ _LEGACY_DEFAULTS: dict[str, Any] = {"snr_max": None, "stall_window": None}
 #: move, and far larger spreads overflow. Checked when a fit starts, not when a config is made, so that model files
 #: saved with a larger value still load (the spread plays no part in prediction).
 INIT_SPREAD_MAX = 20.0
-#: The most ``threads`` a config accepts: a bound on a typo (torch's ``set_num_threads`` takes a C ``int``, and
-#: OpenMP starts a worker per thread), far above the cores of one machine.
+#: The most ``threads`` a fit accepts: a bound on a typo (torch's ``set_num_threads`` takes a C ``int``, and
+#: OpenMP starts a worker per thread), far above the cores of one machine. Checked when a fit starts, as
+#: ``INIT_SPREAD_MAX``, so that a saved config loads whatever it holds.
 MAX_THREADS = 1024
 
 
@@ -128,8 +129,6 @@ class GPFitConfig:
             setattr(self, name, check_positive(getattr(self, name), name, zero=True))  # a Python float (JSON)
         for name in ("drop_after", "stall_window", "race_at", "threads"):
             check_count(getattr(self, name), name, optional=True)
-        if self.threads is not None and self.threads > MAX_THREADS:
-            raise ValueError(f"threads: expected at most {MAX_THREADS}, got {self.threads!r}")
         check_count(self.seed, "seed", minimum=0)  # NumPy's generators take seeds >= 0
         if self.snr_max is not None and (isinstance(self.snr_max, bool) or not isinstance(self.snr_max, (int, float))
                                          or not math.isfinite(self.snr_max) or self.snr_max <= 0):
@@ -142,11 +141,13 @@ class GPFitConfig:
 
     def for_fit(self) -> GPFitConfig:
         """A copy checked again (a field may have been set after construction), and for a fit: ``init_spread`` at
-        most ``INIT_SPREAD_MAX``; ``ValueError`` naming the field."""
+        most ``INIT_SPREAD_MAX`` and ``threads`` at most :data:`MAX_THREADS`; ``ValueError`` naming the field."""
         config = replace(self)
         if config.init_spread > INIT_SPREAD_MAX:
             raise ValueError(f"init_spread: expected at most {INIT_SPREAD_MAX} (log units) for a fit, got "
                              f"{config.init_spread!r}")
+        if config.threads is not None and config.threads > MAX_THREADS:
+            raise ValueError(f"threads: expected at most {MAX_THREADS}, got {config.threads!r}")
         return config
 
     def floors(self, y_std: np.ndarray) -> np.ndarray | None:

@@ -47,7 +47,7 @@ method                          used by
 
 ``r2_scale`` :math:`s` is folded into the inputs (or distances) by the callers of the two in-place forms,
 which saves one pass over the data: 5 for Matern 5/2 and 3 for Matern 3/2 (:math:`s r^2 = \rho^2`), 1/2 for the RBF
-(:math:`s r^2` is the exponent). Scaling by a power of two is exact in floating point.
+(:math:`s r^2` is the exponent; scaling by this power of two is exact in floating point).
 """
 
 from __future__ import annotations

@@ -300,7 +300,8 @@ class CascadedGPModel:
             with np.errstate(over="ignore"):
                 var = var + (J * J) @ input_var.reshape(-1)  # sum_s J_js^2 sigma_s^2 (see above)
             if not np.isfinite(var).all():
-                raise ValueError(f"input_var: the variance overflowed (input_var up to {input_var.max():.3g})")
+                raise ValueError(f"input_var: the variance overflowed (input_var up to {input_var.max():.3g}, the "
+                                 f"mean's derivatives up to {np.abs(J).max():.3g})")
         return (mean[0], var[0]) if single else (mean, var)
 
     def mean_jacobian(self, q: Any, qd: Any, qdd: Any) -> np.ndarray:

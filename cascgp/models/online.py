@@ -186,13 +186,13 @@ def check_supported(model: Any, window: int | None = None, name: str = "window")
     """``ValueError`` naming the model unless online samples can enter it: derivative-based features, and
     neighbour torques in training that were measured (online samples carry measured ones). With ``window``
     (samples, checked by the caller), also ``ValueError`` naming ``name`` unless the fitted model's window arrays
-    fit in this machine's physical memory."""
+    fit in this machine's physical memory (a model without ``posteriors()`` is checked when its window opens)."""
     if model.feature_kind != "db":
         raise ValueError(f"online: model {model.name!r}: online updates support derivative-based models only")
     if getattr(model, "train_on_predicted", False) and model.structure != "standard":
         raise ValueError(f"online: model {model.name!r} was trained on predicted neighbour torques; online "
                          "samples carry measured ones, so they would not match its training inputs")
-    if window is not None:
+    if window is not None and callable(getattr(model, "posteriors", None)):
         _check_window_memory(window, model.posteriors(), name)
 
 

@@ -148,8 +148,8 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
     require_at_least(p, a, 2, "max_samples")  # a GP needs two rows
     require_at_least(p, a, 0, "seed")
     try:
-        _fit_config(a)
-    except ValueError as exc:  # --threads beyond GPFitConfig's bound, say
+        _fit_config(a).for_fit()
+    except ValueError as exc:  # --threads beyond a fit's bound, say
         settings_error(p, exc, {"threads": "--threads", "n_restarts": "--restarts", "seed": "--seed",
                                 "kernel": "--kernel"})
     if a.rate_hz is not None and not (np.isfinite(a.rate_hz) and a.rate_hz > 0):
