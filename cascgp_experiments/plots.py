@@ -15,7 +15,7 @@ fig_sarcos.png          paper Fig. 5: SARCOS NP models (if the JSON has a SARCOS
 fig_iterations.png      paper run-time figure: L-BFGS iterations per joint (mean +- std)
 fig_correlation.png     paper correlation figure: |Spearman| of states and torques
 table1.md               paper Table I layout, measured, next to the paper's numbers
-curves_jaco.csv         every curve point (model, T, joint, mean, std)
+curves_jaco.csv         every curve point: model, T, joint; mean, std, median, quartiles
 curves_sarcos.csv       the same for SARCOS
 iterations.csv          iteration counts per model and joint
 claims.md               which of the paper's claims hold here (:mod:`cascgp_experiments.claims`)
@@ -213,13 +213,18 @@ def _write_rows(path: Path, rows: list[list[Any]]) -> Path:
 
 
 def write_csv(block: dict[str, Any], path: Path, dataset: str) -> Path:
-    """Every curve point of a curves block: ``dataset, model, seconds, joint, nrmse_mean, nrmse_std, n_subsets``."""
-    rows: list[list[Any]] = [["dataset", "model", "seconds", "joint", "nrmse_mean", "nrmse_std", "n_subsets"]]
+    """Every curve point of a curves block: ``dataset, model, seconds, joint, nrmse_mean, nrmse_std, n_subsets,
+    nrmse_median, nrmse_q25, nrmse_q75`` over the subsets (the figures and tables show the median and the
+    interquartile range; the last three are empty for a results file that predates them)."""
+    rows: list[list[Any]] = [["dataset", "model", "seconds", "joint", "nrmse_mean", "nrmse_std", "n_subsets",
+                              "nrmse_median", "nrmse_q25", "nrmse_q75"]]
     for m, v in block["models"].items():
         mu, sd = np.asarray(v["nrmse_mean"], float), np.asarray(v["nrmse_std"], float)
+        quart = [np.asarray(v[k], float) if k in v else None for k in ("nrmse_median", "nrmse_q25", "nrmse_q75")]
         for g, T in enumerate(block["grid_s"]):
             for j in range(mu.shape[1]):
-                rows.append([dataset, m, T, j + 1, f"{mu[g, j]:.6f}", f"{sd[g, j]:.6f}", block["n_subsets"]])
+                rows.append([dataset, m, T, j + 1, f"{mu[g, j]:.6f}", f"{sd[g, j]:.6f}", block["n_subsets"],
+                             *("" if q is None else f"{q[g, j]:.6f}" for q in quart)])
     return _write_rows(path, rows)
 
 

@@ -45,6 +45,7 @@ line is ``python -m scripts.data_efficiency``.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 from dataclasses import asdict, dataclass, replace
@@ -168,6 +169,14 @@ def reuse_note(meta: dict[str, Any]) -> str | None:
             f"own time stays in results.json)")
 
 
+def collection_config(settings: Settings) -> Any:
+    """The :class:`cascgp_experiments.collect.CollectConfig` of the data a study of ``settings`` collects (its
+    preset's, with the study's seed and sensing pipeline), in ``<out>/data``."""
+    from cascgp_experiments import collect as col
+
+    return replace(col.PRESETS[settings.collection], seed=settings.seed, sensor_pipeline=settings.sensor_pipeline)
+
+
 def run_study(out: str | Path, settings: Settings, *, models: list[str] | None = None, workers: int | None = None,
               ray_address: str | None = None, sarcos: str | Path | None = None, do_iterations: bool = True,
               do_plots: bool = True, command: str = "") -> dict[str, Any]:
@@ -198,7 +207,7 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
         "machine": machine_info()}}
 
     # 1. data
-    ccfg = replace(col.PRESETS[settings.collection], seed=settings.seed, sensor_pipeline=settings.sensor_pipeline)
+    ccfg = collection_config(settings)
     t0 = time.perf_counter()
     train, test, cinfo = col.collect(out / "data", ccfg, workers=workers, ray_address=ray_address)
     timings["collect_s"] = time.perf_counter() - t0
@@ -295,7 +304,9 @@ def prepare_files(sarcos_path: str | Path, out: str | Path) -> tuple[Path, Path,
     tr, te = out / "sarcos_train.npz", out / "sarcos_test.npz"
     train.save(tr)
     test.save(te)
-    info = {"file": str(sarcos_path), "n_train_rows_file": train.n_samples,
+    with open(sarcos_path, "rb") as f:  # the file's own digest, to check against the published one
+        digest = hashlib.file_digest(f, "sha256").hexdigest()
+    info = {"file": str(sarcos_path), "file_sha256": digest, "n_train_rows_file": train.n_samples,
             "n_test_rows_file": int(test.meta["n_rows_in_file"]),
             "n_test_duplicates_removed": int(test.meta["n_duplicates_removed"]),
             "n_test_rows": test.n_samples,
@@ -317,7 +328,7 @@ def run_sarcos(sarcos_path: str | Path, out: str | Path, *, grid=SARCOS_FULL_GRI
     block = run_curves(spec, list(NP_DB), workers=workers, ray_address=ray_address,
                        cache_dir=out / "cache" / "sarcos", desc="SARCOS fits")
     block.update(info)
-    block["dof"] = 7
+    block["seed"], block["dof"] = seed, 7
     block["labels"] = {m: label(m) for m in block["models"]}
     block["pooled"] = pooled_block(block, SARCOS_FAMILIES)
     block["wall_s_total"] = time.perf_counter() - t0

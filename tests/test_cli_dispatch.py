@@ -29,13 +29,27 @@ def test_ctrl_c_is_one_line_and_names_the_resume(command: str, resumes: bool, mo
 
 def test_plots_redraws_a_sarcos_json(tmp_path: Path, capsys) -> None:
     """A ``cascgp sarcos`` run's ``sarcos.json`` (here the SARCOS block of the documented study run) gives the
-    study's SARCOS figure, CSV and claims."""
+    study's SARCOS figure, CSV and claims, and the files that ``cascgp sarcos`` writes are named as it names them
+    (``sarcos_claims.md``, and ``sarcos_table.md``, which was missing)."""
+    from cascgp_experiments.cli.sarcos import summary_table
+
     block = json.loads((REPO / "docs" / "results.json").read_text())["sarcos"]
     (tmp_path / "sarcos.json").write_text(json.dumps(block))
     cli.main(["plots", "--json", str(tmp_path / "sarcos.json"), "--out", str(tmp_path / "out")])
     out = tmp_path / "out"
-    assert {p.name for p in out.iterdir()} == {"fig_sarcos.png", "curves_sarcos.csv", "claims.md"}
-    claims = (out / "claims.md").read_text()
+    assert {p.name for p in out.iterdir()} == {"fig_sarcos.png", "curves_sarcos.csv", "sarcos_claims.md",
+                                               "sarcos_table.md"}
+    assert (out / "sarcos_table.md").read_text() == summary_table(block) + "\n"
+    import csv
+
+    with (out / "curves_sarcos.csv").open() as f:  # the figures' median and quartiles too, not only mean and std
+        rows = list(csv.DictReader(f))
+    assert len(rows) == len(block["models"]) * len(block["grid_s"]) * 7
+    for row in rows[::37]:
+        v, g, j = block["models"][row["model"]], block["grid_s"].index(float(row["seconds"])), int(row["joint"]) - 1
+        for key in ("nrmse_median", "nrmse_q25", "nrmse_q75", "nrmse_mean"):
+            assert float(row[key]) == pytest.approx(v[key][g][j], abs=1e-6)
+    claims = (out / "sarcos_claims.md").read_text()
     assert "Outward beats inward on the last joint (7)" in claims and "Simulated Jaco" not in claims
     assert str(out / "fig_sarcos.png") in capsys.readouterr().out
 

@@ -144,3 +144,68 @@ def test_a_data_buffer_on_a_file_names_it(places: dict[str, Path]) -> None:
             DataBuffer(folder)
     assert file.read_text() == "x"
 
+
+
+def _experiment_folder(out: Path, kind: str) -> None:
+    """A finished run's result file of ``kind`` in ``out`` (only what the commands look at)."""
+    import json
+
+    out.mkdir()
+    layout = {"transfer": ("results.json", {"config": {}, "controllers": {}}),
+              "study": ("results.json", {"meta": {}, "jaco": {}}), "sarcos": ("sarcos.json", {"models": {}})}
+    name, content = layout[kind]
+    (out / name).write_text(json.dumps(content))
+
+
+@pytest.mark.parametrize("command, argv, other", [
+    ("study", ["--smoke", "--no-sarcos"], "transfer"),
+    ("study", ["--smoke", "--no-sarcos"], "sarcos"),
+    ("transfer", ["--quick"], "study"),
+    ("sarcos", ["--quick", "--sarcos", "x.mat"], "study"),
+    ("sarcos", ["--quick", "--sarcos", "x.mat"], "transfer"),
+])
+def test_an_experiment_refuses_a_folder_of_another_experiment(command: str, argv: list[str], other: str,
+                                                               tmp_path: Path, monkeypatch, capsys) -> None:
+    """A study run into a transfer's --out replaced its results.json (and the reverse): refused, folder untouched."""
+    monkeypatch.chdir(tmp_path)
+    write_tiny_ias(tmp_path / "x.mat")
+    out = tmp_path / "out"
+    _experiment_folder(out, other)
+    before = {p: p.read_bytes() for p in out.rglob("*")}
+    msg = _refused(command, ["--out", str(out), *argv], capsys)
+    assert f"--out: {out} holds a 'cascgp {other}' run" in msg and "choose another --out folder" in msg
+    assert {p: p.read_bytes() for p in out.rglob("*")} == before
+
+
+def test_a_study_refuses_a_collection_of_other_settings_unless_told_to_overwrite(tmp_path: Path, monkeypatch,
+                                                                                  capsys) -> None:
+    """The study replaced its folder's collection of other settings without a word (its earlier results stayed
+    beside the new data until the run ended); now it refuses, as cascgp collect does, unless --overwrite."""
+    from dataclasses import asdict, replace
+
+    from tests.conftest import make_arm, sinusoid_data
+
+    from cascgp_experiments import collect as col
+    from cascgp_experiments.cli import study as cli
+    from cascgp_experiments.study import PRESETS, collection_config
+
+    out = tmp_path / "out"
+    data = sinusoid_data(make_arm(2), 1.0, 10.0, seed=0)
+    data.meta["collection"] = asdict(replace(collection_config(PRESETS["smoke"]), seed=7))
+    data.save(col.data_path(out / "data", "train"))
+    before = col.data_path(out / "data", "train").read_bytes()
+    msg = _refused("study", ["--out", str(out), "--smoke", "--no-sarcos"], capsys)
+    assert f"--out: {col.data_path(out / 'data', 'train')} holds a collection with other settings (seed 7 (now " \
+           "0)); pass --overwrite" in msg
+    assert col.data_path(out / "data", "train").read_bytes() == before
+    seen: dict = {}
+
+    def fake_run_study(*args, **kw):
+        seen["ran"] = True
+        return {"meta": {"timings": {}}}
+
+    monkeypatch.setattr(cli, "run_study", fake_run_study)
+    monkeypatch.setattr(cli, "limit_threads", lambda n=1: None)
+    cli.main(["--out", str(out), "--smoke", "--no-sarcos", "--overwrite", "--workers", "1"])
+    assert seen == {"ran": True}
+    cli.main(["--out", str(out), "--smoke", "--no-sarcos", "--seed", "7", "--workers", "1"])  # its own settings

@@ -381,8 +381,13 @@ def test_smoke_end_to_end(tmp_path: Path) -> None:
                  "table1.md", "curves_jaco.csv"):
         assert (out / name).stat().st_size > 0
     if "sarcos" in res:
+        import hashlib
+
         assert set(res["sarcos"]["models"]) == {"np-standard", "np-inward", "np-outward"}
         assert (out / "fig_sarcos.png").exists()
+        # the block says which seed drew its subsets and which file it read (its digest, to check it)
+        assert res["sarcos"]["seed"] == res["meta"]["settings"]["seed"]
+        assert res["sarcos"]["file_sha256"] == hashlib.sha256(Path(res["sarcos"]["file"]).read_bytes()).hexdigest()
     _regenerate_from_json_alone(out, tmp_path)
     # the same command again: everything from the first run's files, said so; the timings are this run's
     again = subprocess.run([str(Path(sys.executable).with_name("cascgp")), "study", "--out", str(out), "--smoke"],

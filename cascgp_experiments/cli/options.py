@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import os
 from pathlib import Path
 from typing import Mapping, NoReturn
@@ -111,4 +112,42 @@ def _same_file(a: Path, b: Path) -> bool:
         return a.resolve() == b.resolve()
     except OSError:
         return False
+
+
+#: What each experiment command leaves in its ``--out`` folder (relative paths), to tell one's folder from another's.
+_MARKS = {"study": ("cache/jaco", "cache/iterations.json"), "transfer": ("buffers", "cache/transfer"),
+          "sarcos": ("sarcos.json",)}
+
+
+def experiments_in(out: str | os.PathLike) -> dict[str, str]:
+    """The experiment commands whose runs ``out`` holds (``"study"``, ``"transfer"``, ``"sarcos"``), each with the
+    file or folder that shows it: their marks (:data:`_MARKS`), and ``results.json`` by its layout."""
+    out = Path(out)
+    found: dict[str, str] = {}
+    results = out / "results.json"
+    if results.is_file():
+        try:
+            with results.open() as f:
+                top = json.load(f)
+        except (OSError, ValueError):
+            top = None
+        if isinstance(top, dict) and "controllers" in top:
+            found["transfer"] = str(results)
+        elif isinstance(top, dict) and "meta" in top and ("jaco" in top or "sarcos" in top):
+            found["study"] = str(results)
+    for kind, marks in _MARKS.items():
+        for mark in marks:
+            if kind not in found and (out / mark).exists():
+                found[kind] = str(out / mark)
+    return found
+
+
+def refuse_other_experiment(parser: argparse.ArgumentParser, out: str | os.PathLike, command: str,
+                            allowed: tuple[str, ...] = ()) -> None:
+    """``parser.error`` (exit status 2) when ``out`` holds a run of another experiment command than ``command``
+    (or those ``allowed`` beside it): its results would be replaced or mixed with this run's."""
+    for kind, where in experiments_in(out).items():
+        if kind != command and kind not in allowed:
+            parser.error(f"--out: {out} holds a 'cascgp {kind}' run ({where}); this run would replace or mix with "
+                         "its results: choose another --out folder")
 

@@ -4,7 +4,8 @@ Usage::
 
     cascgp plots --json out/study/results.json --out DIR     # or a `cascgp sarcos` run's sarcos.json
 
-What is written: :mod:`cascgp_experiments.plots`.
+What is written: :mod:`cascgp_experiments.plots`; from a ``sarcos.json``, the files ``cascgp sarcos`` writes
+(``fig_sarcos.png``, ``curves_sarcos.csv``, ``sarcos_claims.md`` and ``sarcos_table.md``).
 """
 
 from __future__ import annotations
@@ -40,8 +41,15 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     out = Path(a.out)
     near = next(p for p in (out, *out.parents) if p.exists())  # check_output: a folder this process can write
     with tempfile.TemporaryDirectory(dir=near) as tmp:  # drawn aside, moved into --out once all are drawn
+        from_sarcos = res.get("sarcos") is run  # a cascgp sarcos run's sarcos.json: the files that command writes
         try:
-            drawn = render_results(res, tmp)
+            drawn = render_results(res, tmp, claims="sarcos_claims.md" if from_sarcos else "claims.md")
+            if from_sarcos:
+                from cascgp.io import atomic_write_text
+                from cascgp_experiments.cli.sarcos import summary_table
+
+                drawn.append(Path(tmp) / "sarcos_table.md")
+                atomic_write_text(drawn[-1], summary_table(run) + "\n")
         except KeyError as exc:  # a hand-edited or truncated file: --out is left as it was
             ap.error(f"--json: {a.json}: not a complete study results file (missing entry {exc.args[0]!r})")
         out.mkdir(parents=True, exist_ok=True)

@@ -25,7 +25,7 @@ import numpy as np
 from cascgp.io import atomic_write_text, write_json
 from cascgp_experiments.common import (SARCOS_ENV, default_sarcos, default_sarcos_source, limit_threads,
                                        machine_info, median_curves, package_versions)
-from cascgp_experiments.cli.options import check_output, check_sarcos_file, require_at_least
+from cascgp_experiments.cli.options import check_output, check_sarcos_file, refuse_other_experiment, require_at_least
 from cascgp_experiments.execution import add_execution_args, check_args
 from cascgp_experiments.study import PRESETS, Settings, run_sarcos
 
@@ -58,6 +58,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     require_at_least(ap, a, 1, "restarts")
     require_at_least(ap, a, 0, "seed")
     check_output(ap, a.out, "--out", "folder")
+    refuse_other_experiment(ap, a.out, "sarcos")
     check_args(ap, a)
     limit_threads(1)
     preset = PRESETS["quick" if a.quick else "full"]

@@ -17,10 +17,35 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from cascgp_experiments.cli.options import check_output, check_sarcos_file, settings_error
+from cascgp_experiments.cli.options import check_output, check_sarcos_file, refuse_other_experiment, settings_error
 from cascgp_experiments.common import SARCOS_ENV, VARIANTS, default_sarcos, default_sarcos_source, limit_threads
 from cascgp_experiments.execution import add_execution_args, check_args
-from cascgp_experiments.study import PRESETS, reuse_note, run_study
+from cascgp_experiments.study import PRESETS, collection_config, reuse_note, run_study
+
+
+def _refuse_other_collection(ap: argparse.ArgumentParser, out: Path, st: Any) -> None:
+    """``ap.error`` when ``out/data`` holds a collection of other settings than the study's (it would be replaced
+    while the folder's earlier results stay beside it until this run ends), as ``cascgp collect`` refuses one."""
+    from dataclasses import asdict
+
+    from cascgp.data import DynamicsData
+    from cascgp_experiments import collect as col
+
+    cfg = collection_config(st)
+    for split in ("train", "test"):
+        path = col.data_path(out / "data", split)
+        if not path.is_file():
+            continue
+        try:
+            stored = DynamicsData.load(path).meta.get("collection")
+        except (OSError, ValueError):
+            stored = None  # a damaged file: the study collects again, as before
+        if stored is not None and not col.same_collection(stored, cfg):
+            want = asdict(cfg)
+            what = ", ".join(f"{k} {stored.get(k)!r} (now {v!r})" for k, v in want.items()
+                             if k in stored and stored[k] != v) if isinstance(stored, dict) else ""
+            ap.error(f"--out: {path} holds a collection with other settings ({what or 'another preset'}); pass "
+                     "--overwrite to collect again there, or choose another --out folder")
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> None:
@@ -36,6 +61,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                          "without one the SARCOS part is skipped)")
     ap.add_argument("--no-sarcos", action="store_true", help="skip the SARCOS part")
     ap.add_argument("--no-iterations", action="store_true", help="skip the iteration-count fits")
+    ap.add_argument("--overwrite", action="store_true",
+                    help="replace a collection of other settings in --out/data (the study collects again); without "
+                         "it such a folder is refused")
     ap.add_argument("--models", default=None, help="comma-separated subset of the 12 variants")
     add_execution_args(ap)
     ap.add_argument("--restarts", type=int, default=None,
@@ -95,6 +123,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
             print(f"--max-seconds {a.max_seconds:g} is below every SARCOS grid point: the SARCOS part is skipped",
                   file=sys.stderr)
     check_output(ap, a.out, "--out", "folder")
+    refuse_other_experiment(ap, a.out, "study")
+    if not a.overwrite:
+        _refuse_other_collection(ap, Path(a.out), st)
     check_args(ap, a)
     limit_threads(1)
     res = run_study(a.out, st, models=models, workers=a.workers, ray_address=a.ray, sarcos=sarcos,

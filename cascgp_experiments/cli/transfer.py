@@ -37,7 +37,7 @@ import sys
 import time
 from pathlib import Path
 
-from cascgp_experiments.cli.options import check_output, settings_error
+from cascgp_experiments.cli.options import check_output, refuse_other_experiment, settings_error
 from cascgp_experiments.execution import add_execution_args, check_args, session
 from cascgp_experiments.transfer import (FULL_CONTROLLERS, FULL_TASKS, QUICK_CONTROLLERS, QUICK_TASKS,
                                          TransferConfig, VideoOptions, claim_output, run_transfer, video_attempts,
@@ -100,6 +100,7 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
     add_execution_args(p)
     a = p.parse_args(argv)
     check_output(p, a.out, "--out", "folder")
+    refuse_other_experiment(p, a.out, "transfer")
     check_output(p, a.video, "--video", "folder")
     if a.video is not None:
         from cascgp_experiments.video import check_video_writer
