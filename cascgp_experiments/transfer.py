@@ -9,8 +9,8 @@ same unknown mass throughout, as when a robot keeps holding the same bottle.
 
 This module owns what is Jaco-specific about the experiment: the env (``JacoPour-v0``), its reset
 options (``payload_mass``), the gains and torque limits (``jaco_env``), the nominal URDF, the
-presets (:data:`FULL_CONTROLLERS` ...), the summary table and the figure. The command line is
-``python -m scripts.task_transfer``.
+presets (:data:`FULL_CONTROLLERS` ..., defined in :mod:`cascgp_experiments.transfer_presets`), the summary table
+and the figure. The command line is ``cascgp transfer``.
 
 Parallel: every controller is one job (:func:`controller_job`, its own env; a controller's attempts
 stay sequential because its data accumulate), run by :mod:`cascgp_experiments.execution` on local
@@ -42,15 +42,11 @@ from cascgp.learning import (PLAIN_CONTROLLERS, Attempt, AttemptContext, Control
 from cascgp.rbd import load_nominal
 from cascgp_experiments.common import DISTRIBUTION, machine_info, package_versions, save_figure
 from cascgp_experiments.run_hooks import PairedEpisodes, seed_offset_factory
+# the presets, here too for the callers that take them from this module
+from cascgp_experiments.transfer_presets import (ENV_ID, FULL_CONTROLLERS, FULL_TASKS, QUICK_CONTROLLERS,  # noqa: F401
+                                                 QUICK_TASKS)
 from jaco_env import nominal_urdf
 
-ENV_ID = "JacoPour-v0"
-FULL_CONTROLLERS = ("pd", "rbd", "sp-standard", "sp-inward", "sp-outward", "np-inward", "sp-inward-gated",
-                    "sp-inward-gated-online")
-FULL_TASKS = ("front", "left", "right", "far")
-#: The README demo: PD, RBD and the best of the uncertainty-aware controllers (README table).
-QUICK_CONTROLLERS = ("pd", "rbd", "sp-inward-igated-online")
-QUICK_TASKS = ("front", "left")
 
 
 def jaco_feedback() -> Feedback:

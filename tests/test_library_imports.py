@@ -51,3 +51,21 @@ assert not bad, bad
 def test_the_experiments_import_no_study() -> None:
     """The product's experiments stand without the research studies (``studies/`` is not installed)."""
     _python(_EXPERIMENTS)
+
+
+_HELP = """
+import sys
+from cascgp_experiments.cli import main
+for command in ("transfer", "study", "sarcos", "collect", "plots"):
+    try:
+        main([command, "--help"])
+    except SystemExit as exc:
+        assert exc.code == 0, (command, exc.code)
+heavy = sorted(m for m in ("torch", "pinocchio") if m in sys.modules)
+assert not heavy, heavy
+"""
+
+
+def test_the_experiment_commands_help_without_torch() -> None:
+    """``--help`` answers at once: ``cascgp transfer --help`` imported torch for its defaults (about 5 s)."""
+    _python(_HELP)

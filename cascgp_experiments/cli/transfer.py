@@ -36,12 +36,15 @@ import shlex
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from cascgp_experiments.cli.options import check_output, refuse_other_experiment, settings_error
 from cascgp_experiments.execution import add_execution_args, check_args, session
-from cascgp_experiments.transfer import (FULL_CONTROLLERS, FULL_TASKS, QUICK_CONTROLLERS, QUICK_TASKS,
-                                         TransferConfig, VideoOptions, claim_output, run_transfer, video_attempts,
-                                         write_outputs)
+# the presets only: the experiment (torch, MuJoCo) is imported after the options are parsed, so --help is quick
+from cascgp_experiments.transfer_presets import FULL_CONTROLLERS, FULL_TASKS, QUICK_CONTROLLERS, QUICK_TASKS
+
+if TYPE_CHECKING:
+    from cascgp_experiments.transfer import TransferConfig
 
 #: The option that sets each field of :class:`TransferConfig` (error messages name the option).
 _OPTIONS = {"rate_hz": "--rate", "payload_mass": "--payload", "attempts": "--attempts", "cap": "--cap",
@@ -51,6 +54,8 @@ _OPTIONS = {"rate_hz": "--rate", "payload_mass": "--payload", "attempts": "--att
 
 def _config(a: argparse.Namespace) -> TransferConfig:
     """The run's settings from the parsed options (``ValueError`` naming a bad field)."""
+    from cascgp_experiments.transfer import TransferConfig
+
     return TransferConfig(
         controllers=tuple(a.controllers.split(",")) if a.controllers else
         (QUICK_CONTROLLERS if a.quick else FULL_CONTROLLERS),
@@ -118,6 +123,8 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
         learned = a.video_controller or next((c for c in reversed(cfg.controllers) if c not in ("pd", "rbd")), None)
         if learned is None or learned not in cfg.controllers or "rbd" not in cfg.controllers:
             p.error("--video needs 'rbd' and a learning controller among --controllers")
+        from cascgp_experiments.transfer import VideoOptions, video_attempts
+
         a.video_options = VideoOptions(str(a.video.resolve()), ("rbd", learned), video_attempts(cfg.plan()))
     else:
         a.video_options = None
@@ -127,6 +134,8 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
 def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     """``cascgp transfer``: parse ``argv`` (``sys.argv[1:]`` when ``None``) and run."""
     cfg, out, overwrite, a = parse_args(argv, prog)
+    from cascgp_experiments.transfer import claim_output, run_transfer, write_outputs
+
     try:
         state = claim_output(cfg, out, overwrite)
     except ValueError as exc:  # an --out folder of another run: an argument error, as argparse reports one
