@@ -220,7 +220,10 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
     results["meta"]["collection"] = {**asdict(ccfg), "reused": cinfo["reused"],
                                      "train_rows": train.n_samples, "test_rows": test.n_samples,
                                      "train_total_seconds": train.duration, "test_total_seconds": test.duration,
-                                     "qdd": train.meta.get("qdd_source")}
+                                     "qdd": train.meta.get("qdd_source"),
+                                     # what the settings' None (follow the sensing pipeline) resolved to
+                                     "qdd_filter_used": "causal" if ccfg.smoothing.causal else "centred",
+                                     "link_inertials_used": ccfg.nominal_link_inertials}
 
     # 2. curves (12 variants + RBD)
     spec = CurveSpec(train_path=str(col.data_path(out / "data", "train")),

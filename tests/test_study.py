@@ -376,6 +376,9 @@ def test_smoke_end_to_end(tmp_path: Path) -> None:
     assert res["meta"]["reused"]["collection"] is False and res["meta"]["reused"]["jaco_jobs"][0] == 0
     # the default sensing, and the SP models' nominal URDF of the simulated arm's link inertials
     assert res["meta"]["collection"]["sensor_pipeline"] == "jaco2"
+    # the settings' None resolved, as the data were collected
+    assert (res["meta"]["collection"]["qdd_filter_used"], res["meta"]["collection"]["link_inertials_used"]) == \
+        ("causal", "kinova")
     assert res["meta"]["nominal_urdf"] == "jaco2_nominal_kinova.urdf"
     for name in ("fig_jaco_np.png", "fig_jaco_sp.png", "fig_iterations.png", "fig_correlation.png",
                  "table1.md", "curves_jaco.csv"):
