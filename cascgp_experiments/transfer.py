@@ -48,7 +48,6 @@ from cascgp_experiments.transfer_presets import (ENV_ID, FULL_CONTROLLERS, FULL_
 from jaco_env import nominal_urdf
 
 
-
 def jaco_feedback() -> Feedback:
     """The Jaco 2's PD gains (``jaco_env.DEFAULT_KP``/``DEFAULT_KD``) and torque limits."""
     return Feedback(jaco_env.DEFAULT_KP, jaco_env.DEFAULT_KD, jaco_env.robot.TORQUE_LIMITS)
