@@ -179,19 +179,22 @@ def collection_config(settings: Settings) -> Any:
 
 def run_study(out: str | Path, settings: Settings, *, models: list[str] | None = None, workers: int | None = None,
               ray_address: str | None = None, sarcos: str | Path | None = None, do_iterations: bool = True,
-              do_plots: bool = True, command: str = "") -> dict[str, Any]:
+              do_plots: bool = True, command: str = "", collect_again: bool = False) -> dict[str, Any]:
     """Run the whole study into ``out``; returns the results dict (also ``out/results.json``).
 
     ``workers`` / ``ray_address``: where the collection's motions and the curve fits run
-    (:mod:`cascgp_experiments.execution`; default every local core); the numbers do not depend on them."""
+    (:mod:`cascgp_experiments.execution`; default every local core); the numbers do not depend on them.
+    ``collect_again``: collect into ``out/data`` even where a collection of the same settings is there (``force``
+    of :func:`cascgp_experiments.collect.collect`); one of other settings is replaced either way."""
     with session(ray_address, workers):
         return _run_study(out, settings, models=models, workers=workers, ray_address=ray_address, sarcos=sarcos,
-                          do_iterations=do_iterations, do_plots=do_plots, command=command)
+                          do_iterations=do_iterations, do_plots=do_plots, command=command,
+                          collect_again=collect_again)
 
 
 def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None, workers: int | None,
                ray_address: str | None, sarcos: str | Path | None, do_iterations: bool, do_plots: bool,
-               command: str) -> dict[str, Any]:
+               command: str, collect_again: bool) -> dict[str, Any]:
     from cascgp_experiments import collect as col
     from cascgp_experiments.analyses import spearman_block
 
@@ -209,7 +212,7 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
     # 1. data
     ccfg = collection_config(settings)
     t0 = time.perf_counter()
-    train, test, cinfo = col.collect(out / "data", ccfg, workers=workers, ray_address=ray_address)
+    train, test, cinfo = col.collect(out / "data", ccfg, force=collect_again, workers=workers, ray_address=ray_address)
     timings["collect_s"] = time.perf_counter() - t0
     # what this run took from an earlier run's files (a resumed or repeated run; None: a part not run): the
     # timings are this run's own

@@ -209,3 +209,26 @@ def test_a_study_refuses_a_collection_of_other_settings_unless_told_to_overwrite
     cli.main(["--out", str(out), "--smoke", "--no-sarcos", "--overwrite", "--workers", "1"])
     assert seen == {"ran": True}
     cli.main(["--out", str(out), "--smoke", "--no-sarcos", "--seed", "7", "--workers", "1"])  # its own settings
+    # a file without its settings, or one that cannot be read, is refused too (collect raised mid-run on the latter)
+    del data.meta["collection"]
+    data.save(col.data_path(out / "data", "train"))
+    assert "holds a collection with other settings (settings not recorded)" in \
+        _refused("study", ["--out", str(out), "--smoke", "--no-sarcos"], capsys)
+    col.data_path(out / "data", "train").write_bytes(b"PK\x03\x04 not a whole archive")
+    assert "jaco_train.npz cannot be read" in _refused("study", ["--out", str(out), "--smoke", "--no-sarcos"], capsys)
+    seen.clear()
+    cli.main(["--out", str(out), "--smoke", "--no-sarcos", "--overwrite", "--workers", "1"])
+    assert seen == {"ran": True}
+
+
+@pytest.mark.parametrize("command, argv, left, shown, other", [
+    ("transfer", ["--quick"], "data/jaco_train.npz", "data/jaco_train.npz", "study"),  # stopped while collecting
+    ("transfer", ["--quick"], "cache/sarcos/x.json", "cache/sarcos", "sarcos"),  # stopped before its sarcos.json
+    ("study", ["--smoke", "--no-sarcos"], "buffers/pd/x.npz", "buffers", "transfer"),  # a transfer stopped mid-run
+])
+def test_a_stopped_run_of_another_experiment_is_seen_too(command: str, argv: list[str], left: str, shown: str,
+                                                          other: str, tmp_path: Path, capsys) -> None:
+    out = tmp_path / "out"
+    (out / left).parent.mkdir(parents=True)
+    (out / left).write_bytes(b"x")
+    assert f"holds a 'cascgp {other}' run ({out / shown})" in _refused(command, ["--out", str(out), *argv], capsys)

@@ -115,8 +115,9 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 #: What each experiment command leaves in its ``--out`` folder (relative paths), to tell one's folder from another's.
-_MARKS = {"study": ("cache/jaco", "cache/iterations.json"), "transfer": ("buffers", "cache/transfer"),
-          "sarcos": ("sarcos.json",)}
+_MARKS = {"study": ("cache/jaco", "cache/iterations.json", "data/jaco_train.npz"),
+          "transfer": ("buffers", "cache/transfer"),
+          "sarcos": ("sarcos.json", "cache/sarcos", "data/sarcos_train.npz")}
 
 
 def experiments_in(out: str | os.PathLike) -> dict[str, str]:

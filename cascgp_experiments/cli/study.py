@@ -38,14 +38,16 @@ def _refuse_other_collection(ap: argparse.ArgumentParser, out: Path, st: Any) ->
             continue
         try:
             stored = DynamicsData.load(path).meta.get("collection")
-        except (OSError, ValueError):
-            stored = None  # a damaged file: the study collects again, as before
-        if stored is not None and not col.same_collection(stored, cfg):
-            want = asdict(cfg)
-            what = ", ".join(f"{k} {stored.get(k)!r} (now {v!r})" for k, v in want.items()
-                             if k in stored and stored[k] != v) if isinstance(stored, dict) else ""
-            ap.error(f"--out: {path} holds a collection with other settings ({what or 'another preset'}); pass "
-                     "--overwrite to collect again there, or choose another --out folder")
+        except (OSError, ValueError) as exc:
+            ap.error(f"--out: {path} cannot be read ({exc}); pass --overwrite to collect again there, or choose "
+                     "another --out folder")
+        if not col.same_collection(stored, cfg):
+            # as same_collection compares: fields that older files lack had their defaults (collect's own message)
+            have, want = ({**col._LATER_FIELDS, **stored} if isinstance(stored, dict) else {}), asdict(cfg)
+            what = ", ".join(f"{k} {have.get(k)!r} (now {want.get(k)!r})" for k in sorted(set(have) | set(want))
+                             if have.get(k) != want.get(k)) if have else "settings not recorded"
+            ap.error(f"--out: {path} holds a collection with other settings ({what}); pass --overwrite to collect "
+                     "again there, or choose another --out folder")
 
 
 def main(argv: list[str] | None = None, prog: str | None = None) -> None:
@@ -62,8 +64,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     ap.add_argument("--no-sarcos", action="store_true", help="skip the SARCOS part")
     ap.add_argument("--no-iterations", action="store_true", help="skip the iteration-count fits")
     ap.add_argument("--overwrite", action="store_true",
-                    help="replace a collection of other settings in --out/data (the study collects again); without "
-                         "it such a folder is refused")
+                    help="collect again into --out/data, replacing what is there (without it, a collection of "
+                         "other settings, or one that cannot be read, is refused)")
     ap.add_argument("--models", default=None, help="comma-separated subset of the 12 variants")
     add_execution_args(ap)
     ap.add_argument("--restarts", type=int, default=None,
@@ -129,7 +131,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     check_args(ap, a)
     limit_threads(1)
     res = run_study(a.out, st, models=models, workers=a.workers, ray_address=a.ray, sarcos=sarcos,
-                    do_iterations=not a.no_iterations,
+                    do_iterations=not a.no_iterations, collect_again=a.overwrite,
                     command=" ".join([prog or "cascgp study"] + (argv if argv is not None else sys.argv[1:])))
     t = res["meta"]["timings"]
     print("timings (s): " + ", ".join(f"{k}={v:.1f}" for k, v in t.items()))

@@ -114,6 +114,7 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
             check_video_writer()  # now, not after the episodes (and before the settings' checks import the env)
         except ImportError as exc:
             p.error(f"--video: {exc}")
+    import cascgp_experiments.transfer  # noqa: F401 - the experiment, imported outside the settings' try below
     try:
         cfg = _config(a)
     except (ValueError, TypeError) as exc:
