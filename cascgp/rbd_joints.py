@@ -38,7 +38,8 @@ import xml.etree.ElementTree as ET
 import numpy as np
 import pinocchio as pin
 
-__all__ = ["angle_joints", "lock_joints", "check_joint_selection", "joint_selection", "mimic_joints", "coupling_map"]
+__all__ = ["angle_joints", "lock_joints", "check_joint_selection", "joint_selection", "mimic_joints", "coupling_map",
+           "xml_tag"]
 
 #: How far (rad or m) a mimic joint's given position may be from the one its relation gives.
 MIMIC_TOL = 1e-9
@@ -129,16 +130,16 @@ def mimic_joints(urdf_text: str | None) -> dict[str, tuple[str, float, float]]:
         return {}
     out = {}
     for joint in root.iter():
-        if _local(joint.tag) != "joint":
+        if xml_tag(joint.tag) != "joint":
             continue
-        mimic = next((c for c in joint if _local(c.tag) == "mimic"), None)
+        mimic = next((c for c in joint if xml_tag(c.tag) == "mimic"), None)
         if mimic is not None and joint.get("name") and mimic.get("joint"):
             out[joint.get("name", "")] = (mimic.get("joint", ""), float(mimic.get("multiplier", 1.0)),
                                           float(mimic.get("offset", 0.0)))
     return out
 
 
-def _local(tag: object) -> str:
+def xml_tag(tag: object) -> str:
     """An element's tag without its XML namespace (``{uri}joint`` -> ``joint``)."""
     return tag.rsplit("}", 1)[-1] if isinstance(tag, str) else ""
 

@@ -29,14 +29,14 @@ from typing import Any, Sequence
 import numpy as np
 import pinocchio as pin
 
-from cascgp.rbd_joints import _local
+from cascgp.rbd_joints import xml_tag
 from cascgp.urdf_parser_output import dropped_inertials, parser_output, parser_reason
 
 __all__ = ["check_urdf_path", "parse_urdf_file", "parse_urdf_text", "warn_odd"]
 
 
 def _children(element: ET.Element, tag: str) -> list[ET.Element]:
-    return [c for c in element if _local(c.tag) == tag]
+    return [c for c in element if xml_tag(c.tag) == tag]
 
 
 def _floats(text: str | None, default: list[float]) -> np.ndarray:
@@ -50,7 +50,7 @@ def _structure_errors(root: ET.Element) -> list[str]:
     """Links with two parent joints, mimics of a missing joint or of themselves, axes of zero length."""
     errors: list[str] = []
     parents: dict[str | None, str | None] = {}
-    joints = [j for j in root if _local(j.tag) == "joint"]
+    joints = [j for j in root if xml_tag(j.tag) == "joint"]
     names = {j.get("name") for j in joints}
     for j in joints:
         name = j.get("name")
@@ -78,7 +78,7 @@ def _inertial_errors(root: ET.Element) -> list[str]:
     may also break the triangle inequality of the principal moments, which no rigid body does; that leaves the mass
     matrix positive definite and is not reported)."""
     errors = []
-    for link in (e for e in root if _local(e.tag) == "link"):
+    for link in (e for e in root if xml_tag(e.tag) == "link"):
         for inertial in _children(link, "inertial"):
             mass = next((_floats(m.get("value"), [0.0])[0] for m in _children(inertial, "mass")), 0.0)
             if mass < 0:

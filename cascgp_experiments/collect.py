@@ -32,11 +32,9 @@ present with the same settings (``meta["collection"]``).
 Parallel: every motion is one job of :mod:`cascgp_experiments.execution` (``workers`` local processes,
 or a Ray cluster); ``vector_env=True`` runs the motions of a split side by side in a Gymnasium
 ``AsyncVectorEnv`` instead. Every motion is seeded on its own, so the files are the same whatever the
-worker count or the backend (tested). Jobs are the default because an env step here is cheap (about
-0.3 ms), so the vector env's lockstep (one round trip to every sub-process per step) costs more than
-it gains: on the 2-core machine (load average 0.1-0.8 from other work) the full collection took 24 s
-serially, 14 s as jobs on 2 processes and 46 s in a 2-env ``AsyncVectorEnv``
-(``python -m scripts.bench_parallel --cases collect-full``, ``docs/bench/parallel_collect_full.json``).
+worker count or the backend (tested). Jobs are the default because an env step here is cheap, so the vector
+env's lockstep (one round trip to every sub-process per step) costs more than it gains (measured side by side:
+``docs/parallel.md``, ``python -m scripts.bench_parallel --cases collect-full``).
 
 Ablations (``docs/studies/calibration.md``, not the study's data): ``sensor_noise="none"`` records noiseless
 measurements (the motions are the same: the command is open loop and the firmware acts on the simulator's state);
@@ -47,9 +45,8 @@ the arm with Kinova's URDF link inertials (``link_inertials``, factor (e)); ``se
 idealised signal (synchronous samples, true velocity, no torque offset or filter), the centred filter and
 dm_control's inertials.
 
-Command line: ``python -m scripts.collect_jaco_data --out out/study/data [--quick|--smoke] [--workers N]
-[--ray ADDRESS] [--sensor-noise none] [--qdd true] [--sensor-pipeline ideal] [--qdd-filter causal]
-[--link-inertials kinova]``.
+Command line: ``cascgp collect --out out/study/data [--quick|--smoke] [--workers N] [--ray ADDRESS]
+[--sensor-noise none] [--qdd true] [--sensor-pipeline ideal] [--qdd-filter causal] [--link-inertials kinova]``.
 """
 
 from __future__ import annotations
@@ -190,6 +187,13 @@ def same_collection(stored: dict | None, cfg: CollectConfig) -> bool:
     """Whether a file's ``meta["collection"]`` was collected with ``cfg`` (files written before
     ``sensor_noise``/``qdd_source`` existed had their defaults)."""
     return isinstance(stored, dict) and {**_LATER_FIELDS, **stored} == asdict(cfg)
+
+
+def collection_difference(stored: object, cfg: CollectConfig) -> str:
+    """What differs between a file's ``meta["collection"]`` and ``cfg`` as :func:`same_collection` compares them."""
+    have, want = ({**_LATER_FIELDS, **stored} if isinstance(stored, dict) else {}), asdict(cfg)
+    return ", ".join(f"{k} {have.get(k)!r} (now {want.get(k)!r})" for k in sorted(set(have) | set(want))
+                     if have.get(k) != want.get(k)) if have else "settings not recorded"
 
 
 def nominal_urdf_for(data_meta: dict) -> Path:
@@ -459,13 +463,10 @@ def collect(out: str | Path, cfg: CollectConfig = CollectConfig(), *, force: boo
     if len(loaded) == 2 and not other:
         return loaded["train"], loaded["test"], {"reused": True, "wall_s": 0.0, "jobs": None}
     if other and not replace_other:
-        want = {**_LATER_FIELDS, **asdict(cfg)}
         split, stored = next(iter(other.items()))
-        have = {**_LATER_FIELDS, **stored} if isinstance(stored, dict) else {}
-        what = ", ".join(f"{k} {have.get(k)!r} (now {want.get(k)!r})" for k in sorted(set(have) | set(want))
-                         if have.get(k) != want.get(k)) if have else "settings not recorded"
-        raise OtherCollectionError(f"{out} holds a collection with other settings ({paths[split].name}: {what}); "
-                                   f"pass --force to replace it, or choose another --out")
+        raise OtherCollectionError(f"{out} holds a collection with other settings ({paths[split].name}: "
+                                   f"{collection_difference(stored, cfg)}); pass --force to replace it, or choose "
+                                   "another --out")
     t0 = time.perf_counter()
     parts, jobs = _record_all(cfg, workers, ray_address, vector_env)
     data = {}

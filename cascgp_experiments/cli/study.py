@@ -26,8 +26,6 @@ from cascgp_experiments.study import PRESETS, collection_config, reuse_note, run
 def _refuse_other_collection(ap: argparse.ArgumentParser, out: Path, st: Any) -> None:
     """``ap.error`` when ``out/data`` holds a collection of other settings than the study's (it would be replaced
     while the folder's earlier results stay beside it until this run ends), as ``cascgp collect`` refuses one."""
-    from dataclasses import asdict
-
     from cascgp.data import DynamicsData
     from cascgp_experiments import collect as col
 
@@ -42,10 +40,7 @@ def _refuse_other_collection(ap: argparse.ArgumentParser, out: Path, st: Any) ->
             ap.error(f"--out: {path} cannot be read ({exc}); pass --overwrite to collect again there, or choose "
                      "another --out folder")
         if not col.same_collection(stored, cfg):
-            # as same_collection compares: fields that older files lack had their defaults (collect's own message)
-            have, want = ({**col._LATER_FIELDS, **stored} if isinstance(stored, dict) else {}), asdict(cfg)
-            what = ", ".join(f"{k} {have.get(k)!r} (now {want.get(k)!r})" for k in sorted(set(have) | set(want))
-                             if have.get(k) != want.get(k)) if have else "settings not recorded"
+            what = col.collection_difference(stored, cfg)
             ap.error(f"--out: {path} holds a collection with other settings ({what}); pass --overwrite to collect "
                      "again there, or choose another --out folder")
 
