@@ -189,6 +189,18 @@ def test_study_max_seconds_below_the_sarcos_grid_skips_sarcos(tmp_path: Path, mo
     assert "below every SARCOS grid point: the SARCOS part is skipped" in capsys.readouterr().err
 
 
+def test_refused_study_prints_its_error_alone(tmp_path: Path, monkeypatch, capsys) -> None:
+    """The SARCOS part's note comes after every check: a refused command prints only its error."""
+    import cascgp_experiments.cli.study as cli
+
+    monkeypatch.setattr(cli, "default_sarcos", lambda: None)  # as an installed wheel without $CASCGP_SARCOS
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["--out", str(tmp_path / "o"), "--smoke", "--workers", "0"])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "--workers: expected an integer >= 1, got 0" in err
+    assert "the SARCOS part is skipped" not in err and not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize("command, argv, message", [
     ("transfer", ["--cap", "1"], "--cap: expected an integer >= 2, got 1"),  # failed after the first episode
     ("transfer", ["--restarts", "0"], "--restarts: expected an integer >= 1, got 0"),

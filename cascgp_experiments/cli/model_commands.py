@@ -33,13 +33,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from cascgp_experiments.cli.log_notes import coverage_note as _coverage_note
-from cascgp_experiments.cli.log_notes import few_rows_note as _few_rows_note
-from cascgp_experiments.cli.log_notes import in_sample_note as _in_sample_note
-from cascgp_experiments.cli.log_notes import limits_note as _limits_note
-from cascgp_experiments.cli.log_notes import log_rate as _log_rate
-from cascgp_experiments.cli.log_notes import note as _note
-from cascgp_experiments.cli.log_notes import periods as _periods
+from cascgp_experiments.cli import log_notes
 from cascgp_experiments.cli.options import check_output, require_at_least, settings_error
 
 _NRMSE_HELP = ("nRMSE of joint i = RMSE_i / (max_i - min_i): the root-mean-square error of the predicted torques "
@@ -56,7 +50,7 @@ def _run(prog: str, body: Callable[[], int | None]) -> int:
     try:
         with warnings.catch_warnings():  # warnings (e.g. "no sidecar JSON") as one note line each, when raised
             warnings.simplefilter("default")
-            warnings.showwarning = lambda message, *args, **kwargs: _note(prog, f"note: {message}")
+            warnings.showwarning = lambda message, *args, **kwargs: log_notes.note(prog, f"note: {message}")
             status = body()
     except (_Fail, ValueError, OSError) as exc:
         msg = " ".join(str(exc).split())  # one line
@@ -80,12 +74,13 @@ def _read(path: Path, require_tau: bool = True) -> Any:
 
 def _describe(prog: str, data: Any, path: Path) -> None:
     m = data.meta
-    steps = _periods(data)
+    steps = log_notes.periods(data)
     period = f", median sample period {np.median(steps):.4g} s" if steps.size else ""
-    _note(prog, f"read {data.n_samples} rows, {data.dof} joint(s), {len(data.segments)} segment(s){period} from {path}")
+    log_notes.note(prog, f"read {data.n_samples} rows, {data.dof} joint(s), {len(data.segments)} segment(s)"
+                         f"{period} from {path}")
     computed = [g for g in ("qd", "qdd") if m.get(f"{g}_source") == "computed"]
     if computed:
-        _note(prog, f"computed {' and '.join(computed)} (no such columns) with {m.get('derivative_filter')}")
+        log_notes.note(prog, f"computed {' and '.join(computed)} (no such columns) with {m.get('derivative_filter')}")
 
 
 def _sha256(path: Path) -> str:
@@ -242,28 +237,28 @@ def _training_rows(prog: str, a: argparse.Namespace, model: Any, data: Any) -> t
             raise _Fail(f"{a.data}: fewer than 2 rows have the {2 * model.df_delta:g} s of history within their "
                         "segment that -df models need")
         if not valid.all():
-            _note(prog, f"note: {int((~valid).sum())} row(s) lack {2 * model.df_delta:g} s of history within their "
-                        "segment and are left out (-df models)")
+            log_notes.note(prog, f"note: {int((~valid).sum())} row(s) lack {2 * model.df_delta:g} s of history "
+                                 "within their segment and are left out (-df models)")
             rows = np.flatnonzero(valid)
             data = data.take(rows)
     if a.rate_hz is not None:
         n0 = data.n_samples
         keep = data.subsample_rows(a.rate_hz)
         if keep.size < 2:
-            raise _Fail(f"--rate-hz {a.rate_hz:g} keeps {keep.size} of {n0} rows (the log's rate: {_log_rate(data)}); "
-                        "a fit needs at least 2: choose a higher rate")
+            raise _Fail(f"--rate-hz {a.rate_hz:g} keeps {keep.size} of {n0} rows (the log's rate: "
+                        f"{log_notes.log_rate(data)}); a fit needs at least 2: choose a higher rate")
         if keep.size < n0:
             data, rows = data.take(keep), rows[keep]  # the rows of data.subsample (its loop once)
-            _note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
+            log_notes.note(prog, f"subsampled to {a.rate_hz:g} Hz: {data.n_samples} of {n0} rows")
         else:
-            _note(prog, f"note: --rate-hz {a.rate_hz:g} keeps every row (the log's rate: {_log_rate(data)}): all "
-                        f"{n0} rows kept")
+            log_notes.note(prog, f"note: --rate-hz {a.rate_hz:g} keeps every row (the log's rate: "
+                                 f"{log_notes.log_rate(data)}): all {n0} rows kept")
     thinned = data.n_samples > a.max_samples
     if thinned:
         n0 = data.n_samples
         keep = data.thin_rows(a.max_samples)
         data, rows = data.take(keep), rows[keep]
-        _note(prog, f"thinned evenly to {data.n_samples} of {n0} rows (--max-samples)")
+        log_notes.note(prog, f"thinned evenly to {data.n_samples} of {n0} rows (--max-samples)")
     return data, None if q_hist is None else q_hist[rows], thinned
 
 
@@ -295,7 +290,7 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         except ValueError as exc:
             raise _Fail(_as_options(str(exc))) from None
         for w in said:
-            _note(prog, f"note: {_as_options(str(w.message))}")
+            log_notes.note(prog, f"note: {_as_options(str(w.message))}")
         provenance["urdf"] = {"file": str(a.urdf), "sha256": _sha256(a.urdf)}
         if rbd.dof != data.dof:
             more = ("; name the log's joints with --joints, or lock the others with --lock NAME=Q,..."
@@ -305,19 +300,20 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
                         f"{a.data} has {data.dof}{more}")
         locked = "".join(f"; {n} locked at {q:g}" for n, q in rbd.locked.items())
         locked += "".join(f"; {n} moves with {j} ({m:g} x {j} + {o:g})" for n, (j, m, o) in rbd.coupled.items())
-        _note(prog, f"rigid-body model: {a.urdf} ({rbd.dof} joints: {', '.join(rbd.joint_names)}{locked})")
-        _limits_note(prog, rbd, data)
+        log_notes.note(prog, f"rigid-body model: {a.urdf} ({rbd.dof} joints: {', '.join(rbd.joint_names)}{locked})")
+        log_notes.limits_note(prog, rbd, data)
     cfg = _fit_config(a)
     model = make_model(a.model, data.dof, rbd, gp_config=cfg)
     data, q_hist, thinned = _training_rows(prog, a, model, data)
-    _few_rows_note(prog, model, data, thinned)
-    _note(prog, f"fitting {a.model}: {data.dof} GPs on {data.n_samples} rows, {cfg.n_restarts} start(s) each ...")
+    log_notes.few_rows_note(prog, model, data, thinned)
+    log_notes.note(prog, f"fitting {a.model}: {data.dof} GPs on {data.n_samples} rows, {cfg.n_restarts} start(s) "
+                         "each ...")
     t0 = time.perf_counter()
     try:
         model.fit(data, q_hist=q_hist)
     except ValueError as exc:  # about the log's values: in its terms
         raise _Fail(_in_log_terms(str(exc), a.data)) from None
-    _note(prog, f"fitted in {time.perf_counter() - t0:.1f} s")
+    log_notes.note(prog, f"fitted in {time.perf_counter() - t0:.1f} s")
     provenance["data"]["n_used"] = data.n_samples  # after --rate-hz and --max-samples
     model.save(a.out, provenance=provenance)
     print(f"saved {a.model} ({data.dof} joints, n_train={model.n_train}) to {a.out}")
@@ -357,8 +353,8 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         if rows.sum() < 2:
             raise _Fail(f"{a.data}: fewer than 2 rows have the {2 * model.df_delta:g} s of history the -df model "
                         "needs")
-    notes = [n for n in (_limits_note(prog, model.rbd, data), _coverage_note(prog, model, data),
-                         _in_sample_note(prog, model, data)) if n]
+    notes = [n for n in (log_notes.limits_note(prog, model.rbd, data), log_notes.coverage_note(prog, model, data),
+                         log_notes.in_sample_note(prog, model, data)) if n]
     tau = data.tau[rows]
     flat = [j for j in range(model.dof) if np.ptp(tau[:, j]) == 0]
     if flat:
@@ -403,7 +399,7 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
                            "nominal": None if nominal is None else float(nominal.mean())},
             "notes": notes,  # what the command noted about the log (in-sample rows, positions far outside)
         })
-        _note(prog, f"wrote {a.json}")
+        log_notes.note(prog, f"wrote {a.json}")
     return 0
 
 
@@ -431,12 +427,12 @@ def _predict(a: argparse.Namespace, prog: str) -> int:
     _describe(prog, data, a.data)
     _check_dof(model, data, a.data)
     mean, var = model.predict_data(data)
-    _limits_note(prog, model.rbd, data)
-    _coverage_note(prog, model, data)
+    log_notes.limits_note(prog, model.rbd, data)
+    log_notes.coverage_note(prog, model, data)
     if model.feature_kind == "df":
         short = int((~history_from_data(data, model.df_delta)[1]).sum())
         if short:
-            _note(prog, f"note: {short} row(s) lack {2 * model.df_delta:g} s of history within their segment; "
+            log_notes.note(prog, f"note: {short} row(s) lack {2 * model.df_delta:g} s of history within their segment; "
                         "their predictions use the segment's first position for the missing history")
     write_predictions(a.out, data.t, mean, var)
     print(f"wrote {data.n_samples} predictions of {model.name} to {a.out}")

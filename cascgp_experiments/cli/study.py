@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
         bad = [m for m in models if m not in VARIANTS]
         if bad or not models:
             ap.error(f"--models: {f'unknown {bad}' if bad else 'no name'}; expected names from {list(VARIANTS)}")
-    sarcos = None
+    sarcos, skip_note = None, None
     if not a.no_sarcos:
         found = default_sarcos()
         sarcos = a.sarcos or (None if found is None else str(found))  # $CASCGP_SARCOS is checked like --sarcos
@@ -114,16 +114,17 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
         if sarcos is None:
             from cascgp.sarcos import IAS_SOURCE
 
-            print(f"no SARCOS file (--sarcos or ${SARCOS_ENV}): the SARCOS part is skipped (the file: {IAS_SOURCE})",
-                  file=sys.stderr)
+            skip_note = (f"no SARCOS file (--sarcos or ${SARCOS_ENV}): the SARCOS part is skipped "
+                         f"(the file: {IAS_SOURCE})")
         elif not st.sarcos_grid:
-            print(f"--max-seconds {a.max_seconds:g} is below every SARCOS grid point: the SARCOS part is skipped",
-                  file=sys.stderr)
+            skip_note = f"--max-seconds {a.max_seconds:g} is below every SARCOS grid point: the SARCOS part is skipped"
     check_output(ap, a.out, "--out", "folder")
     refuse_other_experiment(ap, a.out, "study")
     if not a.overwrite:
         _refuse_other_collection(ap, Path(a.out), st)
     check_args(ap, a)
+    if skip_note:  # after every check: a refused command prints its error alone
+        print(skip_note, file=sys.stderr)
     limit_threads(1)
     res = run_study(a.out, st, models=models, workers=a.workers, ray_address=a.ray, sarcos=sarcos,
                     do_iterations=not a.no_iterations, collect_again=a.overwrite,
