@@ -273,7 +273,8 @@ def _run_study(out: str | Path, settings: Settings, *, models: list[str] | None,
     # 5. SARCOS (an empty sarcos_grid skips it)
     if sarcos is not None and settings.sarcos_grid:
         s = run_sarcos(sarcos, out / "sarcos", grid=settings.sarcos_grid, n_subsets=settings.sarcos_subsets,
-                       n_restarts=settings.n_restarts, workers=workers, ray_address=ray_address, seed=settings.seed)
+                       n_restarts=settings.n_restarts, workers=workers, ray_address=ray_address, seed=settings.seed,
+                       audit_fraction=settings.audit_fraction)
         results["sarcos"] = s
         timings["sarcos_s"] = s["wall_s_total"]
         reused["sarcos_jobs"] = [s["n_cached_jobs"], s["jobs"]["n_jobs"]]
@@ -322,15 +323,16 @@ def prepare_files(sarcos_path: str | Path, out: str | Path) -> tuple[Path, Path,
 
 def run_sarcos(sarcos_path: str | Path, out: str | Path, *, grid=SARCOS_FULL_GRID, n_subsets: int = 9,
                n_restarts: int = 1, workers: int | None = None, ray_address: str | None = None, seed: int = 0,
-               gp_overrides: dict | None = None) -> dict[str, Any]:
+               gp_overrides: dict | None = None, audit_fraction: float = 0.05) -> dict[str, Any]:
     """The SARCOS block of the results JSON (curves of NP standard / inward / outward, their labels and pooled
-    tests), for ``cascgp study`` and ``cascgp sarcos``."""
+    tests), for ``cascgp study`` and ``cascgp sarcos``; ``audit_fraction`` of its fits audited, as the Jaco
+    curves' (the preset's: 5 % in the full study)."""
     t0 = time.perf_counter()
     out = Path(out)
     tr, te, info = prepare_files(sarcos_path, out / "data")
     spec = CurveSpec(train_path=str(tr), test_path=str(te), n_subsets=n_subsets, grid=list(grid),
                      train_hz=10.0, test_hz=None, split_by="rows", urdf=None, n_restarts=n_restarts,
-                     seed=seed, gp_overrides=dict(gp_overrides or {}))
+                     seed=seed, gp_overrides=dict(gp_overrides or {}), audit_fraction=audit_fraction)
     block = run_curves(spec, list(NP_DB), workers=workers, ray_address=ray_address,
                        cache_dir=out / "cache" / "sarcos", desc="SARCOS fits")
     block.update(info)

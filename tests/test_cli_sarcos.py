@@ -84,8 +84,8 @@ def test_sarcos_command_runs_the_study_presets_sarcos_block(monkeypatch, tmp_pat
     for args, preset in ((["--quick"], PRESETS["quick"]), ([], PRESETS["full"])):
         cli.main(["--sarcos", str(mat), "--out", str(tmp_path / "o"), "--workers", "1", *args])
         kw = seen[-1]
-        assert (kw["grid"], kw["n_subsets"], kw["n_restarts"], kw["seed"]) == (
-            preset.sarcos_grid, preset.sarcos_subsets, preset.n_restarts, preset.seed)
+        assert (kw["grid"], kw["n_subsets"], kw["n_restarts"], kw["seed"], kw["audit_fraction"]) == (
+            preset.sarcos_grid, preset.sarcos_subsets, preset.n_restarts, preset.seed, preset.audit_fraction)
         out = capsys.readouterr().out
         assert f"| {preset.sarcos_grid[-1]:g} | 0.1000 | 0.2000 |" in out
         written = json.loads((tmp_path / "o" / "sarcos.json").read_text())

@@ -391,6 +391,9 @@ def test_smoke_end_to_end(tmp_path: Path) -> None:
         # the block says which seed drew its subsets and which file it read (its digest, to check it)
         assert res["sarcos"]["seed"] == res["meta"]["settings"]["seed"]
         assert res["sarcos"]["file_sha256"] == hashlib.sha256(Path(res["sarcos"]["file"]).read_bytes()).hexdigest()
+        # audited at the preset's fraction, as the Jaco curves (the smoke preset's 25 %: 2 of its 12 fits)
+        assert res["sarcos"]["audit"]["fraction_requested"] == res["jaco"]["audit"]["fraction_requested"] == 0.25
+        assert res["sarcos"]["audit"]["n_audited_fits"] >= 1
     _regenerate_from_json_alone(out, tmp_path)
     # the same command again: everything from the first run's files, said so; the timings are this run's
     again = subprocess.run([str(Path(sys.executable).with_name("cascgp")), "study", "--out", str(out), "--smoke"],

@@ -67,7 +67,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
             "versions": package_versions(), "machine": machine_info(), "started": time.strftime("%Y-%m-%d %H:%M:%S")}
     block = run_sarcos(a.sarcos, out, grid=preset.sarcos_grid, n_subsets=preset.sarcos_subsets,
                        n_restarts=preset.n_restarts if a.restarts is None else a.restarts,
-                       seed=preset.seed if a.seed is None else a.seed, workers=a.workers, ray_address=a.ray)
+                       seed=preset.seed if a.seed is None else a.seed, workers=a.workers, ray_address=a.ray,
+                       audit_fraction=preset.audit_fraction)
     meta["finished"] = time.strftime("%Y-%m-%d %H:%M:%S")
     meta["reused"] = {"sarcos_jobs": [block["n_cached_jobs"], block["jobs"]["n_jobs"]]}  # an earlier run's, in --out
     block["meta"] = meta
