@@ -18,6 +18,12 @@ is given) and counts the event in :attr:`FeedforwardController.n_fallbacks`. A
 non-finite measurement contributes no feedback on that joint (counted in
 :attr:`FeedforwardController.n_bad_measurements`).
 
+Threads: a controller and its model belong to one thread. The model's single-query paths write into buffers of
+the model, so two threads must not query one model at once (two controllers, or a monitor calling
+``predict_one``): give each its own (``cascgp.load_model`` again, or ``copy.deepcopy``). To retrain while the robot
+runs, fit a *new* model in the background and build a new controller with it (:attr:`FeedforwardController.model`
+is read-only); refitting the controller's own model while it runs is a data race.
+
 A gate (``FeedforwardController(gate=...)``) shrinks the learned correction toward the nominal model by one of the
 rules of :mod:`cascgp.gates`.
 
@@ -28,12 +34,14 @@ follows (this one, and e.g. ``jaco_env.oracle``'s oracle and PD controllers).
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
-from cascgp.data import F64 as _F64, all_finite, as_real_array
 from cascgp.checks import check_count
+from cascgp.controller_args import (Reference, as_gain, check_finite_reference, check_time, measured,
+                                    reference_at)
+from cascgp.data import all_finite
 from cascgp.gates import (GATE_RULES, GATE_SUFFIXES, INNOVATION_HALF_LIFE_S, GateRule, InnovationGate, gate_weights,
                           innovation_weights, make_gate)
 
@@ -41,8 +49,6 @@ __all__ = ["Controller", "InverseDynamics", "FeedforwardController", "GateRule",
            "INNOVATION_HALF_LIFE_S", "gate_weights", "innovation_weights"]
 
 _BIG = 1e300  # stands in for an overflowed feedback term; far beyond any actuator limit
-
-Reference = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
 
 class Controller(Protocol):
@@ -76,32 +82,6 @@ class InverseDynamics(Protocol):
     dof: int
 
     def inverse_dynamics(self, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray: ...
-
-
-def _as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
-    try:  # TypeError for complex (a cast drops the imaginary part), boolean, text, None
-        arr = as_real_array(name, value, f"one real number or {dof} of them (one per joint)")
-    except TypeError:
-        raise TypeError(f"{name} must be one real number or {dof} of them (one per joint), got {value!r}") from None
-    try:
-        gain = np.broadcast_to(arr, (dof,)).copy()
-    except ValueError:
-        raise ValueError(f"{name} must be one real number or {dof} of them (one per joint, as torque_limits), got "
-                         f"shape {arr.shape}") from None
-    if not np.all(np.isfinite(gain)) or np.any(gain < 0):
-        raise ValueError(f"{name} must be finite and non-negative, got {value!r}")
-    gain.setflags(write=False)  # changed only through the checked assignment
-    return gain
-
-
-def _check_finite_reference(q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, t: float) -> None:
-    """``ValueError`` naming the first of ``q_d``, ``qd_d``, ``qdd_d`` with a NaN or inf entry: a reference is the
-    caller's computation, so a non-finite one is a bug to report, not a sensor fault to ride out."""
-    for name, x in (("q_d", q_d), ("qd_d", qd_d), ("qdd_d", qdd_d)):
-        bad = np.flatnonzero(~np.isfinite(x))
-        if bad.size:
-            raise ValueError(f"reference: {name} at t={t} must be finite; entries {bad.tolist()} are NaN or inf: "
-                             f"{x.tolist()}")
 
 
 class FeedforwardController:
@@ -181,7 +161,7 @@ class FeedforwardController:
         self.dof = 0  # set from the limits: their setter checks them
         self.torque_limits = torque_limits
         self.dof = int(self._torque_limits.shape[0])
-        self.model: Any = model  # duck-typed (predict_one / inverse_dynamics); None: PD only
+        self._model: Any = model  # duck-typed (predict_one / inverse_dynamics); None: PD only
         if model is not None:
             if not (hasattr(model, "predict_one") or hasattr(model, "inverse_dynamics")):
                 raise TypeError("model: expected a fitted cascgp model, an object with inverse_dynamics(q, qd, qdd) "
@@ -241,6 +221,17 @@ class FeedforwardController:
             getattr(self, name).setflags(write=False)
 
     @property
+    def model(self) -> Any:
+        """The feedforward model given at construction (read-only: its gate and online window are bound to it). To
+        use a retrained model, build a new controller with it, as :mod:`cascgp.learning` does between attempts."""
+        return self._model
+
+    @model.setter
+    def model(self, value: Any) -> None:
+        raise AttributeError("model: read-only (the controller's gate and online window are bound to its model); "
+                             "build a new FeedforwardController for another model")
+
+    @property
     def torque_limits(self) -> np.ndarray:
         """Symmetric actuator limits (N m), one per joint, as a read-only array. Assigning new limits (as many
         joints) validates them as the constructor does (``ValueError`` for a non-finite or non-positive limit or
@@ -270,7 +261,7 @@ class FeedforwardController:
 
     @kp.setter
     def kp(self, value: float | np.ndarray) -> None:
-        self._kp = _as_gain(value, self.dof, "kp")
+        self._kp = as_gain(value, self.dof, "kp")
 
     @property
     def kd(self) -> np.ndarray:
@@ -280,27 +271,28 @@ class FeedforwardController:
 
     @kd.setter
     def kd(self, value: float | np.ndarray) -> None:
-        self._kd = _as_gain(value, self.dof, "kd")
+        self._kd = as_gain(value, self.dof, "kd")
 
     @property
     def name(self) -> str:
         """Short description of the feedforward source."""
-        if self.model is None:
+        if self._model is None:
             return "pd"
-        name = str(getattr(self.model, "name", type(self.model).__name__))
+        name = str(getattr(self._model, "name", type(self._model).__name__))
         gate = self.gate_rule.suffix if self.gate_rule is not None else ""
         return name + gate + ("-online" if self.online else "")
 
     def feedforward(self, t: float, reference: Reference) -> np.ndarray:
         """The feedforward torque at time ``t`` (finite, not yet clipped); a reference as :meth:`__call__` takes."""
-        q_d, qd_d, qdd_d = self._reference(reference, t)
-        _check_finite_reference(q_d, qd_d, qdd_d, t)
+        check_time(t)
+        q_d, qd_d, qdd_d = reference_at(reference, t, self.dof)
+        check_finite_reference(q_d, qd_d, qdd_d, t)
         return self._feedforward(t, q_d, qd_d, qdd_d, reference)
 
     def _feedforward(
         self, t: float, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, reference: Reference
     ) -> np.ndarray:
-        if self.model is None:
+        if self._model is None:
             return np.zeros(self.dof)
         tau = self._model_torque(t, q_d, qd_d, qdd_d, reference)
         if tau is not None and tau.shape == (self.dof,) and all_finite(tau):
@@ -309,7 +301,7 @@ class FeedforwardController:
             self.last_model_error = (f"the model returned shape {tau.shape}, expected ({self.dof},)"
                                      if tau.shape != (self.dof,) else "the model returned a non-finite torque")
         self.n_fallbacks += 1
-        if self.fallback is not None and self.fallback is not self.model:
+        if self.fallback is not None and self.fallback is not self._model:
             try:
                 tau = np.asarray(self.fallback.inverse_dynamics(q_d, qd_d, qdd_d), dtype=float)
             except Exception as exc:  # noqa: BLE001 - the fallback must not stop the loop either
@@ -322,7 +314,7 @@ class FeedforwardController:
     def _model_torque(
         self, t: float, q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, reference: Reference
     ) -> np.ndarray | None:
-        model = self.model
+        model = self._model
         try:
             if hasattr(model, "predict_one"):
                 q_hist = None
@@ -349,16 +341,15 @@ class FeedforwardController:
 
     def __call__(self, t: float, q: np.ndarray, qd: np.ndarray, reference: Reference) -> np.ndarray:
         """Joint torques for the measured state ``(q, qd)`` at time ``t``; always finite and within limits.
-        Malformed arguments (``t`` not a real number, ``q``/``qd`` not real ``(N,)`` arrays) or a reference
+        Malformed arguments (``t`` not a finite real number, ``q``/``qd`` not real ``(N,)`` arrays) or a reference
         that does not return three finite real ``(N,)`` arrays raise ``TypeError``/``ValueError`` naming them, and
         change nothing. A non-finite *measurement* is a sensor fault, not an error: no feedback on that joint
         (:attr:`n_bad_measurements`)."""
-        if isinstance(t, (bool, np.bool_)) or not isinstance(t, (int, float, np.integer, np.floating)):
-            raise TypeError(f"t: expected a real number (s), got {type(t).__name__}")
-        q, qd = self._measured("q", q), self._measured("qd", qd)
-        q_d, qd_d, qdd_d = self._reference(reference, t)  # once per tick; shared with the feedforward
+        check_time(t)
+        q, qd = measured("q", q, self.dof), measured("qd", qd, self.dof)
+        q_d, qd_d, qdd_d = reference_at(reference, t, self.dof)  # once per tick; shared with the feedforward
         if not all_finite(qdd_d):  # q_d and qd_d: by the feedback's finiteness below
-            _check_finite_reference(q_d, qd_d, qdd_d, t)
+            check_finite_reference(q_d, qd_d, qdd_d, t)
         # Kp (q_d - q) + Kd (qd_d - qd) in Python floats: the same IEEE double operations in the same order as
         # NumPy's, bit for bit, but an overflow or inf - inf gives inf or NaN without a floating-point warning,
         # so the usual tick needs neither np.errstate (a third of this form's cost) nor array temporaries.
@@ -369,7 +360,7 @@ class FeedforwardController:
         else:
             # A finite feedback needs all four inputs finite and no overflow: then it equals the general form
             # below, which this tick needs only for a non-finite measurement or an absurd error.
-            _check_finite_reference(q_d, qd_d, qdd_d, t)
+            check_finite_reference(q_d, qd_d, qdd_d, t)
             feedback = self._feedback_nonfinite(q, qd, q_d, qd_d)
         tau = self._feedforward(t, q_d, qd_d, qdd_d, reference) + feedback
         return np.minimum(np.maximum(tau, self._neg_limits), self._torque_limits)  # np.clip, without its wrapper
@@ -385,39 +376,6 @@ class FeedforwardController:
                                   posinf=_BIG, neginf=-_BIG)
         return np.where(bad, 0.0, terms.sum(axis=0))
 
-    def _measured(self, name: str, x: Any) -> np.ndarray:
-        if type(x) is np.ndarray and x.dtype == _F64 and x.shape == (self.dof,):
-            return x  # what the general form below returns for a float64 (N,) array
-        try:
-            a = np.asarray(x)
-        except (TypeError, ValueError) as exc:  # ragged nested sequences
-            raise TypeError(f"{name}: expected a real numeric array of shape ({self.dof},) ({exc})") from None
-        if a.dtype.kind not in "fiu":
-            raise TypeError(f"{name}: expected a real numeric array, got dtype {a.dtype}")
-        if a.shape != (self.dof,):
-            raise ValueError(f"{name}: expected shape ({self.dof},), got {a.shape}")
-        return a.astype(float, copy=False)
-
-    def _reference(self, reference: Reference, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        out = reference(t)
-        if not isinstance(out, (tuple, list)) or len(out) != 3:
-            raise ValueError("reference: expected reference(t) to return (q_d, qd_d, qdd_d)")
-        a, b, c = out
-        shape = (self.dof,)
-        if (type(a) is np.ndarray and type(b) is np.ndarray and type(c) is np.ndarray and a.dtype == _F64
-                and b.dtype == _F64 and c.dtype == _F64 and a.shape == shape and b.shape == shape
-                and c.shape == shape):
-            return a, b, c  # what the general form below returns for float64 (N,) arrays
-        parts = []
-        for nm, x in zip(("q_d", "qd_d", "qdd_d"), out):
-            a = np.asarray(x)
-            if a.dtype.kind not in "fiu":
-                raise TypeError(f"reference: {nm} must be a real numeric array, got dtype {a.dtype}")
-            if a.shape != (self.dof,):
-                raise ValueError(f"reference: {nm} must have shape ({self.dof},), got {a.shape}")
-            parts.append(a.astype(float, copy=False))
-        return parts[0], parts[1], parts[2]
-
     def start(self, env: Any, info: dict[str, Any]) -> None:
         """Start of an episode (:class:`Controller` protocol; ``env`` and ``info``, the environment and its reset
         info, are not used): zero the counters; with ``online``, open a fresh online window on the model (samples
@@ -427,9 +385,9 @@ class FeedforwardController:
         self.n_online_samples = self.n_online_rejected = 0
         self.last_gate, self.last_model_error = None, None
         if self.online:
-            self.model.start_online(self.online)
-        elif hasattr(self.model, "stop_online"):
-            self.model.stop_online()  # an offline controller uses the fitted model, not an earlier episode's window
+            self._model.start_online(self.online)
+        elif hasattr(self._model, "stop_online"):
+            self._model.stop_online()  # an offline controller uses the fitted model, not an earlier episode's window
         if self.gate_rule is not None:
             self.gate_rule.start()  # after the window: a variance rule prepares the variance path of this episode
 
@@ -445,14 +403,18 @@ class FeedforwardController:
         started at that tick (reported now). A gate rule that observes (the innovation rule) gets the sample
         first (an error it raises is kept in ``last_model_error``); with ``online`` it then enters the model. A
         sample the model refuses (non-finite values, a sensor fault or an unstable step's) is counted in
-        ``n_online_rejected``, never raised. Malformed arguments (``q``/``qd``/``tau`` not real ``(N,)`` arrays,
-        ``t`` not a real number) raise ``TypeError``/``ValueError`` naming them and change nothing."""
-        if isinstance(t, (bool, np.bool_)) or not isinstance(t, (int, float, np.integer, np.floating)):
-            raise TypeError(f"t: expected a real number (s), got {type(t).__name__}")
+        ``n_online_rejected``, never raised. A reading whose time is not finite or not after the previous one's (a
+        stale, repeated or out-of-order reading, which would give a wrong q̈) is not used and is counted in
+        ``n_bad_measurements``. Malformed arguments (``q``/``qd``/``tau`` not real ``(N,)`` arrays, ``t`` not a
+        real number) raise ``TypeError``/``ValueError`` naming them and change nothing."""
+        check_time(t, finite=False)  # a reading's NaN time is a sensor fault, as its NaN values
         t = float(t)
-        q, qd, tau = self._measured("q", q), self._measured("qd", qd), self._measured("tau", tau)
+        q, qd, tau = measured("q", q, self.dof), measured("qd", qd, self.dof), measured("tau", tau, self.dof)
         rule = self.gate_rule if self.gate_rule is not None and self.gate_rule.observes else None
         if not self.online and rule is None:
+            return
+        if not math.isfinite(t) or (self._recent and not t > self._recent[-1][0]):
+            self.n_bad_measurements += 1  # a reading without a usable time (stale, repeated, out of order): no q̈
             return
         self._recent = (self._recent + [(t, q.copy(), qd.copy(), tau.copy())])[-3:]
         self._n_observed += 1
@@ -469,7 +431,7 @@ class FeedforwardController:
         if not self.online:
             return
         try:
-            self.model.add_sample(q1, qd1, qdd1, tau2)
+            self._model.add_sample(q1, qd1, qdd1, tau2)
             self.n_online_samples += 1
         except Exception as exc:  # noqa: BLE001 - learning must never stop the control loop
             self.n_online_rejected += 1

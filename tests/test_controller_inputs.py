@@ -128,7 +128,8 @@ def test_observe_refuses_malformed_input_and_changes_nothing(fitted_planar_model
 
 def test_observe_rides_out_a_non_finite_reading(fitted_planar_model, arm3_rbd) -> None:
     """NaN readings, a NaN time or a repeated one (an unstable simulation step reports the last finite state) are
-    sensor faults, as in a tick: the samples they spoil are refused and counted, never raised."""
+    sensor faults, as in a tick, never raised: a reading without a usable time is not used (counted in
+    n_bad_measurements), and the samples that a NaN value spoils are refused and counted."""
     model = copy.deepcopy(fitted_planar_model)
     ctrl = FeedforwardController(model, 10.0, 1.0, np.full(3, 50.0), fallback=arm3_rbd, gate=True, online=4,
                                  online_every=1)
@@ -136,4 +137,73 @@ def test_observe_rides_out_a_non_finite_reading(fitted_planar_model, arm3_rbd) -
     q, qd, _ = planar_reference(0.0)
     for k, t in enumerate([0.0, 0.025, np.nan, 0.075, 0.1, 0.1]):
         ctrl.observe(q, np.r_[np.nan, qd[1:]] if k == 3 else qd, np.ones(3), np.float32(t) if k == 1 else t)
-    assert ctrl.n_online_samples + ctrl.n_online_rejected == 4 and ctrl.n_online_rejected >= 1
+    assert ctrl.n_bad_measurements == 2  # the NaN time and the repeated 0.1
+    # the four readings used make two samples, both with the NaN velocity of the third in them
+    assert ctrl.n_online_samples == 0 and ctrl.n_online_rejected == 2
+
+
+@pytest.mark.parametrize("online", [None, 4])
+def test_observe_skips_readings_whose_time_does_not_increase(fitted_planar_model, arm3_rbd, online) -> None:
+    """A repeated, stale or out-of-order reading gave q̈ from a time difference of zero or of the wrong sign (a
+    repeated stamp: twice the true q̈; one 2 ms back: the wrong sign), and that sample entered the gate and the
+    window. Now such a reading is not used: the controller goes on as a twin that never got it (samples, gate
+    errors, torques), and counts it in n_bad_measurements."""
+    ctrl = FeedforwardController(copy.deepcopy(fitted_planar_model), 10.0, 1.0, np.full(3, 50.0), fallback=arm3_rbd,
+                                 gate=True, online=online, online_every=1)
+    twin = copy.deepcopy(ctrl)
+    for c in (ctrl, twin):
+        c.start(None, {})
+
+    def reading(k: int):
+        t = 0.025 * k
+        q, qd, _ = planar_reference(t)
+        return q, qd, np.full(3, 0.5 + 0.1 * k), t
+
+    for k in range(12):
+        q, qd, tau, t = reading(k)
+        np.testing.assert_array_equal(ctrl(t, q, qd, planar_reference), twin(t, q, qd, planar_reference))
+        for c in (ctrl, twin):
+            c.observe(q, qd, tau, t)
+        if k in (3, 7):
+            ctrl.observe(q, qd + 0.5, tau, t)  # the same time again (a stale driver message), other values
+        if k == 9:
+            ctrl.observe(*reading(k - 1)[:3], t - 0.002)  # out of order
+    assert ctrl.n_bad_measurements == 3 and twin.n_bad_measurements == 0
+    assert ctrl.n_innovation_samples == twin.n_innovation_samples == 10
+    assert ctrl.n_online_samples == twin.n_online_samples == (10 if online else 0)
+    np.testing.assert_array_equal(ctrl.innovation_errors[1], twin.innovation_errors[1])
+
+
+@pytest.mark.parametrize("t", [np.nan, np.inf, -np.inf])
+def test_a_tick_at_a_non_finite_time_names_t_and_changes_nothing(fitted_planar_model, arm3_rbd, t) -> None:
+    """A tick's time selects the reference: a NaN time blamed the reference ('q_d at t=nan must be finite'), and
+    with a reference that ignores t it was taken. Now ``ValueError`` names t, in a tick and in feedforward()."""
+    ctrl = FeedforwardController(copy.deepcopy(fitted_planar_model), 10.0, 1.0, np.full(3, 50.0), fallback=arm3_rbd,
+                                 gate=True, online=4)
+    ctrl.start(None, {})
+    q, qd, _ = planar_reference(0.1)
+    ctrl(0.1, q, qd, planar_reference)
+    twin = copy.deepcopy(ctrl)
+    fixed = planar_reference(0.2)
+    for ref in (planar_reference, lambda _: fixed):
+        with pytest.raises(ValueError, match=r"^t: expected a finite time \(s\), got"):
+            ctrl(t, q, qd, ref)
+        with pytest.raises(ValueError, match=r"^t: expected a finite time \(s\), got"):
+            ctrl.feedforward(t, ref)
+    assert (ctrl.n_fallbacks, ctrl.n_bad_measurements) == (twin.n_fallbacks, twin.n_bad_measurements)
+    np.testing.assert_array_equal(ctrl(0.125, q, qd, planar_reference), twin(0.125, q, qd, planar_reference))
+
+
+def test_the_model_is_read_only(fitted_planar_model, arm3_rbd) -> None:
+    """Assigning another model to a gated controller was taken silently, but its gate stayed bound to the old
+    model, which went on supplying the feedforward (the name said the new one). The model is now read-only, with
+    a message that says what to do; the controller is unchanged."""
+    from cascgp.models import make_model
+
+    ctrl = FeedforwardController(fitted_planar_model, 10.0, 1.0, np.full(3, 50.0), fallback=arm3_rbd, gate=True)
+    for other in (copy.deepcopy(fitted_planar_model), make_model("np-inward", 3), None):
+        with pytest.raises(AttributeError, match=r"^model: read-only .* build a new FeedforwardController"):
+            ctrl.model = other
+    assert ctrl.model is fitted_planar_model
+    for copied in (copy.deepcopy(ctrl), pickle.loads(pickle.dumps(ctrl))):
+        assert copied.model is not None and copied.name == ctrl.name

@@ -203,6 +203,31 @@ def test_a_sample_refused_by_one_joint_changes_no_joint(path: str) -> None:
     np.testing.assert_array_equal(model.predict_one_var(*query)[1], twin.predict_one_var(*query)[1])
 
 
+@pytest.mark.parametrize("path", ["numpy", "compiled"])
+def test_an_sp_sample_whose_rigid_body_torque_is_huge_is_refused(path: str) -> None:
+    """An SP model's online target is the measured torque minus the rigid-body torque: a finite but absurd
+    velocity (a sensor fault) makes that torque huge, and the target is held to the fitted targets' rule
+    (squares must not overflow). Such samples entered the window and turned later predictions into NaN; now
+    they are refused naming ``tau`` and change nothing, and predictions stay finite."""
+    arm = make_arm(2)
+    d = sinusoid_data(arm, 3.0, 10.0, seed=1)
+    model = make_model("sp-inward", 2, arm, gp_config=GPFitConfig(n_restarts=1, max_iter=20)).fit(d)
+    model.start_online(window=5)
+    _use_path(model, path)
+    query = (d.q[1], d.qd[1], d.qdd[1])
+    ref = model.predict_one(*query)
+    qd = d.qd[0] + np.array([0.0, 1e153])  # finite, within the inputs' own rule; its Coriolis torque is ~1e305
+    assert not np.abs(arm.inverse_dynamics(d.q[0], qd, d.qdd[0])).max() < 1e200
+    for k in range(2):
+        with pytest.raises(ValueError, match=r"^tau \(minus the rigid-body torque: the sample's target\): values too "
+                                             r"large"):
+            model.add_sample(d.q[0] + 0.01 * k, qd, d.qdd[0], d.tau[0])
+    assert model.n_online == 0
+    np.testing.assert_array_equal(model.predict_one(*query), ref)
+    model.add_sample(d.q[0], d.qd[0], d.qdd[0], d.tau[0])  # a good sample still enters
+    assert model.n_online == 1 and np.isfinite(model.predict_one(*query)).all()
+
+
 @pytest.mark.parametrize("how", ["deepcopy", "pickle"])
 def test_a_copied_window_runs_on_its_own_arrays(how: str) -> None:
     """The compiled paths gather the window's arrays once; a copy (``deepcopy``, or pickled and loaded) gathers

@@ -381,7 +381,8 @@ class CascadedGPModel:
         :meth:`predict` to round-off (~1e-12), except while an online window is open (:meth:`start_online`): then
         it includes the online samples, which :meth:`predict` does not. Inputs are checked for shape and finiteness
         (``ValueError``). ``rbd_torque`` (SP models, optional): ``self.rbd.inverse_dynamics(q, qd, qdd)`` when the
-        caller has it already (a gated controller's nominal torque), so that it is not computed twice."""
+        caller has it already (a gated controller's nominal torque), so that it is not computed twice. Not
+        thread-safe: the query is written into the model's own buffer, so threads need a model each."""
         f, tau_rbd = load_query(self, q, qd, qdd, q_hist, rbd_torque)
         return f.mean(tau_rbd)
 

@@ -370,6 +370,11 @@ class OnlineWindow:
         S = model._states(arr["q"][None], arr["qd"][None], arr["qdd"][None], None).reshape(-1)
         target = arr["tau"] - (model._rbd_torque(arr["q"], arr["qd"], arr["qdd"]) if model.parametric == "sp"
                                else 0.0)
+        if not np.abs(target).max() < _SMALL:  # an SP target: a huge velocity's rigid-body torque can overflow
+            if not np.isfinite(target).all():
+                raise ValueError(f"tau: the sample's target (tau minus the rigid-body torque) is not finite: "
+                                 f"{target!r}")
+            check_scale(np.stack([target, np.zeros(N)]), "tau (minus the rigid-body torque: the sample's target)")
         v = np.concatenate([S, arr["tau"]])  # each joint's input: its state columns, then the neighbour's torque
         self.add([v[c] for c in self._cols], target)
 
