@@ -45,7 +45,7 @@ def test_np_standard_sarcos_small(split):
 def test_np_standard_sarcos_300(split):
     """The issue's criterion: mean nRMSE over the 7 joints <= 0.06 (2 restarts, as GPy).
     13-39 s on the shared 2-core machine (one torch thread; about 9 s of CPU), hence slow; measured 0.0361 0.0657 0.0656
-    0.0225 0.0314 0.1543 0.0360, mean 0.0588 (with the default 10 restarts: mean 0.0598)."""
+    0.0225 0.0314 0.1543 0.0360, mean 0.0588 (with the default 10 restarts: mean 0.0600)."""
     tr, te = split
     e = _score(tr, te, 300, 2)
     print("SARCOS np-standard n=300 nRMSE per joint:", np.round(e, 4), "mean", round(float(e.mean()), 4))
