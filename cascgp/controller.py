@@ -16,7 +16,8 @@ raises any exception (kept in :attr:`FeedforwardController.last_model_error`), t
 controller falls back to the rigid-body feedforward (or to zero when no RBD model
 is given) and counts the event in :attr:`FeedforwardController.n_fallbacks`. A
 non-finite measurement contributes no feedback on that joint (counted in
-:attr:`FeedforwardController.n_bad_measurements`).
+:attr:`FeedforwardController.n_bad_measurements`, as are the readings :meth:`FeedforwardController.observe` cannot
+use).
 
 Threads: a controller and its model belong to one thread. The model's single-query paths write into buffers of
 the model, so two threads must not query one model at once (two controllers, or a monitor calling
@@ -205,6 +206,7 @@ class FeedforwardController:
         self.online = None if online is None else int(online)
         self.online_every = online_every
         self._recent: list[tuple[float, np.ndarray, np.ndarray, np.ndarray]] = []
+        self._t_received = -math.inf  # the time of the last reading observe() got (used or not)
         self._n_observed = 0
         self.n_online_samples = 0
         self.n_online_rejected = 0
@@ -381,7 +383,7 @@ class FeedforwardController:
         info, are not used): zero the counters; with ``online``, open a fresh online window on the model (samples
         of earlier episodes enter only through retraining)."""
         self.reset_counters()
-        self._recent, self._n_observed = [], 0
+        self._recent, self._n_observed, self._t_received = [], 0, -math.inf
         self.n_online_samples = self.n_online_rejected = 0
         self.last_gate, self.last_model_error = None, None
         if self.online:
@@ -403,19 +405,28 @@ class FeedforwardController:
         started at that tick (reported now). A gate rule that observes (the innovation rule) gets the sample
         first (an error it raises is kept in ``last_model_error``); with ``online`` it then enters the model. A
         sample the model refuses (non-finite values, a sensor fault or an unstable step's) is counted in
-        ``n_online_rejected``, never raised. A reading whose time is not finite or not after the previous one's (a
-        stale, repeated or out-of-order reading, which would give a wrong q̈) is not used and is counted in
-        ``n_bad_measurements``. Malformed arguments (``q``/``qd``/``tau`` not real ``(N,)`` arrays, ``t`` not a
-        real number) raise ``TypeError``/``ValueError`` naming them and change nothing."""
+        ``n_online_rejected``, never raised. A reading whose time is not after the previous reading's (a stale,
+        repeated or out-of-order reading, which would give a wrong q̈) or not finite is not used and is counted in
+        ``n_bad_measurements``; no sample spans a non-finite time, and one used after a jump back in time starts
+        a new run of readings (a bogus time far ahead costs a few samples, not the episode). Malformed arguments
+        (``q``/``qd``/``tau`` not real ``(N,)`` arrays, ``t`` not a real number) raise ``TypeError``/``ValueError``
+        naming them and change nothing."""
         check_time(t, finite=False)  # a reading's NaN time is a sensor fault, as its NaN values
         t = float(t)
         q, qd, tau = measured("q", q, self.dof), measured("qd", qd, self.dof), measured("tau", tau, self.dof)
         rule = self.gate_rule if self.gate_rule is not None and self.gate_rule.observes else None
         if not self.online and rule is None:
             return
-        if not math.isfinite(t) or (self._recent and not t > self._recent[-1][0]):
-            self.n_bad_measurements += 1  # a reading without a usable time (stale, repeated, out of order): no q̈
+        if not self._t_received < t < math.inf:  # not finite, or not after the last reading (stale, out of order)
+            self.n_bad_measurements += 1
+            if math.isfinite(t):
+                self._t_received = t
+            else:
+                self._recent = []  # a gap: no sample spans it (as the episode runner starts a new segment)
             return
+        self._t_received = t
+        if self._recent and not t > self._recent[-1][0]:
+            self._recent = []  # after a time jump (back, or a bogus one ahead): a new run of readings
         self._recent = (self._recent + [(t, q.copy(), qd.copy(), tau.copy())])[-3:]
         self._n_observed += 1
         if self._n_observed % self.online_every or len(self._recent) < 3:

@@ -1,6 +1,6 @@
 """The argument checks of :class:`cascgp.controller.FeedforwardController`: gains, times, measurements and the
-reference, each refused with an error naming it (the controller's hot path takes the usual case first and calls
-these for everything else)."""
+reference, each refused with an error naming it. The tick calls them every time: each takes the usual case (a
+float64 array of the right shape) first, at the cost of a few comparisons."""
 
 from __future__ import annotations
 
@@ -34,11 +34,15 @@ def as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
 
 
 def check_time(t: Any, finite: bool = True) -> None:
-    """``TypeError`` unless ``t`` is a real number; with ``finite``, ``ValueError`` unless it is finite (a time in
-    s: the reference cannot be evaluated at NaN or inf)."""
+    """``TypeError`` unless ``t`` is a real number, ``ValueError`` if it is beyond float64's range or, with
+    ``finite``, not finite (a time in s: the reference cannot be evaluated at NaN or inf)."""
     if isinstance(t, (bool, np.bool_)) or not isinstance(t, (int, float, np.integer, np.floating)):
         raise TypeError(f"t: expected a real number (s), got {type(t).__name__}")
-    if finite and not math.isfinite(t):
+    try:
+        f = float(t)
+    except OverflowError:  # an int beyond float64's range
+        raise ValueError(f"t: expected a time (s) within float64's range, got {t!r}") from None
+    if finite and not math.isfinite(f):
         raise ValueError(f"t: expected a finite time (s), got {t!r}")
 
 

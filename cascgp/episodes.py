@@ -124,10 +124,11 @@ def run_episode(
     ``env``, ``controller``, ``smoothing``, ``meta`` and ``callback`` are checked before the reset (``TypeError`` /
     ``ValueError`` naming them: the env's observation space must hold ``[q, qd, tau, t]`` of the controller's
     joints, its actions one per joint). A tick whose
-    measured ``t``, ``q``, ``qd`` or torque is not finite (a sensor fault; the controller copes with it) is left out
-    of the record, which starts a new segment after it, and so is a run of good ticks between faults too short to
-    differentiate (under 3 ticks, or the ``smoothing`` window); ``data.meta["n_dropped_ticks"]`` counts them. The
-    errors are computed on the recorded ticks.
+    measured ``q``, ``qd`` or torque is not finite (a sensor fault; the controller copes with it) is left out
+    of the record (so is one with a non-finite ``t``, which a :class:`~cascgp.controller.FeedforwardController`
+    refuses, naming ``t``), which starts a new segment after it, and so is a run of good ticks between faults too
+    short to differentiate (under 3 ticks, or the ``smoothing`` window); ``data.meta["n_dropped_ticks"]`` counts
+    them. The errors are computed on the recorded ticks.
     """
     if not all(hasattr(env, a) for a in ("reset", "step", "unwrapped")):
         raise TypeError(f"env: expected a Gymnasium environment, got {type(env).__name__}")

@@ -436,7 +436,8 @@ class CascadedGPModel:
     def add_sample(self, q: Any, qd: Any, qdd: Any, tau: Any) -> None:
         """Add one measured sample ``(q, qd, qdd, tau)``, each (N,), to every joint (see :meth:`start_online`).
         Each joint's GP input uses the *measured* neighbour torque and its target is the measured torque (minus
-        the RBD torque for SP), as in training. Rejects non-finite values (``ValueError``), changing nothing."""
+        the RBD torque for SP), as in training. Rejects non-finite values and values too large to normalise (an SP
+        target too: the measured torque minus the RBD torque), with ``ValueError``, changing nothing."""
         if getattr(self, "_online", None) is None:
             raise RuntimeError(f"model {self.name!r}: call start_online() before add_sample()")
         self._online.add_measured(q, qd, qdd, tau)

@@ -353,7 +353,8 @@ class OnlineWindow:
         """Add one measured sample ``(q, qd, qdd, tau)``, each (N,)
         (:meth:`~cascgp.models.CascadedGPModel.add_sample`): each joint's input holds its states and the
         *measured* neighbour torque, its target the measured torque (minus the RBD torque for SP models), as in
-        training. ``ValueError`` for a non-finite value, changing nothing."""
+        training. ``ValueError`` for a non-finite value, or one (or an SP target) too large to normalise, changing
+        nothing."""
         model = self.model
         N = model.dof
         arr = {}
@@ -370,7 +371,7 @@ class OnlineWindow:
         S = model._states(arr["q"][None], arr["qd"][None], arr["qdd"][None], None).reshape(-1)
         target = arr["tau"] - (model._rbd_torque(arr["q"], arr["qd"], arr["qdd"]) if model.parametric == "sp"
                                else 0.0)
-        if not np.abs(target).max() < _SMALL:  # an SP target: a huge velocity's rigid-body torque can overflow
+        if model.parametric == "sp" and not np.abs(target).max() < _SMALL:  # a huge velocity's rigid-body torque
             if not np.isfinite(target).all():
                 raise ValueError(f"tau: the sample's target (tau minus the rigid-body torque) is not finite: "
                                  f"{target!r}")

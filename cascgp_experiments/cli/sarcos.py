@@ -5,8 +5,9 @@ Usage::
     cascgp sarcos --sarcos PATH/ias_sarcos_data.mat --out out/sarcos
     ... [--workers N | --ray ADDRESS]     # parallel fits (default: every core); same numbers
 
-The SARCOS block of ``cascgp study`` (its preset's grid, subsets, restarts and seed: ``--quick`` the quick
-preset's; the pooled tests included); data, subsets and models: :mod:`cascgp_experiments.study` (SARCOS block).
+The SARCOS block of ``cascgp study`` (its preset's grid, subsets, restarts, seed and fit-audit fraction:
+``--quick`` the quick preset's; the pooled tests included); data, subsets and models:
+:mod:`cascgp_experiments.study` (SARCOS block).
 Writes ``<out>/sarcos.json`` (per model the nRMSE of every subset, grid point and joint, their summaries, the
 pooled tests, and ``meta``: the command, versions and machine), ``sarcos_table.md`` (each model's nRMSE per grid
 point, median over subsets, mean over the 7 joints; also printed), ``fig_sarcos.png``, ``curves_sarcos.csv`` and
