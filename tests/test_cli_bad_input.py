@@ -68,3 +68,30 @@ def test_fit_names_a_torque_column_too_large_to_normalise(files: dict[str, Path]
     err = _refused(fit_main, ["--data", str(files["root"] / "big.csv"), "--model", "np-standard", "--restarts", "1",
                               "--out", str(files["root"] / "big.npz")], capsys)
     assert "big.csv: column 'tau2': values too large to normalise: largest magnitude" in err, err
+
+
+def test_fit_too_big_for_its_memory_says_how_many_rows_fit(files: dict[str, Path], capsys) -> None:
+    """A fit over the memory limit was refused in the library's terms ('raise GPFitConfig.max_batch_bytes', which
+    the command could not set): it now names --max-samples, the rows that fit and --max-memory, which sets the
+    limit; a fit within the raised limit runs."""
+    from cascgp.gp import estimate_fit_bytes
+
+    out = files["root"] / "big.npz"
+    limit_gib = 0.13  # 133 MiB: the estimate's 128 MiB of overhead and a few (n, n) matrices
+    err = _refused(fit_main, ["--data", str(files["train"]), "--model", "np-standard", "--restarts", "1",
+                              "--max-samples", "200", "--max-memory", str(limit_gib), "--out", str(out)], capsys)
+    rows = int(err.split("at most ")[1].split(" rows")[0])
+    # np-standard on 2 joints: 2 GPs of 6 inputs (q, qd, qdd of both joints), one start
+    assert 0 < rows < 200 and estimate_fit_bytes(rows, 6, 2, 1) <= limit_gib * 2**30 < estimate_fit_bytes(
+        rows + 1, 6, 2, 1)
+    assert err.startswith("cascgp fit: error: --max-samples 200: fitting 200 rows needs about ") and \
+        err.endswith(f"over --max-memory {limit_gib:g} GiB; at most {rows} rows fit within it: lower --max-samples "
+                     "or raise --max-memory"), err
+    assert not out.exists()
+    assert fit_main(["--data", str(files["train"]), "--model", "np-standard", "--restarts", "1", "--max-samples",
+                     str(rows), "--max-memory", str(limit_gib), "--out", str(out)]) == 0 and out.is_file()
+    for bad in ("0", "-1", "nan"):
+        with pytest.raises(SystemExit):
+            fit_main(["--data", str(files["train"]), "--model", "np-standard", "--max-memory", bad, "--out",
+                      str(out)])
+        assert f"--max-memory: expected a positive number of GiB, got {float(bad)}" in capsys.readouterr().err

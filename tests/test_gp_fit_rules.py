@@ -131,6 +131,29 @@ def test_memory_guard_refuses_over_limit_with_clear_message():
         GPFitConfig(max_batch_bytes=0)
 
 
+def test_memory_guard_says_what_fits_and_knows_the_machine(monkeypatch):
+    """The refusal says how many points fit within the limit (the largest n whose estimate is within it), and a
+    limit raised beyond the machine's memory does not let a fit start that the machine cannot hold (a 75 GiB
+    estimate on a 23 GiB machine ran until the kernel killed it)."""
+    import cascgp.gp.memory as memory
+
+    cfg = GPFitConfig(n_restarts=3, max_batch_bytes=2 * 1024**3)
+    with pytest.raises(memory.FitMemoryError) as exc:
+        plan_chunk(cfg, 4000, 9, 3)
+    e = exc.value
+    assert isinstance(e, ValueError) and not e.machine and e.n == 4000 and e.limit == cfg.max_batch_bytes
+    assert estimate_fit_bytes(e.max_n, 9, 3, 3) <= e.limit < estimate_fit_bytes(e.max_n + 1, 9, 3, 3)
+    assert f"at most n={e.max_n} points fit within it" in str(e) and "raise GPFitConfig.max_batch_bytes" in str(e)
+    monkeypatch.setattr(memory, "physical_memory_bytes", lambda: 1024**3)  # a 1 GiB machine
+    with pytest.raises(memory.FitMemoryError, match=r"over this machine's 1024 MiB of memory \(GPFitConfig"
+                                                    r"\.max_batch_bytes allows 2048 MiB\)") as exc:
+        plan_chunk(cfg, 3000, 9, 3)  # within max_batch_bytes, not within the machine
+    assert exc.value.machine and exc.value.limit == 1024**3
+    assert plan_chunk(cfg, exc.value.max_n, 9, 3) >= 1
+    monkeypatch.setattr(memory, "physical_memory_bytes", lambda: None)  # a system that does not say
+    assert plan_chunk(cfg, 3000, 9, 3) >= 1
+
+
 def test_chunked_fit_equals_unchunked_to_roundoff():
     rng = np.random.default_rng(1)
     n, d, B, R = 60, 3, 3, 4

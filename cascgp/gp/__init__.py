@@ -49,8 +49,10 @@ value is ignored). Each batch member runs its own L-BFGS (:mod:`cascgp.gp.lbfgs`
 
 from cascgp.gp.bank import GPBank
 from cascgp.gp.config import GPFitConfig
-from cascgp.gp.likelihood import estimate_fit_bytes, nll_and_grad, plan_chunk
+from cascgp.gp.likelihood import nll_and_grad
+from cascgp.gp.memory import FitMemoryError, estimate_fit_bytes, plan_chunk
 from cascgp.gp.posterior import GPPosterior
 from cascgp.gp.state import STATE_VERSION
 
-__all__ = ["GPFitConfig", "GPBank", "GPPosterior", "nll_and_grad", "estimate_fit_bytes", "plan_chunk", "STATE_VERSION"]
+__all__ = ["GPFitConfig", "GPBank", "GPPosterior", "nll_and_grad", "estimate_fit_bytes", "plan_chunk", "FitMemoryError",
+           "STATE_VERSION"]

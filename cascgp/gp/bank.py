@@ -2,9 +2,9 @@ r"""The GP bank: ``B`` independent exact GPs (one per output) fitted together in
 
 :class:`GPBank` owns the fit driver (normalise, build the starts, optimise every start of every GP in one batch,
 keep the best start per GP, cache the factors) and batched prediction. The pieces it drives live next to it:
-:mod:`~cascgp.gp.likelihood` (NLL and gradient), :mod:`~cascgp.gp.lbfgs` (batched optimiser),
-:mod:`~cascgp.gp.restarts` (starts and early stopping), :mod:`~cascgp.gp.posterior` (factors, NumPy posterior),
-:mod:`~cascgp.gp.state` (save/load); the fit driver and batched prediction, which share one state, stay here.
+:mod:`~cascgp.gp.likelihood` (NLL and gradient), :mod:`~cascgp.gp.memory` (the memory plan),
+:mod:`~cascgp.gp.lbfgs` (batched optimiser), :mod:`~cascgp.gp.restarts` (starts and early stopping),
+:mod:`~cascgp.gp.posterior` (factors, NumPy posterior), :mod:`~cascgp.gp.state` (save/load).
 
 Normalisation
 -------------
@@ -41,7 +41,8 @@ from cascgp.gp.checks import as_list, check_matrix, check_scale, check_vector, j
 from cascgp.gp.config import GPFitConfig, noise_var
 from cascgp.gp.kernels import get_kernel, scaled_sqdist
 from cascgp.gp.lbfgs import LBFGSOptions, minimize_batched
-from cascgp.gp.likelihood import DTYPE, fit_threads, nll_and_grad, plan_chunk
+from cascgp.gp.likelihood import DTYPE, fit_threads, nll_and_grad
+from cascgp.gp.memory import plan_chunk
 from cascgp.gp.posterior import ZCLIP, Factors, GPPosterior, compute_factors
 from cascgp.gp.restarts import initial_thetas, make_pruner, warm_theta
 from cascgp.gp.state import BankData, bank_from_state, bank_state
@@ -87,8 +88,7 @@ class _Objective:
 
 
 def _settings_of(config: GPFitConfig, b: int) -> tuple[GPFitConfig, Any]:
-    """What decides GP ``b``'s fit besides its data and its place in the bank: the settings, with a per-GP noise
-    floor reduced to GP ``b``'s."""
+    """What decides GP ``b``'s fit besides its data and place in the bank: the settings, its own noise floor."""
     t = config.noise_floor_target
     return replace(config, noise_floor_target=None), (t[b] if isinstance(t, tuple) and b < len(t) else t)
 

@@ -42,10 +42,11 @@ inverse 2.8, gradient 1.2, optimiser 0.1), against 22.8 ms for the earlier all-b
 
 Memory
 ------
-:func:`estimate_fit_bytes` bounds the memory of a fit from ``(starts, outputs, n, d)`` before anything large is
-allocated: three ``(chunk, n, n)`` work matrices, the ``(B, n, n)`` factors kept for prediction and the data.
-:func:`plan_chunk` picks the block size within ``GPFitConfig.max_batch_bytes`` (default 2 GiB) and raises a
-``ValueError`` naming ``max_batch_bytes`` when even one start at a time does not fit. The batch of starts never
+:func:`cascgp.gp.memory.estimate_fit_bytes` bounds the memory of a fit from ``(starts, outputs, n, d)`` before
+anything large is allocated: three ``(chunk, n, n)`` work matrices, the ``(B, n, n)`` factors kept for prediction and
+the data. :func:`cascgp.gp.memory.plan_chunk` picks the block size within ``GPFitConfig.max_batch_bytes`` (default
+2 GiB) and raises :class:`cascgp.gp.memory.FitMemoryError` (a ``ValueError`` naming ``max_batch_bytes``) when even
+one start at a time does not fit. The batch of starts never
 needs ``(starts, n, n)`` at once, so memory grows as :math:`n^2 (B + 3)` and not with the number of starts; results
 do not depend on the block size (tested to round-off).
 
@@ -78,10 +79,10 @@ import numpy as np
 import torch
 from scipy.linalg.lapack import dpotrf as _dpotrf, dpotri as _dpotri, dpotrs as _dpotrs
 
-from cascgp.gp.config import GPFitConfig
 from cascgp.gp.kernels import get_kernel
+from cascgp.gp.memory import CACHE_CHUNK_BYTES
 
-__all__ = ["nll_and_grad", "estimate_fit_bytes", "plan_chunk", "blas_threads", "fit_threads", "PROFILE", "DTYPE",
+__all__ = ["nll_and_grad", "blas_threads", "fit_threads", "PROFILE", "DTYPE",
            "LOG2PI"]
 
 #: Every GP computation is float64.
@@ -150,12 +151,6 @@ def fit_threads(k: int | None) -> Iterator[None]:
     finally:
         torch.set_num_threads(prev)
 
-
-
-# Cache-sized chunks: the element-wise kernel work runs on (c, n, n) blocks of about this many bytes per tensor
-# (measured, 1 thread: one (60, 500, 500) batch per op was 2.2x slower per evaluation than member-sized blocks, the
-# whole batch being memory-bandwidth bound; at n = 300 and 500 one member per block was 6 % faster than 5).
-_CACHE_CHUNK_BYTES = 1 << 20
 
 
 def _potrf_jitter(kk: torch.Tensor, K: torch.Tensor, sf2: float, sn2: float,
@@ -243,7 +238,7 @@ def nll_and_grad(
     if mask is None:
         mask = torch.ones(k_, D, dtype=DTYPE, device=X.device)
     if chunk is None:
-        chunk = max(1, _CACHE_CHUNK_BYTES // (8 * n * n))
+        chunk = max(1, CACHE_CHUNK_BYTES // (8 * n * n))
     chunk = min(chunk, max(k_, 1))
     prof = PROFILE
     clock = time.perf_counter
@@ -379,38 +374,3 @@ def _block_gradient_rows(grad: np.ndarray, rows: np.ndarray, A: torch.Tensor, Bu
                        axis=1)
     g[~np.all(np.isfinite(g), axis=1)] = 0.0
     grad[rows] = g
-
-
-# ----------------------------------------------------------------------------------------------------------------
-# memory
-
-
-def estimate_fit_bytes(n: int, d: int, n_gps: int, n_starts: int, chunk: int = 1) -> int:
-    """Bytes :meth:`cascgp.gp.GPBank.fit` needs beyond the interpreter, before fitting (a deliberately high estimate).
-
-    ``3 * chunk`` work matrices ``(n, n)`` of the batched evaluation (:func:`nll_and_grad`), the stored factor of
-    every GP ``(n_gps, n, n)`` plus twelve ``(n, n)`` for the temporaries of the final factors and for allocator
-    fragmentation (freed ``(n, n)`` blocks are not always returned to the system), the data copies (normalised
-    inputs of every start, ``(n_gps * n_starts, n, d)``, twice), all float64, and 128 MiB of fixed overhead.
-    Measured (``bench_cascgp --scaling``, 6 GPs x 10 starts, d = 18, two runs): peak RSS growth 40 / 68 /
-    161-187 / 565-703 MiB at n = 250 / 500 / 1000 / 2000.
-    """
-    return 8 * (3 * chunk * n * n + (n_gps + 12) * n * n + 2 * n_gps * n_starts * n * d + 6 * n_gps * n * d) \
-        + (128 << 20)
-
-
-def plan_chunk(cfg: GPFitConfig, n: int, d: int, n_gps: int) -> int:
-    """Members per evaluation block: cache-sized, shrunk to keep :func:`estimate_fit_bytes` within
-    ``cfg.max_batch_bytes``; ``ValueError`` naming ``max_batch_bytes`` when even one member does not fit."""
-    chunk = max(1, _CACHE_CHUNK_BYTES // (8 * n * n))
-    need1 = estimate_fit_bytes(n, d, n_gps, cfg.n_restarts, 1)
-    if need1 > cfg.max_batch_bytes:
-        raise ValueError(
-            f"max_batch_bytes: fitting {n_gps} GPs x {cfg.n_restarts} starts on n={n} points (d={d}) needs about "
-            f"{need1 / 2**20:.0f} MiB even one start at a time (3 + {n_gps + 12} matrices of {n}x{n} float64, the "
-            f"data and 128 MiB of fixed overhead), over GPFitConfig.max_batch_bytes = "
-            f"{cfg.max_batch_bytes / 2**20:.0f} MiB; raise GPFitConfig.max_batch_bytes, or use fewer training points "
-            "(memory grows as n^2)")
-    while chunk > 1 and estimate_fit_bytes(n, d, n_gps, cfg.n_restarts, chunk) > cfg.max_batch_bytes:
-        chunk -= 1
-    return chunk

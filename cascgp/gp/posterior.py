@@ -18,6 +18,17 @@ __all__ = ["GPPosterior", "Factors", "compute_factors", "robust_cholesky", "ZCLI
 #: Scaled query inputs (lengthscales applied) are clipped to +-ZCLIP in prediction, so that no squared distance
 #: overflows: the output is finite for any finite input (far beyond the data, where the kernel is 0 anyway).
 ZCLIP = 1e6
+#: Query rows per block are chosen so that each (rows, n) float64 matrix of a prediction holds at most this many
+#: bytes: memory stays fixed however many rows are queried (a 200,000-row log against n = 2000 needed 13 GB).
+BLOCK_BYTES = 64 * 2**20
+
+
+def _row_blocks(m: int, n: int) -> list[slice]:
+    """Slices of ``m`` query rows whose (rows, n) matrices each hold at most :data:`BLOCK_BYTES` (at least 256 rows,
+    a multiple of 256: BLAS then treats the rows of a block as those of the whole, whose results equal a
+    computation of all rows at once to round-off)."""
+    rows = max(256, BLOCK_BYTES // (8 * max(n, 1)) // 256 * 256)
+    return [slice(i, min(i + rows, m)) for i in range(0, m, rows)] or [slice(0, 0)]
 
 
 @dataclass(frozen=True)
@@ -50,8 +61,17 @@ class GPPosterior:
     jitter: float = 0.0
 
     def predict(self, x: np.ndarray, return_var: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-        """Reference NumPy prediction: ``x`` ``(m, d)`` or ``(d,)`` -> mean ``(m,)``, latent variance ``(m,)``."""
+        """Reference NumPy prediction: ``x`` ``(m, d)`` or ``(d,)`` -> mean ``(m,)``, latent variance ``(m,)``,
+        in blocks of rows (fixed memory for any ``m``: :data:`BLOCK_BYTES`)."""
         x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        blocks = _row_blocks(x.shape[0], self.Z.shape[0])
+        if len(blocks) > 1:
+            parts = [self._predict_block(x[b], return_var) for b in blocks]
+            return (np.concatenate([p[0] for p in parts]),
+                    np.concatenate([p[1] for p in parts]) if return_var else None)
+        return self._predict_block(x, return_var)
+
+    def _predict_block(self, x: np.ndarray, return_var: bool) -> tuple[np.ndarray, np.ndarray | None]:
         z = np.clip((x - self.x_mean) / self.x_scale, -ZCLIP, ZCLIP)
         r2 = (z * z).sum(1)[:, None] + (self.Z * self.Z).sum(1)[None, :] - 2.0 * z @ self.Z.T
         ks = self.signal_var * get_kernel(self.kernel).value(r2)
@@ -71,9 +91,12 @@ class GPPosterior:
         x = np.atleast_2d(np.asarray(x, dtype=np.float64))
         if not np.isfinite(self.x_scale[col]):
             return np.zeros(x.shape[0])
-        z, kprime = self._kernel_slope(x)
-        dk = kprime * (2.0 * (z[:, col, None] - self.Z[None, :, col]))
-        return self.y_std * self.signal_var * (dk @ self.alpha) / self.x_scale[col]
+        out = np.empty(x.shape[0])
+        for b in _row_blocks(x.shape[0], self.Z.shape[0]):  # fixed memory for any number of rows
+            z, kprime = self._kernel_slope(x[b])
+            dk = kprime * (2.0 * (z[:, col, None] - self.Z[None, :, col]))
+            out[b] = self.y_std * self.signal_var * (dk @ self.alpha) / self.x_scale[col]
+        return out
 
     def _kernel_slope(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Normalised queries ``z`` (m, d) and :math:`k'(r^2)` (m, n) against the training inputs."""
@@ -91,9 +114,12 @@ class GPPosterior:
             \Big(z_c \sum_k k'(r^2_k)\,\alpha_k - \sum_k k'(r^2_k)\,\alpha_k Z_{kc}\Big)
 
         (two matrix products; 0 for ignored columns, whose ``x_scale`` is ``inf``)."""
-        z, kprime = self._kernel_slope(np.atleast_2d(np.asarray(x, dtype=np.float64)))
-        w = kprime * self.alpha[None, :]
-        g = z * w.sum(1)[:, None] - w @ self.Z
+        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        g = np.empty(x.shape)
+        for b in _row_blocks(x.shape[0], self.Z.shape[0]):  # fixed memory for any number of rows
+            z, kprime = self._kernel_slope(x[b])
+            w = kprime * self.alpha[None, :]
+            g[b] = z * w.sum(1)[:, None] - w @ self.Z
         return 2.0 * self.y_std * self.signal_var * g / self.x_scale
 
 

@@ -137,6 +137,9 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
                    help="covariance function of every GP: matern52 (the paper's; default), matern32 or rbf")
     p.add_argument("--threads", type=int, default=None,
                    help="torch/BLAS threads during the fit (default: the library's, one thread)")
+    p.add_argument("--max-memory", type=float, default=None, metavar="GIB",
+                   help="memory a fit may use (GiB; default: the library's, 2): a fit whose estimate is over it, or "
+                        "over the machine's memory, is refused before it starts, saying how many rows fit")
     p.add_argument("--seed", type=int, default=0, help="seed of the optimiser's random starts (default 0)")
     a = p.parse_args(argv)
     require_at_least(p, a, 1, "restarts", "threads")
@@ -146,7 +149,7 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
         _fit_config(a).for_fit()
     except ValueError as exc:  # --threads beyond a fit's bound, say
         settings_error(p, exc, {"threads": "--threads", "n_restarts": "--restarts", "seed": "--seed",
-                                "kernel": "--kernel"})
+                                "kernel": "--kernel", "max_batch_bytes": "--max-memory"})
     if a.rate_hz is not None and not (np.isfinite(a.rate_hz) and a.rate_hz > 0):
         p.error(f"--rate-hz: expected a positive rate, got {a.rate_hz}")
     if a.model.startswith("sp-") and a.urdf is None:
@@ -263,18 +266,23 @@ def _training_rows(prog: str, a: argparse.Namespace, model: Any, data: Any) -> t
 
 
 def _fit_config(a: argparse.Namespace) -> Any:
-    """The fit's ``GPFitConfig`` from ``--seed``, ``--restarts``, ``--kernel`` and ``--threads`` (``ValueError``
-    naming a field)."""
+    """The fit's ``GPFitConfig`` from ``--seed``, ``--restarts``, ``--kernel``, ``--threads`` and ``--max-memory``
+    (``ValueError`` naming a field)."""
     from cascgp.gp import GPFitConfig
 
     kw: dict[str, Any] = {"seed": a.seed}
     for option, field in (("restarts", "n_restarts"), ("kernel", "kernel"), ("threads", "threads")):
         if getattr(a, option) is not None:
             kw[field] = getattr(a, option)
+    if a.max_memory is not None:
+        if not (np.isfinite(a.max_memory) and a.max_memory > 0):
+            raise ValueError(f"max_batch_bytes: expected a positive number of GiB, got {a.max_memory}")
+        kw["max_batch_bytes"] = max(1, int(a.max_memory * 2**30))
     return GPFitConfig(**kw)
 
 
 def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
+    from cascgp.gp import FitMemoryError
     from cascgp.models import make_model
     from cascgp.rbd import load_nominal
 
@@ -311,6 +319,12 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     t0 = time.perf_counter()
     try:
         model.fit(data, q_hist=q_hist)
+    except FitMemoryError as exc:  # in the command's terms: which options to change, and to what
+        where = (f"this machine's memory ({exc.limit / 2**30:.1f} GiB)" if exc.machine else
+                 f"--max-memory {exc.limit / 2**30:g} GiB")
+        raise _Fail(f"--max-samples {a.max_samples}: fitting {exc.n} rows needs about {exc.need / 2**20:.0f} MiB "
+                    f"(a high estimate), over {where}; at most {exc.max_n} rows fit within it: lower --max-samples"
+                    f"{'' if exc.machine else ' or raise --max-memory'}") from None
     except ValueError as exc:  # about the log's values: in its terms
         raise _Fail(_in_log_terms(str(exc), a.data)) from None
     log_notes.note(prog, f"fitted in {time.perf_counter() - t0:.1f} s")
