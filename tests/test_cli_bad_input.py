@@ -90,6 +90,11 @@ def test_fit_too_big_for_its_memory_says_how_many_rows_fit(files: dict[str, Path
     assert not out.exists()
     assert fit_main(["--data", str(files["train"]), "--model", "np-standard", "--restarts", "1", "--max-samples",
                      str(rows), "--max-memory", str(limit_gib), "--out", str(out)]) == 0 and out.is_file()
+    assert fit_main(["--data", str(files["train"]), "--model", "np-standard", "--restarts", "1", "--max-samples",
+                     "40", "--max-memory", "1e300", "--out", str(out)]) == 0  # beyond any machine: no limit but its
+    err = _refused(fit_main, ["--data", str(files["train"]), "--model", "np-standard", "--restarts", "1",
+                              "--max-memory", "1e-10", "--out", str(out)], capsys)
+    assert err.endswith("over --max-memory 1e-10 GiB; not even 2 rows fit within it: raise --max-memory"), err
     for bad in ("0", "-1", "nan"):
         with pytest.raises(SystemExit):
             fit_main(["--data", str(files["train"]), "--model", "np-standard", "--max-memory", bad, "--out",

@@ -135,8 +135,11 @@ def test_memory_guard_says_what_fits_and_knows_the_machine(monkeypatch):
     """The refusal says how many points fit within the limit (the largest n whose estimate is within it), and a
     limit raised beyond the machine's memory does not let a fit start that the machine cannot hold (a 75 GiB
     estimate on a 23 GiB machine ran until the kernel killed it)."""
+    import pickle
+
     import cascgp.gp.memory as memory
 
+    monkeypatch.setattr(memory, "physical_memory_bytes", lambda: None)  # the limit alone, whatever this machine
     cfg = GPFitConfig(n_restarts=3, max_batch_bytes=2 * 1024**3)
     with pytest.raises(memory.FitMemoryError) as exc:
         plan_chunk(cfg, 4000, 9, 3)
@@ -144,14 +147,23 @@ def test_memory_guard_says_what_fits_and_knows_the_machine(monkeypatch):
     assert isinstance(e, ValueError) and not e.machine and e.n == 4000 and e.limit == cfg.max_batch_bytes
     assert estimate_fit_bytes(e.max_n, 9, 3, 3) <= e.limit < estimate_fit_bytes(e.max_n + 1, 9, 3, 3)
     assert f"at most n={e.max_n} points fit within it" in str(e) and "raise GPFitConfig.max_batch_bytes" in str(e)
-    monkeypatch.setattr(memory, "physical_memory_bytes", lambda: 1024**3)  # a 1 GiB machine
-    with pytest.raises(memory.FitMemoryError, match=r"over this machine's 1024 MiB of memory \(GPFitConfig"
-                                                    r"\.max_batch_bytes allows 2048 MiB\)") as exc:
-        plan_chunk(cfg, 3000, 9, 3)  # within max_batch_bytes, not within the machine
-    assert exc.value.machine and exc.value.limit == 1024**3
-    assert plan_chunk(cfg, exc.value.max_n, 9, 3) >= 1
-    monkeypatch.setattr(memory, "physical_memory_bytes", lambda: None)  # a system that does not say
+    copy = pickle.loads(pickle.dumps(e))  # crosses processes whole
+    assert (str(copy), copy.need, copy.limit, copy.n, copy.max_n, copy.machine) == (
+        str(e), e.need, e.limit, e.n, e.max_n, e.machine)
+    # a 1 GiB machine: a fit within max_batch_bytes by the high estimate runs if it can (its least need fits) ...
+    monkeypatch.setattr(memory, "physical_memory_bytes", lambda: 1024**3)
+    assert memory.minimum_fit_bytes(3000, 9, 3, 3) < 1024**3 < estimate_fit_bytes(3000, 9, 3, 3)
     assert plan_chunk(cfg, 3000, 9, 3) >= 1
+    # ... and one that cannot is refused, also with the limit raised beyond the machine
+    big = dataclasses.replace(cfg, max_batch_bytes=64 * 1024**3)
+    with pytest.raises(memory.FitMemoryError, match=r"at least \d+ MiB, more than this machine's 1024 MiB of memory "
+                                                    r"\(GPFitConfig\.max_batch_bytes allows 65536 MiB\)") as exc:
+        plan_chunk(big, 6000, 9, 3)
+    assert exc.value.machine and exc.value.limit == 1024**3
+    assert memory.minimum_fit_bytes(exc.value.max_n, 9, 3, 3) <= 1024**3 < memory.minimum_fit_bytes(
+        exc.value.max_n + 1, 9, 3, 3)
+    with pytest.raises(ValueError, match="limit: expected a finite number of bytes"):
+        memory.largest_fit_n(float("inf"), 9, 3, 3)
 
 
 def test_chunked_fit_equals_unchunked_to_roundoff():

@@ -31,7 +31,8 @@ module                          owns
 ==============================  ===============================================================================
 :mod:`cascgp.gp.kernels`        the kernels (one object each: NumPy, torch, in-place fit and fast-path forms)
 :mod:`cascgp.gp.config`         :class:`GPFitConfig` (fit options, validated)
-:mod:`cascgp.gp.likelihood`     NLL and analytic gradient of a batch (:func:`nll_and_grad`), memory planning
+:mod:`cascgp.gp.likelihood`     NLL and analytic gradient of a batch (:func:`nll_and_grad`)
+:mod:`cascgp.gp.memory`         a fit's memory, planned before it starts (:class:`FitMemoryError`)
 :mod:`cascgp.gp.lbfgs`          batched L-BFGS, one optimiser state per start
 :mod:`cascgp.gp.restarts`       where the starts begin and when a start stops early
 :mod:`cascgp.gp.bank`           :class:`GPBank`: the fit driver and batched prediction

@@ -65,7 +65,8 @@ class GPFitConfig:
         snr_max: bound of the signal-to-noise variance ratio, :math:`s_n^2 \ge s_f^2 / \mathrm{snr\_max}`
             (``None``: no bound); keeps :math:`\operatorname{cond}(K) \le 1 + n\,\mathrm{snr\_max}`.
         max_batch_bytes: memory limit of a fit (bytes); the evaluation is chunked to stay within it, and a fit that
-            cannot (:func:`estimate_fit_bytes` with one start at a time) is refused with a ``ValueError``.
+            cannot (:func:`~cascgp.gp.memory.estimate_fit_bytes` with one start at a time), or that needs more
+            than the machine's memory at the least, is refused with :class:`~cascgp.gp.memory.FitMemoryError`.
         threads: threads of torch's intra-op pool *and* of the BLAS/LAPACK library while :meth:`GPBank.fit` runs;
             both are restored afterwards (:func:`cascgp.gp.likelihood.fit_threads`). The rule: **one thread**
             (default). A fit's work is many small, cache-sized pieces (one ``(n, n)`` kernel block and one

@@ -25,8 +25,7 @@ BLOCK_BYTES = 64 * 2**20
 
 def _row_blocks(m: int, n: int) -> list[slice]:
     """Slices of ``m`` query rows whose (rows, n) matrices each hold at most :data:`BLOCK_BYTES` (at least 256 rows,
-    a multiple of 256: BLAS then treats the rows of a block as those of the whole, whose results equal a
-    computation of all rows at once to round-off)."""
+    a multiple of 256); the results equal a computation of all rows at once to round-off."""
     rows = max(256, BLOCK_BYTES // (8 * max(n, 1)) // 256 * 256)
     return [slice(i, min(i + rows, m)) for i in range(0, m, rows)] or [slice(0, 0)]
 

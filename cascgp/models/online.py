@@ -45,7 +45,6 @@ Derivative-based (``db``) models only.
 from __future__ import annotations
 
 import math
-import os
 from typing import Any
 
 import numpy as np
@@ -56,6 +55,7 @@ from cascgp.checks import check_count
 from cascgp.gp.checks import check_scale
 from cascgp.gp.kernels import get_kernel
 from cascgp.gp.likelihood import blas_threads
+from cascgp.gp.memory import physical_memory_bytes
 from cascgp.models.fastkernel import JIT_WT, jit_enabled, jit_var, kernel_id, warn_dropped
 from cascgp.models.fastpath import FastPath, FastVariance
 from cascgp.models.queries import one_real, state_cols
@@ -200,9 +200,8 @@ def _check_window_memory(window: int, posts: list[Any], name: str = "window") ->
     """``ValueError`` naming ``name`` when the window's arrays (per joint two window x window matrices and the
     window's rows against the fitted set) would not fit in this machine's physical memory, instead of NumPy's
     ``MemoryError`` or the system's out-of-memory kill later, when the pages are written."""
-    try:
-        phys = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-    except (AttributeError, ValueError, OSError):  # not POSIX: no bound known
+    phys = physical_memory_bytes()
+    if phys is None:  # not POSIX: no bound known
         return
     need = sum(8 * (2 * window * window + 3 * window * (P.Z.shape[0] + P.Z.shape[1])) for P in posts)
     if need > phys:

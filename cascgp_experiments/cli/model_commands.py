@@ -277,7 +277,7 @@ def _fit_config(a: argparse.Namespace) -> Any:
     if a.max_memory is not None:
         if not (np.isfinite(a.max_memory) and a.max_memory > 0):
             raise ValueError(f"max_batch_bytes: expected a positive number of GiB, got {a.max_memory}")
-        kw["max_batch_bytes"] = max(1, int(a.max_memory * 2**30))
+        kw["max_batch_bytes"] = max(1, int(min(a.max_memory, 2.0**32) * 2**30))  # 4 EiB: beyond any machine
     return GPFitConfig(**kw)
 
 
@@ -320,11 +320,15 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     try:
         model.fit(data, q_hist=q_hist)
     except FitMemoryError as exc:  # in the command's terms: which options to change, and to what
-        where = (f"this machine's memory ({exc.limit / 2**30:.1f} GiB)" if exc.machine else
-                 f"--max-memory {exc.limit / 2**30:g} GiB")
+        if exc.machine:
+            raise _Fail(f"--max-samples {a.max_samples}: fitting {exc.n} rows needs at least "
+                        f"{exc.need / 2**20:.0f} MiB, more than this machine's memory ({exc.limit / 2**30:.1f} GiB); "
+                        f"at most {exc.max_n} rows could fit in it: lower --max-samples") from None
+        what = (f"at most {exc.max_n} rows fit within it: lower --max-samples or raise --max-memory"
+                if exc.max_n >= 2 else "not even 2 rows fit within it: raise --max-memory")
         raise _Fail(f"--max-samples {a.max_samples}: fitting {exc.n} rows needs about {exc.need / 2**20:.0f} MiB "
-                    f"(a high estimate), over {where}; at most {exc.max_n} rows fit within it: lower --max-samples"
-                    f"{'' if exc.machine else ' or raise --max-memory'}") from None
+                    f"(a high estimate), over --max-memory "
+                    f"{exc.limit / 2**30 if a.max_memory is None else a.max_memory:g} GiB; {what}") from None
     except ValueError as exc:  # about the log's values: in its terms
         raise _Fail(_in_log_terms(str(exc), a.data)) from None
     log_notes.note(prog, f"fitted in {time.perf_counter() - t0:.1f} s")
