@@ -73,7 +73,8 @@ class CurveSpec:
     seed: int = 0
     audit_fraction: float = 0.05
     df_delta: float = 0.1
-    factory: str = "cascgp.models:make_model"  # its cascades' fit takes share= (the standard model of their job)
+    # its cascades' fit takes share= (the standard model of their job); its models' predict_data takes return_var=
+    factory: str = "cascgp.models:make_model"
     measured: str | None = "cascgp.models.measured:predict_measured_neighbour"  # None: predicted scoring only
     gp_overrides: dict = field(default_factory=dict)
 
@@ -226,7 +227,7 @@ class _Track:
         t0 = time.perf_counter()
         m.fit(d, init=self.prev if spec.warm_start else None, **({"share": share} if share is not None else {}))
         self.walls.append(time.perf_counter() - t0)
-        mean, _ = m.predict_data(test)
+        mean, _ = m.predict_data(test, return_var=False)  # the score needs the mean alone
         self.rows.append(nrmse(np.asarray(mean)[mask], test.tau[mask]).tolist())
         if self.measured is not None:
             self.rows_meas.append(nrmse(np.asarray(self.measured(m, test))[mask], test.tau[mask]).tolist())

@@ -56,6 +56,8 @@ def test_every_variant_learns(name, fitted, interleaved):
     mean, var = m.predict_data(te)
     assert mean.shape == var.shape == te.tau.shape
     assert np.isfinite(mean).all() and np.isfinite(var).all() and (var >= 0).all()
+    mean_only, none = m.predict_data(te, return_var=False)  # the study's scoring: the same mean, no variance
+    assert none is None and np.array_equal(mean_only, mean)
     valid = state_features(te, m.feature_kind, m.df_delta)[1]
     err = nrmse(mean[valid], te.tau[valid])
     trivial = nrmse(np.broadcast_to(tr.tau.mean(0), te.tau.shape)[valid], te.tau[valid])

@@ -107,10 +107,10 @@ class _LinearModel:
         self.fit_info = [{"best_nll": float(v) + (0.5 if self.warm else 0.0)} for v in (data.tau**2).sum(0)]
         return self
 
-    def predict_data(self, data: DynamicsData):
+    def predict_data(self, data: DynamicsData, return_var: bool = True):
         X = np.concatenate([data.q, data.qd, data.qdd, np.ones((data.n_samples, 1))], axis=1)
         m = X @ self.W
-        return m, np.zeros_like(m)
+        return m, (np.zeros_like(m) if return_var else None)
 
 
 def fake_make(name, dof, rbd=None, **kw):

@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Literal, Sequence, overload
 
 import numpy as np
 
@@ -361,17 +361,25 @@ class CascadedGPModel:
                     var[:, j] += P.mean_grad(x, x.shape[1] - 1) ** 2 * var[:, tj]
         return mean, var
 
-    def predict_data(self, data: DynamicsData) -> tuple[np.ndarray, np.ndarray]:
+    @overload
+    def predict_data(self, data: DynamicsData, return_var: Literal[True] = ...) -> tuple[np.ndarray, np.ndarray]: ...
+
+    @overload
+    def predict_data(self, data: DynamicsData, return_var: Literal[False]) -> tuple[np.ndarray, None]: ...
+
+    def predict_data(self, data: DynamicsData, return_var: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
         """:meth:`predict` on the rows of ``data`` (``-df``: history from ``data`` itself, see
         :func:`cascgp.features.history_from_data`; rows without full history use the clamped
-        history: finite, but check ``state_features(data, "df")[1]`` before scoring them)."""
+        history: finite, but check ``state_features(data, "df")[1]`` before scoring them). ``return_var=False``:
+        the mean alone, the same numbers, without the variance's triangular solves (``None`` in its place)."""
         self._require_fitted()
         if not isinstance(data, DynamicsData):
             raise TypeError(f"data: expected DynamicsData, got {type(data).__name__}")
         if data.dof != self.dof:
             raise ValueError(f"data: DOF mismatch: the model has dof={self.dof}, data.dof={data.dof}")
         q_hist = history_from_data(data, self.df_delta)[0] if self.feature_kind == "df" else None
-        return self._predict_arrays(data.q, data.qd, data.qdd, q_hist, return_var=True)
+        mean, var = self._predict_arrays(data.q, data.qd, data.qdd, q_hist, return_var=return_var)
+        return mean, (var if return_var else None)
 
     def predict_one(self, q: Any, qd: Any = None, qdd: Any = None, q_hist: Any = None, *,
                     rbd_torque: Any = None) -> np.ndarray:

@@ -364,7 +364,7 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     data = _read(a.data)
     _describe(prog, data, a.data)
     _check_dof(model, data, a.data)
-    mean, _ = model.predict_data(data)
+    mean, _ = model.predict_data(data, return_var=False)
     rows = np.ones(data.n_samples, dtype=bool)
     if model.feature_kind == "df":  # rows without 2 * df_delta of history are not scored
         rows = history_from_data(data, model.df_delta)[1]
