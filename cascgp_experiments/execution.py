@@ -61,6 +61,7 @@ from cascgp.checks import check_count
 from cascgp_experiments.cli.options import require_at_least
 from cascgp_experiments.common import install_hint
 from cascgp_experiments.job_cache import canonical_json, job_key, read_cached, write_cached
+from cascgp_experiments.pool_exit import exit_with_parent, interrupted
 from cascgp_experiments.ray_backend import RayAuthenticationError, import_ray, ray_connect, run_ray
 
 __all__ = ["run_jobs", "report_progress", "session", "default_workers", "check_workers", "job_key", "JobError",
@@ -183,27 +184,16 @@ def _limit_threads() -> None:
         sys.modules["torch"].set_num_threads(1)
 
 
-def _exit_with_parent(parent_pid: int, period_s: float = 0.5) -> None:
-    """Leave this worker process as soon as the process that started it is gone. A run killed with SIGKILL or
-    SIGTERM sent to its main process alone (``kill PID``, a batch scheduler) runs no cleanup, and the pool processes
-    went on with their jobs as orphans, holding a core and ~0.5 GB each. Polling the parent id is the portable check
-    (Linux's PR_SET_PDEATHSIG is not); the job's result would have nowhere to go."""
-    while True:
-        time.sleep(period_s)
-        if os.getppid() != parent_pid:
-            os._exit(1)
-
-
 def _init_process(channel: Any, parent_pid: int | None = None) -> None:
     """Initializer of every pool process: one thread, the progress channel, exit with the parent (``parent_pid``:
     the run's id, passed by it, so that a parent already gone is noticed too), and on Ctrl-C (sent to every process
     of the terminal's group) exit without a traceback: the run's main process reports it."""
     global _CHANNEL
     _limit_threads()
-    signal.signal(signal.SIGINT, lambda *_: sys.exit(130))  # SystemExit: no traceback, finalizers run
+    signal.signal(signal.SIGINT, interrupted)
     _CHANNEL = channel
     pid = os.getppid() if parent_pid is None else int(parent_pid)
-    threading.Thread(target=_exit_with_parent, args=(pid,), name="exit-with-parent", daemon=True).start()
+    threading.Thread(target=exit_with_parent, args=(pid,), name="exit-with-parent", daemon=True).start()
 
 
 def _call(fn: Callable, inputs: dict, index: int, attempt: int, channel: Any = None) -> tuple:
