@@ -1,5 +1,6 @@
 """cascgp fit / evaluate refuse input that would give a wrong or meaningless result, with a message naming the
-option, file or column, exit status 2 and no traceback."""
+option, file or column, exit status 2 and no traceback; a fit too big for its memory says what fits, and a long fit
+says that it is still running."""
 
 from __future__ import annotations
 
@@ -100,3 +101,29 @@ def test_fit_too_big_for_its_memory_says_how_many_rows_fit(files: dict[str, Path
             fit_main(["--data", str(files["train"]), "--model", "np-standard", "--max-memory", bad, "--out",
                       str(out)])
         assert f"--max-memory: expected a positive number of GiB, got {float(bad)}" in capsys.readouterr().err
+
+
+def test_a_long_fit_says_it_is_still_running(files: dict[str, Path], capsys, monkeypatch) -> None:
+    """A fit was silent between 'fitting ...' and 'fitted in' (minutes at n = 4000): it now says every
+    STILL_FITTING_EVERY_S seconds that it is still running, and stops saying so when it is done."""
+    import time
+
+    import cascgp_experiments.cli.model_commands as commands
+    from cascgp.models.cascade import CascadedGPModel
+
+    fit = CascadedGPModel.fit
+
+    def slow_fit(self, *args, **kwargs):
+        time.sleep(0.5)
+        return fit(self, *args, **kwargs)
+
+    monkeypatch.setattr(CascadedGPModel, "fit", slow_fit)
+    monkeypatch.setattr(commands, "STILL_FITTING_EVERY_S", 0.1)
+    out = files["root"] / "slow.npz"
+    assert fit_main(["--data", str(files["train"]), "--model", "np-standard", "--restarts", "1", "--max-samples",
+                     "40", "--out", str(out)]) == 0 and out.is_file()
+    err = capsys.readouterr().err
+    assert err.count("cascgp fit: still fitting (") >= 2, err
+    assert err.index("still fitting") < err.index("fitted in")
+    time.sleep(0.3)
+    assert "still fitting" not in capsys.readouterr().err  # the notes ended with the fit

@@ -25,11 +25,13 @@ import hashlib
 import re
 import sys
 import textwrap
+import threading
 import time
 import warnings
+from contextlib import contextmanager
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -318,7 +320,8 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
                          "each ...")
     t0 = time.perf_counter()
     try:
-        model.fit(data, q_hist=q_hist)
+        with _still_fitting(prog):
+            model.fit(data, q_hist=q_hist)
     except FitMemoryError as exc:  # in the command's terms: which options to change, and to what
         if exc.machine:
             raise _Fail(f"--max-samples {a.max_samples}: fitting {exc.n} rows needs at least "
@@ -336,6 +339,26 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
     model.save(a.out, provenance=provenance)
     print(f"saved {a.model} ({data.dof} joints, n_train={model.n_train}) to {a.out}")
     return 0
+
+
+#: Seconds between the notes that a long fit is still running (an exact GP's time grows as n^3: minutes at n = 4000).
+STILL_FITTING_EVERY_S = 30.0
+
+
+@contextmanager
+def _still_fitting(prog: str) -> Iterator[None]:
+    """While the block runs, a note every :data:`STILL_FITTING_EVERY_S` seconds that the fit is still running."""
+    done, t0 = threading.Event(), time.perf_counter()
+
+    def tell() -> None:
+        while not done.wait(STILL_FITTING_EVERY_S):
+            log_notes.note(prog, f"still fitting ({time.perf_counter() - t0:.0f} s so far)")
+
+    threading.Thread(target=tell, name="still-fitting", daemon=True).start()
+    try:
+        yield
+    finally:
+        done.set()
 
 
 # --------------------------------------------------------------------------- evaluate
