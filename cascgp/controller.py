@@ -411,8 +411,7 @@ class FeedforwardController:
         a new run of readings (a bogus time far ahead costs a few samples, not the episode). Malformed arguments
         (``q``/``qd``/``tau`` not real ``(N,)`` arrays, ``t`` not a real number) raise ``TypeError``/``ValueError``
         naming them and change nothing."""
-        check_time(t, finite=False)  # a reading's NaN time is a sensor fault, as its NaN values
-        t = float(t)
+        t = check_time(t, finite=False)  # a reading's NaN time is a sensor fault, as its NaN values
         q, qd, tau = measured("q", q, self.dof), measured("qd", qd, self.dof), measured("tau", tau, self.dof)
         rule = self.gate_rule if self.gate_rule is not None and self.gate_rule.observes else None
         if not self.online and rule is None:

@@ -33,9 +33,9 @@ def as_gain(value: float | np.ndarray, dof: int, name: str) -> np.ndarray:
     return gain
 
 
-def check_time(t: Any, finite: bool = True) -> None:
-    """``TypeError`` unless ``t`` is a real number, ``ValueError`` if it is beyond float64's range or, with
-    ``finite``, not finite (a time in s: the reference cannot be evaluated at NaN or inf)."""
+def check_time(t: Any, finite: bool = True) -> float:
+    """``t`` as a float; ``TypeError`` unless it is a real number, ``ValueError`` if it is beyond float64's range
+    or, with ``finite``, not finite (a time in s: the reference cannot be evaluated at NaN or inf)."""
     if isinstance(t, (bool, np.bool_)) or not isinstance(t, (int, float, np.integer, np.floating)):
         raise TypeError(f"t: expected a real number (s), got {type(t).__name__}")
     try:
@@ -44,6 +44,7 @@ def check_time(t: Any, finite: bool = True) -> None:
         raise ValueError(f"t: expected a time (s) within float64's range, got {t!r}") from None
     if finite and not math.isfinite(f):
         raise ValueError(f"t: expected a finite time (s), got {t!r}")
+    return f
 
 
 def check_finite_reference(q_d: np.ndarray, qd_d: np.ndarray, qdd_d: np.ndarray, t: float) -> None:

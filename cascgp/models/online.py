@@ -196,6 +196,14 @@ def check_supported(model: Any, window: int | None = None, name: str = "window")
         _check_window_memory(window, model.posteriors(), name)
 
 
+def _check_values(name: str, a: np.ndarray, not_finite: str) -> None:
+    """``ValueError`` with the message ``not_finite`` for a NaN or inf entry of ``a``, or naming ``name`` when its
+    values are too large to normalise (:func:`cascgp.gp.checks.check_scale`)."""
+    if not np.isfinite(a).all():
+        raise ValueError(not_finite)
+    check_scale(np.stack([a, np.zeros(a.size)]), name)
+
+
 def _check_window_memory(window: int, posts: list[Any], name: str = "window") -> None:
     """``ValueError`` naming ``name`` when the window's arrays (per joint two window x window matrices and the
     window's rows against the fitted set) would not fit in this machine's physical memory, instead of NumPy's
@@ -364,17 +372,13 @@ class OnlineWindow:
             arr[nm] = a
         if not np.abs(np.stack(list(arr.values()))).max() < _SMALL:  # else one of the exact checks fails
             for nm, a in arr.items():
-                if not np.isfinite(a).all():
-                    raise ValueError(f"{nm}: expected a finite array of shape ({N},), got {a!r}")
-                check_scale(np.stack([a, np.zeros(N)]), nm)
+                _check_values(nm, a, f"{nm}: expected a finite array of shape ({N},), got {a!r}")
         S = model._states(arr["q"][None], arr["qd"][None], arr["qdd"][None], None).reshape(-1)
         target = arr["tau"] - (model._rbd_torque(arr["q"], arr["qd"], arr["qdd"]) if model.parametric == "sp"
                                else 0.0)
         if model.parametric == "sp" and not np.abs(target).max() < _SMALL:  # a huge velocity's rigid-body torque
-            if not np.isfinite(target).all():
-                raise ValueError(f"tau: the sample's target (tau minus the rigid-body torque) is not finite: "
-                                 f"{target!r}")
-            check_scale(np.stack([target, np.zeros(N)]), "tau (minus the rigid-body torque: the sample's target)")
+            _check_values("tau (minus the rigid-body torque: the sample's target)", target,
+                          f"tau: the sample's target (tau minus the rigid-body torque) is not finite: {target!r}")
         v = np.concatenate([S, arr["tau"]])  # each joint's input: its state columns, then the neighbour's torque
         self.add([v[c] for c in self._cols], target)
 
