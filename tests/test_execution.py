@@ -157,6 +157,10 @@ def test_cache_is_keyed_by_the_inputs_and_normalises_results(tmp_path: Path) -> 
     again = run_jobs(counting_job, jobs + [{"x": 9, "log_dir": str(log)}], workers=1, cache_dir=tmp_path / "c",
                      show_progress=False)
     assert again.n_cached == 4 and list(again) == [1, 2, 3, 4, 10] and len(list(log.iterdir())) == 5
+    assert (again.workers, again.backend) == (1, "in-process")
+    # every job from the cache: no worker ran, and the statistics say so
+    cached = run_jobs(counting_job, jobs, workers=2, cache_dir=tmp_path / "c", show_progress=False)
+    assert cached.n_cached == 4 and (cached.stats()["workers"], cached.stats()["backend"]) == (0, "cache")
     assert again.job_seconds[0] == first.job_seconds[0]  # the time recorded when the job ran
     assert job_key(counting_job, {"x": 1, "log_dir": "a"}) != job_key(counting_job, {"x": 2, "log_dir": "a"})
     assert job_key(counting_job, {"x": 1, "log_dir": "a"}) == job_key(counting_job, {"log_dir": "a", "x": 1})
