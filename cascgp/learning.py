@@ -35,19 +35,18 @@ from typing import Any, Callable, Iterable, Sequence
 import numpy as np
 
 from cascgp.buffer import DataBuffer
+from cascgp.checks import check_count
 from cascgp.controller import FeedforwardController
-from cascgp.gates import GATE_SUFFIXES
 from cascgp.episodes import EpisodeResult, run_episode
 from cascgp.gp import GPFitConfig
-from cascgp.checks import check_count, check_positive
-from cascgp.models import MODEL_NAMES, make_model
+from cascgp.models import make_model
+# defined in a module without torch (command lines check them before importing the library); exported here too
+from cascgp.settings import PLAIN_CONTROLLERS, RetrainConfig, check_controller, parse_controller
 
 __all__ = ["PLAIN_CONTROLLERS", "ONLINE_WINDOW", "Attempt", "Feedback", "RetrainConfig", "ControllerRun",
            "AttemptContext", "RunHooks", "check_controller", "parse_controller", "make_controller", "attempt_plan",
            "default_model_factory", "run_controller", "run_controllers"]
 
-#: Controllers that never learn.
-PLAIN_CONTROLLERS = ("pd", "rbd")
 #: Online samples a ``-online`` controller keeps per joint during an attempt (15 s at 10 Hz).
 ONLINE_WINDOW = 150
 #: One attempt: (task, attempt index within the task, phase). Only ``"train"`` attempts feed the buffer.
@@ -72,31 +71,6 @@ class Feedback:
     kp: np.ndarray
     kd: np.ndarray
     torque_limits: np.ndarray
-
-
-@dataclass(frozen=True)
-class RetrainConfig:
-    """How episodes are seeded and how a learning controller is refitted after a training attempt.
-
-    Attributes:
-        seed: attempt ``i`` resets the env with seed ``seed * 1000 + i`` and refits with GP seed ``seed + i``
-            (an integer >= 0).
-        rate_hz: rate (Hz) to which the buffer's episodes are subsampled for a refit.
-        cap: the most training rows of a refit (evenly spaced over the subsampled buffer; at least 2).
-        restarts: GP optimiser starts per joint's GP in a refit.
-    """
-
-    seed: int = 0
-    rate_hz: float = 10.0
-    cap: int = 500
-    restarts: int = 3
-
-    def __post_init__(self) -> None:
-        # As Python numbers (the settings go into JSON records); episode seeds are seed * 1000 + i, and Gymnasium
-        # takes seeds >= 0.
-        for name, least in (("seed", 0), ("cap", 2), ("restarts", 1)):  # a GP needs two rows
-            object.__setattr__(self, name, check_count(getattr(self, name), name, least))
-        object.__setattr__(self, "rate_hz", check_positive(self.rate_hz, "rate_hz", "Hz"))
 
 
 @dataclass(frozen=True)
@@ -151,39 +125,6 @@ class ControllerRun:
 
     name: str
     attempts: list[dict[str, Any]] = field(default_factory=list)
-
-
-def parse_controller(name: str) -> tuple[str, str | None, bool]:
-    """``"sp-inward-gated-online"`` -> ``("sp-inward", "wiener", True)``: the base controller or model name,
-    the gate (``-gated``: ``"wiener"``, ``-fgated``: ``"floor"``, ``-vgated``: ``"variance"``,
-    ``-igated``: ``"innovation"``, else None; see
-    :class:`cascgp.controller.FeedforwardController`), online. ``ValueError`` naming the controller for anything
-    unknown (suffixes apply to models only; online needs derivative-based states)."""
-    if not isinstance(name, str):
-        raise ValueError(f"controller: expected a name, got {name!r}")
-    base, online = (name[: -len("-online")], True) if name.endswith("-online") else (name, False)
-    gate = None
-    for rule, suffix in GATE_SUFFIXES.items():
-        if base.endswith(suffix):
-            base, gate = base[: -len(suffix)], rule
-            break
-    if base not in PLAIN_CONTROLLERS and base not in MODEL_NAMES or (base in PLAIN_CONTROLLERS and (gate or online)):
-        raise ValueError(f"unknown controller {name!r}; expected 'pd', 'rbd' or one of {list(MODEL_NAMES)}, "
-                         "a model name optionally followed by '-gated' (or '-fgated', '-vgated', '-igated') "
-                         "and/or '-online'")
-    if gate == "floor" and not base.startswith("sp-"):
-        raise ValueError(f"unknown controller {name!r}: '-fgated' needs a semi-parametric model ('sp-...')")
-    if gate == "innovation" and base.endswith("-df"):
-        raise ValueError(f"unknown controller {name!r}: '-igated' needs a derivative-based model (not '-df')")
-    if online and base.endswith("-df"):
-        raise ValueError(f"unknown controller {name!r}: '-online' needs a derivative-based model (not '-df')")
-    return base, gate, online
-
-
-def check_controller(name: str) -> None:
-    """``ValueError`` unless ``name`` is ``"pd"``, ``"rbd"`` or a model name (with optional suffixes,
-    :func:`parse_controller`)."""
-    parse_controller(name)
 
 
 def make_controller(name: str, rbd: Any, model: Any | None, feedback: Feedback) -> FeedforwardController:

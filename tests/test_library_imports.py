@@ -23,11 +23,12 @@ print(len(names))
 """
 
 
-def _python(code: str) -> None:
-    """Runs ``code`` in a fresh interpreter (nothing imported yet) from the checkout; fails with its stderr."""
+def _python(code: str, *args: str) -> None:
+    """Runs ``code`` (with ``args`` in ``sys.argv[1:]``) in a fresh interpreter (nothing imported yet) from the
+    checkout; fails with its stderr."""
     env = dict(os.environ)
     env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    out = subprocess.run([sys.executable, "-c", code], env=env, cwd=REPO, capture_output=True, text=True,
+    out = subprocess.run([sys.executable, "-c", code, *args], env=env, cwd=REPO, capture_output=True, text=True,
                          timeout=300)
     assert out.returncode == 0, out.stderr[-3000:]
 
@@ -69,3 +70,28 @@ assert not heavy, heavy
 def test_the_experiment_commands_help_without_torch() -> None:
     """``--help`` answers at once: ``cascgp transfer --help`` imported torch for its defaults (about 5 s)."""
     _python(_HELP)
+
+
+_BAD_SETTINGS = """
+import contextlib, io, sys
+from cascgp_experiments.cli import main
+for args in (["--controllers", "pd,sp-inwrd"], ["--attempts", "0"], ["--tasks", "nowhere"], ["--payload", "-1"],
+             ["--restarts", "0"], ["--rate", "nan"]):
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        try:
+            main(["transfer", "--out", sys.argv[1], *args])
+        except SystemExit as exc:
+            assert exc.code == 2, (args, exc.code)
+        else:
+            raise AssertionError(f"{args} accepted")
+    assert "cascgp transfer: error: --" in err.getvalue(), (args, err.getvalue())
+heavy = sorted(m for m in ("torch", "pinocchio") if m in sys.modules)
+assert not heavy, heavy
+"""
+
+
+def test_a_bad_transfer_setting_is_refused_without_torch(tmp_path: Path) -> None:
+    """A bad ``cascgp transfer`` setting is refused at once, naming its option: its checks imported torch through
+    the library (3-4 s before the error)."""
+    _python(_BAD_SETTINGS, str(tmp_path / "out"))

@@ -17,7 +17,7 @@ import numpy as np
 
 from cascgp.checks import check_positive
 from cascgp.data import DynamicsData, all_finite
-from cascgp.features import STRUCTURES, build_inputs, history_from_data, input_spec, states_from_arrays
+from cascgp.features import build_inputs, history_from_data, input_spec, states_from_arrays
 from cascgp.gp import GPBank, GPFitConfig
 from cascgp.gp.bank import SharedGPError
 from cascgp.gp.config import check_target_floor
@@ -26,21 +26,10 @@ from cascgp.models.fit_start import shared_chain_first, warm_start_banks
 from cascgp.models.jacobian import check_input_var, mean_jacobian_arrays
 from cascgp.models.queries import check_queries, clipped, load_query, state_cols
 from cascgp.models.training_rows import training_arrays
+# defined in a module without torch (command lines check names before importing the library); exported here too
+from cascgp.settings import MODEL_NAMES, parse_name
 
 __all__ = ["MODEL_NAMES", "CascadedGPModel", "make_model", "parse_name"]
-
-#: The twelve model names.
-MODEL_NAMES: tuple[str, ...] = tuple(
-    f"{p}-{s}{d}" for p in ("np", "sp") for s in STRUCTURES for d in ("", "-df"))
-
-
-def parse_name(name: str) -> tuple[str, str, str]:
-    """``"sp-inward-df"`` -> ``("sp", "inward", "df")``; unknown names raise ``ValueError``."""
-    if not isinstance(name, str) or name not in MODEL_NAMES:
-        raise ValueError(f"name: expected one of {MODEL_NAMES}, got {name!r}")
-    parts = name.split("-")
-    return parts[0], parts[1], ("df" if len(parts) == 3 else "db")
-
 
 class CascadedGPModel:
     """One of the twelve variants (build with :func:`make_model`).

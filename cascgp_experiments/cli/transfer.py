@@ -44,7 +44,7 @@ from cascgp_experiments.execution import add_execution_args, check_args, session
 from cascgp_experiments.transfer_presets import FULL_CONTROLLERS, FULL_TASKS, QUICK_CONTROLLERS, QUICK_TASKS
 
 if TYPE_CHECKING:
-    from cascgp_experiments.transfer import TransferConfig
+    from cascgp_experiments.transfer_config import TransferConfig
 
 #: The option that sets each field of :class:`TransferConfig` (error messages name the option).
 _OPTIONS = {"rate_hz": "--rate", "payload_mass": "--payload", "attempts": "--attempts", "cap": "--cap",
@@ -54,7 +54,7 @@ _OPTIONS = {"rate_hz": "--rate", "payload_mass": "--payload", "attempts": "--att
 
 def _config(a: argparse.Namespace) -> TransferConfig:
     """The run's settings from the parsed options (``ValueError`` naming a bad field)."""
-    from cascgp_experiments.transfer import TransferConfig
+    from cascgp_experiments.transfer_config import TransferConfig
 
     return TransferConfig(
         controllers=tuple(a.controllers.split(",")) if a.controllers else
@@ -114,8 +114,7 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
             check_video_writer()  # now, not after the episodes (and before the settings' checks import the env)
         except ImportError as exc:
             p.error(f"--video: {exc}")
-    import cascgp_experiments.transfer  # noqa: F401 - the experiment, imported outside the settings' try below
-    try:
+    try:  # the settings' checks import no torch: a bad setting is refused at once
         cfg = _config(a)
     except (ValueError, TypeError) as exc:
         settings_error(p, exc, _OPTIONS)
