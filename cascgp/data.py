@@ -71,7 +71,7 @@ def as_real_array(label: str, raw: object, shape: str) -> np.ndarray:
     non-numeric input (a cast would silently drop an imaginary part or turn flags into numbers)."""
     try:
         a0 = np.asarray(raw)
-    except (TypeError, ValueError) as exc:  # ragged nested lists
+    except (TypeError, ValueError, RuntimeError) as exc:  # ragged nested lists; a torch tensor that requires grad
         raise TypeError(f"{label}: expected a numeric {shape} array ({exc})") from None
     if a0.dtype.kind not in "fiuO":
         raise TypeError(f"{label}: expected a real numeric {shape} array, got dtype {a0.dtype}")

@@ -419,3 +419,37 @@ def test_input_errors_name_the_field():
     np.testing.assert_allclose(bank.predict([X], chunk=1)[0], bank.predict([X])[0], rtol=1e-12, atol=1e-12)
     with pytest.raises(ValueError, match="b"):
         bank.posterior(1)
+
+
+def test_posterior_refuses_a_query_of_another_shape_and_keeps_a_row_vector():
+    """``GPPosterior.predict`` broadcast a (m, 1) query against d columns and returned numbers; NaN and the wrong
+    vector length raised NumPy's or SciPy's errors, naming nothing."""
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(30, 3))
+    bank = GPBank(GPFitConfig(n_restarts=1)).fit([X], [X.sum(1)])
+    post = bank.posterior(0)
+    for bad in (np.zeros((4, 1)), np.zeros((4, 4)), np.zeros(2), np.zeros(4), np.zeros((2, 3, 1))):
+        for call in (post.predict, post.mean_grad_all, lambda x: post.mean_grad(x, 0)):
+            with pytest.raises(ValueError, match=r"^x: expected"):
+                call(bad)
+    nan = X[:2].copy()
+    nan[1, 2] = np.nan
+    with pytest.raises(ValueError, match=r"^x: contains NaN or inf \(first at row 1\)"):
+        post.predict(nan)
+    with pytest.raises(TypeError, match=r"^x: expected a real numeric"):
+        post.predict(X[:2] + 1j)
+    with pytest.raises(TypeError, match=r"^x: expected a numeric .*requires grad"):
+        post.predict(torch.zeros(2, 3, requires_grad=True))
+    with pytest.raises(TypeError, match=r"^X\[0\]: expected a numeric .*requires grad"):  # torch's RuntimeError
+        GPBank(GPFitConfig(n_restarts=1)).fit([torch.tensor(X, requires_grad=True)], [X.sum(1)])
+    for col in (3, -1, 1.0, True):
+        with pytest.raises(ValueError, match=r"^col: expected an input column in \[0, 3\)"):
+            post.mean_grad(X[:2], col)
+    # a (d,) vector is one row, a list is accepted, and every form predicts as the (m, d) array
+    m, v = post.predict(X[:1])
+    for q in (X[0], X[0].tolist(), [X[0].tolist()]):
+        m2, v2 = post.predict(q)
+        assert m2.shape == (1,) and v2.shape == (1,)
+        np.testing.assert_array_equal(m2, m)
+        np.testing.assert_array_equal(v2, v)
+    assert post.predict(np.zeros((0, 3)))[0].shape == (0,)

@@ -8,7 +8,7 @@ import numpy as np
 
 from cascgp.data import as_real_array
 
-__all__ = ["as_list", "check_matrix", "check_vector", "check_scale", "json_num"]
+__all__ = ["as_list", "real_array", "check_matrix", "check_vector", "check_scale", "json_num"]
 
 
 def json_num(v: float) -> float | None:
@@ -24,7 +24,7 @@ def as_list(v: Any, field_name: str) -> list[np.ndarray]:
     return list(v)
 
 
-def _real(a: Any, field_name: str, shape: str) -> np.ndarray:
+def real_array(a: Any, field_name: str, shape: str) -> np.ndarray:
     """``a`` as float64; ``TypeError`` naming the field for complex, boolean, text or other non-numeric input (a
     cast would drop an imaginary part or turn flags into numbers)."""
     if type(a) is np.ndarray and a.dtype == np.float64:  # not a subclass (a masked array's NaN would pass)
@@ -33,7 +33,7 @@ def _real(a: Any, field_name: str, shape: str) -> np.ndarray:
 
 
 def check_matrix(a: Any, field_name: str, d: int | None = None, n: int | None = None) -> np.ndarray:
-    a = _real(a, field_name, "(n, d)")
+    a = real_array(a, field_name, "(n, d)")
     if a.ndim != 2:
         raise ValueError(f"{field_name}: expected a 2-D array (n, d), got shape {a.shape}")
     if a.shape[1] < 1:
@@ -49,7 +49,7 @@ def check_matrix(a: Any, field_name: str, d: int | None = None, n: int | None = 
 
 
 def check_vector(a: Any, field_name: str, n: int) -> np.ndarray:
-    a = _real(a, field_name, f"({n},)")
+    a = real_array(a, field_name, f"({n},)")
     if a.ndim != 1 or a.shape[0] != n:
         raise ValueError(f"{field_name}: expected shape ({n},), got {a.shape}")
     if not np.all(np.isfinite(a)):

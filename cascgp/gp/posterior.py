@@ -5,10 +5,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
 
+from cascgp.gp.checks import check_matrix, real_array
 from cascgp.gp.config import GPFitConfig, noise_var
 from cascgp.gp.kernels import get_kernel, scaled_sqdist
 from cascgp.gp.likelihood import DTYPE, LOG2PI
@@ -59,10 +61,22 @@ class GPPosterior:
     y_std: float
     jitter: float = 0.0
 
+    def query(self, x: Any) -> np.ndarray:
+        """``x`` as a float64 ``(m, d)`` array of finite numbers, a ``(d,)`` vector as one row; ``ValueError`` (shape,
+        NaN or inf) or ``TypeError`` (not real numbers) naming ``x`` otherwise."""
+        d = self.x_mean.shape[0]
+        a = real_array(x, "x", f"(m, {d})")
+        if a.ndim == 1:
+            if a.shape[0] != d:
+                raise ValueError(f"x: expected shape (m, {d}) or ({d},), got {a.shape}")
+            a = a[None, :]
+        return check_matrix(a, "x", d=d)
+
     def predict(self, x: np.ndarray, return_var: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
-        """Reference NumPy prediction: ``x`` ``(m, d)`` or ``(d,)`` -> mean ``(m,)``, latent variance ``(m,)``,
-        in blocks of rows (fixed memory for any ``m``: :data:`BLOCK_BYTES`)."""
-        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        """Reference NumPy prediction: ``x`` ``(m, d)`` or ``(d,)`` (:meth:`query`) -> mean ``(m,)``, latent
+        variance ``(m,)`` (None when not ``return_var``), in blocks of rows (fixed memory for any ``m``:
+        :data:`BLOCK_BYTES`)."""
+        x = self.query(x)
         blocks = _row_blocks(x.shape[0], self.Z.shape[0])
         if len(blocks) > 1:
             parts = [self._predict_block(x[b], return_var) for b in blocks]
@@ -87,7 +101,9 @@ class GPPosterior:
         r"""Derivative of the posterior mean with respect to input column ``col`` at the rows of ``x``
         ``(m, d)``: :math:`\partial\mu/\partial x_c = \frac{y_{std} s_f^2}{x_{scale,c}} \sum_k
         2\,k'(r^2_k)\,(z_c - Z_{kc})\,\alpha_k` (0 for an ignored column)."""
-        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        x = self.query(x)
+        if isinstance(col, bool) or not isinstance(col, (int, np.integer)) or not 0 <= col < x.shape[1]:
+            raise ValueError(f"col: expected an input column in [0, {x.shape[1]}), got {col!r}")
         if not np.isfinite(self.x_scale[col]):
             return np.zeros(x.shape[0])
         out = np.empty(x.shape[0])
@@ -113,7 +129,7 @@ class GPPosterior:
             \Big(z_c \sum_k k'(r^2_k)\,\alpha_k - \sum_k k'(r^2_k)\,\alpha_k Z_{kc}\Big)
 
         (two matrix products; 0 for ignored columns, whose ``x_scale`` is ``inf``)."""
-        x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+        x = self.query(x)
         g = np.empty(x.shape)
         for b in _row_blocks(x.shape[0], self.Z.shape[0]):  # fixed memory for any number of rows
             z, kprime = self._kernel_slope(x[b])
