@@ -222,6 +222,43 @@ def test_bad_reset_options(pour_env, options, exc, match):
     assert np.array_equal(qpos, u.data.qpos) and u.payload_mass == mass
 
 
+@pytest.mark.parametrize("env_id", ["JacoPour-v0", "JacoPayload-v0"])
+def test_a_changed_observation_changes_nothing_the_env_returns_later(env_id):
+    """``reset`` (both envs) and ``JacoPour-v0``'s ``step`` returned the env's own array: a caller that normalised it
+    in place changed the last finite observation that an unstable step returns."""
+    env = gym.make(env_id, **({"n_marbles": 5} if env_id == "JacoPour-v0" else {}))
+    try:
+        for n_steps in (0, 2):  # the reset observation, then a step's
+            obs, _ = env.reset(seed=0)
+            for _ in range(n_steps):
+                obs, *_ = env.step(np.full(6, 2.0))
+            kept = obs.copy()
+            obs *= 0.0
+            u = env.unwrapped
+            u.data.qvel[u.arm_dof_adr] = 1e6
+            unstable_obs, _, _, truncated, info = env.step(np.zeros(6))
+            assert truncated and info["unstable"]
+            np.testing.assert_array_equal(unstable_obs, kept)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("freq", [8.5, 19.5, 49.5])
+def test_a_half_integer_control_freq_builds(freq):
+    """MujocoEnv asserts render_fps == round(1 / dt); at these frequencies dt rounds to the other side of the half
+    (19.5 Hz: 20), and the env raised a bare AssertionError."""
+    env = JacoPayloadEnv(control_freq=freq)
+    try:
+        assert env.metadata["render_fps"] == int(np.round(1.0 / env.dt)) and abs(env.dt - 1.0 / freq) < 1e-12
+    finally:
+        env.close()
+
+
+def test_reset_options_with_keys_of_several_types_are_refused_by_name(pour_env):
+    with pytest.raises(ValueError, match=r"unknown reset option\(s\) \['colour', 1\]"):
+        pour_env.reset(seed=0, options={1: 2, "colour": 3, "task": "front"})
+
+
 def test_bad_constructor_arguments():
     with pytest.raises(ValueError, match="control_mode"):
         JacoPayloadEnv(control_mode="position")

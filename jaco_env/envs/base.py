@@ -210,7 +210,7 @@ def check_options(options: dict | None, allowed: tuple[str, ...]) -> dict:
         return {}
     if not isinstance(options, dict):
         raise TypeError(f"reset options must be a dict, got {type(options).__name__}")
-    unknown = sorted(set(options) - set(allowed))
+    unknown = sorted((key for key in options if key not in allowed), key=repr)  # keys of any type: sorted by repr
     if unknown:
         raise ValueError(f"unknown reset option(s) {unknown}; allowed: {list(allowed)}")
     return {key: value for key, value in options.items() if value is not None}
@@ -275,7 +275,9 @@ class JacoMujocoEnv(MujocoEnv):
         timestep = self.control_dt / n_sub
         self.n_marbles = int(n_marbles)
         self.torque_limits = robot.TORQUE_LIMITS.copy()
-        self.metadata = {**type(self).metadata, "render_fps": int(round(control_freq))}
+        # MujocoEnv asserts render_fps == round(1 / dt) with dt = timestep * frame_skip, which can round to the other
+        # side of a half-integer control_freq (19.5 Hz: 20 against round(19.5) = 19): computed the same way here
+        self.metadata = {**type(self).metadata, "render_fps": int(np.round(1.0 / (timestep * n_sub)))}
 
         # The sensing pipeline (signal_pipeline.py): None for "ideal", whose measurement is the noise alone; its
         # skewed reads are MuJoCo's delayed joint sensors, part of the scene.
@@ -434,7 +436,7 @@ class JacoMujocoEnv(MujocoEnv):
         if self._signal is not None:  # after the episode's draws (task, payload, marbles): the same for any pipeline
             self._signal.reset(self.np_random)
         self._last_obs = self._get_obs()
-        return self._last_obs
+        return self._last_obs.copy()  # the caller's own array: changing it changes no later observation
 
     def _warn_if_over(self) -> None:
         """Gymnasium's convention (as ``CartPole``): warn once per episode when ``step`` is called after

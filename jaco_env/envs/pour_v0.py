@@ -403,4 +403,5 @@ class JacoPourEnv(JacoMujocoEnv, EzPickle):
         self._terminated = self._terminated or terminated
         if self.render_mode == "human":
             self.render()
-        return obs, reward, terminated, False, self._info(reward_info, err, counts)
+        # a copy: the caller may change it, and an unstable step returns _last_obs again
+        return obs.copy(), reward, terminated, False, self._info(reward_info, err, counts)
