@@ -147,6 +147,11 @@ def test_memory_guard_says_what_fits_and_knows_the_machine(monkeypatch):
     assert isinstance(e, ValueError) and not e.machine and e.n == 4000 and e.limit == cfg.max_batch_bytes
     assert estimate_fit_bytes(e.max_n, 9, 3, 3) <= e.limit < estimate_fit_bytes(e.max_n + 1, 9, 3, 3)
     assert f"at most n={e.max_n} points fit within it" in str(e) and "raise GPFitConfig.max_batch_bytes" in str(e)
+    # a limit below the fixed overhead: fewer points cannot help, and the advice says to raise the limit alone
+    with pytest.raises(memory.FitMemoryError, match=r"; not even 2 points fit within it: raise GPFitConfig\."
+                                                    r"max_batch_bytes$") as low:
+        plan_chunk(GPFitConfig(n_restarts=3, max_batch_bytes=100 * 2**20), 80, 9, 3)
+    assert low.value.max_n == 0 and "use fewer points" not in str(low.value)
     copy = pickle.loads(pickle.dumps(e))  # crosses processes whole
     assert (str(copy), copy.need, copy.limit, copy.n, copy.max_n, copy.machine) == (
         str(e), e.need, e.limit, e.n, e.max_n, e.machine)

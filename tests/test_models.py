@@ -392,6 +392,8 @@ def test_query_errors(fitted):
         m.predict_one(np.zeros(4), np.zeros(4), np.zeros(4))
     with pytest.raises(ValueError, match="qdd: expected 5 rows"):
         m.predict(np.zeros((5, 3)), np.zeros((5, 3)), np.zeros((4, 3)))
+    with pytest.raises(ValueError, match=r"^q: expected at least one row, got shape \(0, 3\)$"):  # said "(T, 3)"
+        m.predict(np.zeros((0, 3)), np.zeros((0, 3)), np.zeros((0, 3)))
     with pytest.raises(ValueError, match="qd/qdd"):
         m.predict(q)
     df = fitted["np-inward-df"]

@@ -22,7 +22,7 @@ Edge cases (documented behaviour)
 * Constant target ``y[b]`` (standard deviation <= 1e-12 x max(1, |mean|), for SI-like units; an input column too):
   not optimised, ``y_std = 1``, hyperparameters at the default start (variances in target units squared that say
   nothing of its scale), the posterior mean exactly the constant, ``fit_info[b]["constant_target"]`` True.
-* NaN/inf or wrong shapes, ``n < 2``, different ``n`` across GPs, unknown kernel: ``ValueError`` naming the field.
+* NaN/inf, wrong shapes, ``n < 2``, unequal ``n``, bad kernel: ``ValueError``; not a list, or not real: ``TypeError``.
 """
 
 from __future__ import annotations

@@ -92,11 +92,14 @@ def plan_chunk(cfg: GPFitConfig, n: int, d: int, n_gps: int) -> int:
     what = f"fitting {n_gps} GPs x {cfg.n_restarts} starts on n={n} points (d={d}) needs"
     if need1 > cfg.max_batch_bytes:
         max_n = largest_fit_n(cfg.max_batch_bytes, d, n_gps, cfg.n_restarts)
+        # a GP needs 2 points: below that, fewer points cannot help (the fixed overhead alone can exceed the limit)
+        advice = (f"at most n={max_n} points fit within it (memory grows as n^2): use fewer points, or raise "
+                  "GPFitConfig.max_batch_bytes" if max_n >= 2 else
+                  "not even 2 points fit within it: raise GPFitConfig.max_batch_bytes")
         raise FitMemoryError(
             f"max_batch_bytes: {what} about {need1 / 2**20:.0f} MiB even one start at a time (3 + {n_gps + 12} "
             f"matrices of {n}x{n} float64, the data and 128 MiB of fixed overhead), over GPFitConfig.max_batch_bytes "
-            f"= {cfg.max_batch_bytes / 2**20:.0f} MiB; at most n={max_n} points fit within it (memory grows as n^2): "
-            "use fewer points, or raise GPFitConfig.max_batch_bytes",
+            f"= {cfg.max_batch_bytes / 2**20:.0f} MiB; {advice}",
             need=need1, limit=cfg.max_batch_bytes, n=n, max_n=max_n, machine=False)
     machine = physical_memory_bytes()
     least = minimum_fit_bytes(n, d, n_gps, cfg.n_restarts)

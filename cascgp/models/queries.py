@@ -40,7 +40,9 @@ def as_query(name: str, a: Any, N: int, extra: tuple[int, ...] = ()) -> np.ndarr
     x = as_real_array(name, a, "(T, N)")
     if x.ndim == 1 + len(extra):
         x = x[None]
-    if x.ndim != 2 + len(extra) or x.shape[1:] != (*extra, N) or x.shape[0] == 0:
+    if x.ndim == 2 + len(extra) and x.shape[1:] == (*extra, N) and x.shape[0] == 0:
+        raise ValueError(f"{name}: expected at least one row, got shape {x.shape}")
+    if x.ndim != 2 + len(extra) or x.shape[1:] != (*extra, N):
         want = ", ".join(["T", *map(str, extra), str(N)])
         raise ValueError(f"{name}: expected shape ({want}) or ({', '.join([*map(str, extra), str(N)])}), got {x.shape}")
     if not np.isfinite(x).all():
