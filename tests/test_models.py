@@ -468,3 +468,32 @@ def test_adopt_banks_refuses_a_row_count_other_than_the_banks(arm3_train):
     a.adopt_banks(banks, where, np.int64(40))
     assert a.n_train == 40 and type(a.n_train) is int
 
+
+
+@pytest.mark.parametrize("name", ["np-standard", "np-inward-df", "np-outward"])
+def test_load_refuses_a_changed_model_trained_far_from_the_unit_box(name, tmp_path):
+    """The stored check queries were random states in [-1, 1] only: a model trained on states elsewhere predicted
+    its prior there, and a file with a changed hyperparameter loaded silently. The check now also queries training
+    states."""
+    t = np.arange(300) * 0.02
+    q = 25.0 + 5.0 * np.stack([np.sin(t), np.sin(1.3 * t + 1.0)], axis=1)
+    qd = 5.0 * np.stack([np.cos(t), 1.3 * np.cos(1.3 * t + 1.0)], axis=1)
+    qdd = -5.0 * np.stack([np.sin(t), 1.69 * np.sin(1.3 * t + 1.0)], axis=1)
+    tau = np.stack([np.sin(4.0 * q[:, 0]) + 0.1 * qd[:, 1], np.cos(q[:, 1]) + 0.05 * qdd[:, 0]], axis=1)
+    model = make_model(name, 2, gp_config=FAST).fit(DynamicsData(q=q, qd=qd, qdd=qdd, tau=tau, t=t))
+    p = tmp_path / "far.npz"
+    model.save(p)
+    loaded = load_model(p)
+    np.testing.assert_array_equal(loaded.predict(q[:7], qd[:7], qdd[:7], model_hist(model, q[:7], qd[:7]))[0],
+                                  model.predict(q[:7], qd[:7], qdd[:7], model_hist(model, q[:7], qd[:7]))[0])
+    for b in range(2):  # one log-lengthscale of one GP, +0.1
+        z = dict(np.load(p))
+        z["bank0/theta"][b, 0] += 0.1
+        np.savez(tmp_path / "changed.npz", **z)
+        with pytest.raises(ValueError, match="does not reproduce its stored check predictions"):
+            load_model(tmp_path / "changed.npz")
+
+
+def model_hist(model, q, qd):
+    """``q_hist`` of a derivative-free model (None for a derivative-based one), from q and qd."""
+    return np.stack([q - 0.1 * qd, q - 0.2 * qd], axis=1) if model.feature_kind == "df" else None

@@ -83,7 +83,7 @@ def save_model(model: CascadedGPModel, path: str | os.PathLike, *,
         for key, val in bank.state_dict().items():
             arrays[f"bank{k}/{key}"] = np.asarray(val)
     arrays.update(_embedded_rbd(model.rbd))
-    # check queries: seeded random states in [-1, 1] (check_set) with their predictions
+    # check queries: seeded random states in [-1, 1] and training states (check_set) with their predictions
     chk = check_set(model)
     arrays.update({f"check/{k}": v for k, v in chk.items()})
     return atomic_savez(path, arrays)
@@ -185,15 +185,39 @@ def _rbd_from_recorded_path(cfg: dict[str, Any], path: str | os.PathLike, name: 
 
 
 def check_set(model: CascadedGPModel) -> dict[str, np.ndarray]:
-    """Deterministic check queries and their predictions (stored by save, verified by load)."""
+    """Deterministic check queries and their predictions (stored by save, verified by load): ``_N_CHECK`` seeded
+    random states in [-1, 1], then up to ``_N_CHECK`` of the model's training states (evenly spaced rows of its GP
+    that sees every joint's state), where its GPs are informed: far from the data every prediction is the prior's,
+    which would not show a changed hyperparameter or training row."""
     rng = np.random.default_rng(12345)
     N, m = model.dof, _N_CHECK
     q = rng.uniform(-1.0, 1.0, (m, N))
     qd = rng.uniform(-1.0, 1.0, (m, N))
     qdd = rng.uniform(-1.0, 1.0, (m, N))
     qh = np.stack([q - 0.1 * qd, q - 0.2 * qd], axis=1)
+    S = _training_states(model)  # (k, N, 3)
+    if model.feature_kind == "db":
+        q, qd, qdd = (np.concatenate([a, S[:, :, c]]) for c, a in enumerate((q, qd, qdd)))
+        qh = np.concatenate([qh, np.stack([q[m:] - 0.1 * qd[m:], q[m:] - 0.2 * qd[m:]], axis=1)])
+    else:  # q(t), q(t - delta), q(t - 2 delta); qd and qdd (an SP model's rigid-body part) by differences
+        dt = model.df_delta
+        q, qh = np.concatenate([q, S[:, :, 0]]), np.concatenate([qh, S[:, :, 1:].transpose(0, 2, 1)])
+        qd = np.concatenate([qd, (S[:, :, 0] - S[:, :, 1]) / dt])
+        qdd = np.concatenate([qdd, (S[:, :, 0] - 2.0 * S[:, :, 1] + S[:, :, 2]) / dt**2])
     mean, var = model.predict(q, qd, qdd, qh if model.feature_kind == "df" else None)
     return {"q": q, "qd": qd, "qdd": qdd, "q_hist": qh, "mean": mean, "var": var}
+
+
+def _training_states(model: CascadedGPModel) -> np.ndarray:
+    """Up to ``_N_CHECK`` evenly spaced training states ``(k, N, 3)`` of ``model``, read back from the posterior of
+    a GP whose inputs are every joint's state (each structure has one; its columns come joint by joint), to
+    round-off; a constant (ignored) column is its mean."""
+    j = next(j for j, (sj, tj) in enumerate(model.specs) if tj is None and len(sj) == model.dof)
+    post = model.posteriors()[j]
+    rows = np.unique(np.linspace(0, post.Z.shape[0] - 1, _N_CHECK).round().astype(int))
+    scale = np.where(np.isfinite(post.x_scale), post.x_scale, 0.0)
+    X = post.x_mean + post.Z[rows] * scale
+    return X.reshape(len(rows), model.dof, 3)
 
 
 def saved_config(path: str | os.PathLike) -> dict[str, Any]:
