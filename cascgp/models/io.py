@@ -209,15 +209,13 @@ def check_set(model: CascadedGPModel) -> dict[str, np.ndarray]:
 
 
 def _training_states(model: CascadedGPModel) -> np.ndarray:
-    """Up to ``_N_CHECK`` evenly spaced training states ``(k, N, 3)`` of ``model``, read back from the posterior of
-    a GP whose inputs are every joint's state (each structure has one; its columns come joint by joint), to
-    round-off; a constant (ignored) column is its mean."""
+    """Up to ``_N_CHECK`` evenly spaced training states ``(k, N, 3)`` of ``model``: the inputs of a GP that sees
+    every joint's state (each structure has one; its columns come joint by joint)."""
     j = next(j for j, (sj, tj) in enumerate(model.specs) if tj is None and len(sj) == model.dof)
-    post = model.posteriors()[j]
-    rows = np.unique(np.linspace(0, post.Z.shape[0] - 1, _N_CHECK).round().astype(int))
-    scale = np.where(np.isfinite(post.x_scale), post.x_scale, 0.0)
-    X = post.x_mean + post.Z[rows] * scale
-    return X.reshape(len(rows), model.dof, 3)
+    k, b = model.where[j]
+    X = model.banks[k].training_data()[0][b]
+    rows = np.unique(np.linspace(0, X.shape[0] - 1, _N_CHECK).round().astype(int))
+    return X[rows].reshape(len(rows), model.dof, 3)
 
 
 def saved_config(path: str | os.PathLike) -> dict[str, Any]:
