@@ -52,16 +52,46 @@ SARCOS_DOF = 7
 SARCOS_RATE_HZ = 50.0
 
 
+def _file(path: str | os.PathLike) -> Path:
+    """``path`` as a ``Path`` to an existing file: ``FileNotFoundError``, or ``ValueError`` for a folder."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder; expected a MATLAB .mat file")
+    if not path.is_file():
+        raise FileNotFoundError(f"SARCOS file not found: {path}")
+    return path
+
+
+def _mat_error(path: Path, exc: Exception) -> ValueError:
+    """The ``ValueError`` for a file SciPy cannot read, with what to do where that is known."""
+    text = f"{type(exc).__name__}: {exc}"
+    if isinstance(exc, NotImplementedError) and "v7.3" in str(exc):
+        return ValueError(f"{path}: a MATLAB v7.3 (HDF5) file, which this reader does not read; save it again in "
+                          f"MATLAB with save(..., '-v7') ({text})")
+    return ValueError(f"{path}: not a readable MATLAB .mat file (damaged or truncated?): {text}")
+
+
 def _loadmat(path: str | os.PathLike) -> dict:
     from scipy.io import loadmat
 
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"SARCOS file not found: {path}")
+    path = _file(path)
     try:
         return loadmat(path)
     except Exception as exc:  # scipy raises several types for corrupt files
-        raise ValueError(f"{path}: not a readable MATLAB .mat file: {type(exc).__name__}: {exc}") from exc
+        raise _mat_error(path, exc) from exc
+
+
+def _matrix(path: str | os.PathLike, d: dict, name: str) -> np.ndarray:
+    """Variable ``name`` of a loaded file as float64: ``ValueError`` naming it unless real numbers, all finite."""
+    a = np.asarray(d[name])
+    if a.dtype.kind not in "fiu":
+        raise ValueError(f"{path}: {name}: expected real numbers, got dtype {a.dtype}")
+    a = a.astype(np.float64)
+    bad = ~np.isfinite(a)
+    if bad.any():
+        row = int(np.flatnonzero(bad.any(axis=1))[0]) if a.ndim == 2 else 0
+        raise ValueError(f"{path}: {name}: NaN or inf (first at row {row})")
+    return a
 
 
 #: The IAS file's variables and their number of columns.
@@ -69,28 +99,34 @@ _IAS_COLUMNS = {"X_train": 3 * 7, "Y_train": 7, "X_test": 3 * 7, "Y_test": 7}
 
 
 def check_ias(path: str | os.PathLike) -> None:
-    """Check that ``path`` is an IAS SARCOS file (``ias_sarcos_data.mat``) from its variables' names and shapes,
-    without reading the data: a command can refuse a wrong file before it runs anything.
+    """Check that ``path`` is an IAS SARCOS file (``ias_sarcos_data.mat``): its variables' names and shapes, then
+    its data (readable to the end, real and finite; about 50 ms), so that a command can refuse a wrong or damaged
+    file before it runs anything.
 
     Raises:
         FileNotFoundError: no file at ``path``.
-        ValueError: not a readable MATLAB file, or not the IAS variables and shapes (``X_train``/``X_test``:
-            T x 21, ``Y_train``/``Y_test``: T x 7, as many rows as their ``X``); a GPML file
-            (``sarcos_inv.mat``, one T x 28 matrix) is named as such, with :func:`load_gpml` as its loader.
+        ValueError: a folder, not a readable MATLAB file (or a damaged one), not the IAS variables and shapes
+            (``X_train``/``X_test``: T x 21, ``Y_train``/``Y_test``: T x 7, as many rows as their ``X``), or
+            values that are not finite real numbers; a GPML file (``sarcos_inv.mat``, one T x 28 matrix) is named
+            as such, with :func:`load_gpml` as its loader.
     """
+    _read_ias(path)
+
+
+def _read_ias(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """The IAS file's four matrices as float64, checked as :func:`check_ias` says."""
     from scipy.io import whosmat
 
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"SARCOS file not found: {path}")
+    path = _file(path)
     try:
         shapes = {name: shape for name, shape, _ in whosmat(path)}
     except Exception as exc:  # scipy raises several types for files that are not MATLAB's
-        raise ValueError(f"{path}: not a readable MATLAB .mat file: {type(exc).__name__}: {exc}") from exc
+        raise _mat_error(path, exc) from exc
     missing = [k for k in _IAS_COLUMNS if k not in shapes]
     if missing:
         gpml = [k for k, s in shapes.items() if len(s) == 2 and s[1] == 28]
-        hint = (f"; it holds the GPML SARCOS matrix {gpml[0]!r} (T x 28), which cascgp.load_gpml reads" if gpml else "")
+        hint = (f"; it holds the GPML SARCOS matrix {gpml[0]!r} (T x 28), which cascgp.load_gpml reads" if gpml else
+                "; it holds only some of them: truncated?" if len(missing) < len(_IAS_COLUMNS) else "")
         raise ValueError(f"{path}: missing variable(s) {missing} (expected the IAS SARCOS format, "
                          f"ias_sarcos_data.mat){hint}")
     for k, cols in _IAS_COLUMNS.items():
@@ -99,6 +135,8 @@ def check_ias(path: str | os.PathLike) -> None:
         if len(shape) != 2 or shape[1] != cols or shape[0] != rows:
             raise ValueError(f"{path}: {k}: expected shape ({rows}, {cols}), got {tuple(shape)} "
                              "(the IAS SARCOS format)")
+    d = _loadmat(path)
+    return {k: _matrix(path, d, k) for k in _IAS_COLUMNS}
 
 
 def detect_segments(q: np.ndarray, qd: np.ndarray, jump_factor: float = 20.0) -> np.ndarray:
@@ -182,10 +220,8 @@ def load_ias(path: str | os.PathLike, *, dedup: bool = True, torque_scale: float
     new segment starts (``inf``: one segment). See the module docstring for time, segments and units.
     """
     _check_common(rate_hz, torque_scale, jump_factor)
-    check_ias(path)
-    d = _loadmat(path)
-    X_tr, Y_tr = np.asarray(d["X_train"], float), np.asarray(d["Y_train"], float)
-    X_te, Y_te = np.asarray(d["X_test"], float), np.asarray(d["Y_test"], float)
+    d = _read_ias(path)
+    X_tr, Y_tr, X_te, Y_te = d["X_train"], d["Y_train"], d["X_test"], d["Y_test"]
     units = _units(torque_scale, "IAS")
     base = {"robot": "SARCOS", "source": "IAS ias_sarcos_data.mat", "file": str(path),
             "torque_units": units, "torque_scale": float(torque_scale), "rate_hz": float(rate_hz)}
@@ -212,15 +248,17 @@ def load_gpml(path: str | os.PathLike, *, torque_scale: float = 1.0, rate_hz: fl
     ``jump_factor``: as for :func:`load_ias`."""
     _check_common(rate_hz, torque_scale, jump_factor)
     d = _loadmat(path)
+    found = {k: np.shape(v) for k, v in d.items() if not k.startswith("__")}
     if variable is None:
         cands = [k for k, v in d.items() if not k.startswith("__") and isinstance(v, np.ndarray)
                  and v.ndim == 2 and v.shape[1] == 28]
         if len(cands) != 1:
-            raise ValueError(f"{path}: expected exactly one T x 28 matrix (GPML SARCOS format), found {cands}")
+            raise ValueError(f"{path}: expected exactly one T x 28 matrix (GPML SARCOS format), found "
+                             f"{len(cands)} among its variables {found}")
         variable = cands[0]
     if variable not in d:
-        raise ValueError(f"{path}: variable {variable!r} not found")
-    A = np.asarray(d[variable], dtype=np.float64)
+        raise ValueError(f"{path}: variable {variable!r} not found; the file holds {found}")
+    A = _matrix(path, d, variable)
     if A.ndim != 2 or A.shape[1] != 28:
         raise ValueError(f"{path}: {variable}: expected shape (T, 28), got {A.shape}")
     meta = {"robot": "SARCOS", "source": f"GPML {Path(path).name}", "file": str(path),

@@ -63,9 +63,10 @@ def test_loader_errors(tmp_path, sarcos_dir):
         load_ias(sarcos_dir / "ias_sarcos_data.mat", torque_scale=0)
 
 
-def test_check_ias_reads_names_and_shapes_only(tmp_path) -> None:
+def test_check_ias_checks_names_shapes_and_data(tmp_path) -> None:
     """``check_ias`` accepts a file with the IAS variables and shapes and names the variable and the expected
-    shape otherwise; ``load_ias`` raises the same errors."""
+    shape otherwise; ``load_ias`` raises the same errors. A truncated file, whose names and shapes it read alone
+    before, is refused too (``cascgp study`` ran the whole Jaco part, then failed at the SARCOS load)."""
     from scipy.io import savemat
 
     from cascgp.sarcos import check_ias
@@ -86,7 +87,37 @@ def test_check_ias_reads_names_and_shapes_only(tmp_path) -> None:
     (tmp_path / "text.mat").write_text("t,q1\n")
     with pytest.raises(ValueError, match="text.mat: not a readable MATLAB .mat file"):
         check_ias(tmp_path / "text.mat")
+    raw = (tmp_path / "ok.mat").read_bytes()
+    for cut, match in ((10, r"cut.mat: not a readable MATLAB .mat file \(damaged or truncated\?\)"),
+                       (len(raw) // 2, r"cut.mat: missing variable\(s\) .*: truncated\?")):
+        (tmp_path / "cut.mat").write_bytes(raw[:-cut])
+        with pytest.raises(ValueError, match=match):
+            check_ias(tmp_path / "cut.mat")
+    with pytest.raises(ValueError, match=r"is a folder; expected a MATLAB .mat file"):
+        check_ias(tmp_path)
+    with pytest.raises(ValueError, match=r"is a folder; expected a MATLAB .mat file"):
+        load_gpml(tmp_path)
 
+
+
+def test_load_gpml_names_what_the_file_holds_and_refuses_complex_values(tmp_path) -> None:
+    """A GPML file of another shape said 'found []'; a complex matrix lost its imaginary part with a warning; a
+    MATLAB v7.3 file got SciPy's advice to use h5py."""
+    from scipy.io import savemat
+
+    A = np.random.default_rng(1).normal(size=(6, 28))
+    savemat(tmp_path / "t.mat", {"sarcos_inv": A.T})
+    with pytest.raises(ValueError, match=r"found 0 among its variables \{'sarcos_inv': \(28, 6\)\}"):
+        load_gpml(tmp_path / "t.mat")
+    with pytest.raises(ValueError, match=r"variable 'x' not found; the file holds \{'sarcos_inv': \(28, 6\)\}"):
+        load_gpml(tmp_path / "t.mat", variable="x")
+    savemat(tmp_path / "c.mat", {"sarcos_inv": A + 1j})
+    with pytest.raises(ValueError, match=r"c.mat: sarcos_inv: expected real numbers, got dtype complex128"):
+        load_gpml(tmp_path / "c.mat")
+    header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, Created on: Mon Jan  1 00:00:00 2024 HDF5 schema 1.00 ."
+    (tmp_path / "h5.mat").write_bytes(header.ljust(116) + b"\0" * 8 + b"\x00\x02IM" + b"\0" * 512)
+    with pytest.raises(ValueError, match=r"h5.mat: a MATLAB v7.3 \(HDF5\) file.*save\(\.\.\., '-v7'\)"):
+        load_gpml(tmp_path / "h5.mat")
 
 
 def test_a_bad_matrix_names_the_file_and_the_matrix(tmp_path) -> None:
@@ -94,13 +125,16 @@ def test_a_bad_matrix_names_the_file_and_the_matrix(tmp_path) -> None:
     matrix are named (they were DynamicsData's messages alone). Tiny files: no SARCOS copy needed."""
     from scipy.io import savemat
 
+    from cascgp.sarcos import check_ias
+
     rng = np.random.default_rng(0)
     X, Y = rng.normal(size=(4, 21)), rng.normal(size=(4, 7))
     bad = X.copy()
     bad[2, 5] = np.nan
     savemat(tmp_path / "nan.mat", {"X_train": bad, "Y_train": Y, "X_test": X, "Y_test": Y})
-    with pytest.raises(ValueError, match=r"nan.mat: X_train: DynamicsData.q: non-finite value .* at row 2"):
-        load_ias(tmp_path / "nan.mat")
+    for load in (load_ias, check_ias):  # check_ias read names and shapes only: a command ran, then failed at the load
+        with pytest.raises(ValueError, match=r"nan.mat: X_train: NaN or inf \(first at row 2\)"):
+            load(tmp_path / "nan.mat")
     savemat(tmp_path / "dup.mat", {"X_train": X, "Y_train": Y, "X_test": X[:2], "Y_test": Y[:2]})
     with pytest.raises(ValueError, match=r"dup.mat: X_test \(0 of 2 rows kept\): "):
         load_ias(tmp_path / "dup.mat")

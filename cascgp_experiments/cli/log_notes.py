@@ -77,14 +77,16 @@ def coverage_note(prog: str, model: Any, data: Any) -> str | None:
 
 
 def in_sample_note(prog: str, model: Any, data: Any) -> str | None:
-    """A note when at least 5 % of a test log's rows are the model's training rows (their positions bit for bit);
-    returns it (``None``: no note)."""
-    from cascgp.models.coverage import fraction_in_training
+    """A note when at least 5 % of a test log's rows are the model's training rows (their positions bit for bit), or
+    when the log holds at least half of the model's training rows (a model fitted on a few of a long log's rows,
+    evaluated on that log); returns it (``None``: no note)."""
+    from cascgp.models.coverage import fraction_in_training, fraction_of_training_in
 
-    share = fraction_in_training(model, data.q)
-    if share >= 0.05:
-        msg = (f"{share:.0%} of the rows are the model's training rows (the same positions, bit for bit): scores on "
-               "them are in-sample, not a test; evaluate on a log the model was not fitted to")
+    share, held = fraction_in_training(model, data.q), fraction_of_training_in(model, data.q)
+    if share >= 0.05 or held >= 0.5:
+        msg = (f"{share:.0%} of the rows are the model's training rows (the same positions, bit for bit; "
+               f"{held:.0%} of its training rows are in the log): scores on them are in-sample, not a test; "
+               "evaluate on a log the model was not fitted to")
         note(prog, f"note: {msg}")
         return msg
     return None
