@@ -19,7 +19,8 @@ column                 needed    meaning
 
 N is read from the header: every group present holds exactly the columns ``1..N`` (``q`` defines N), columns
 may come in any order, names are case-sensitive. Any other column is an error (a misspelt ``qd_1`` would
-otherwise be dropped silently); remove unneeded columns first. Every cell is a finite decimal number. In a log
+otherwise be dropped silently); remove unneeded columns first. Every cell is a finite decimal number in ASCII
+digits (a row of empty cells is refused; a blank line is skipped). In a log
 without velocity columns (whose velocities are computed from ``q``) no joint position changes by more than
 :math:`\pi` from one row to the next within a segment: no arm moves that far in one sample, and a continuous
 joint's angle wrapped to :math:`[-\pi, \pi)` or :math:`[0, 2\pi)` would give spikes in the computed velocity and
@@ -142,7 +143,7 @@ def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[i
     k = len(names)
     for cells in reader:
         r = reader.line_num
-        if not cells or all(not c.strip() for c in cells):
+        if not cells or (len(cells) == 1 and not cells[0].strip()):  # a blank line (a row of empty cells is not)
             continue
         if len(cells) != k:
             lines = sum(c.rstrip("\n").count("\n") for c in cells)
@@ -157,10 +158,11 @@ def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[i
             row = [float(c) for c in cells]
         except ValueError:
             row = []
-        if len(row) != k or not all(map(math.isfinite, row)):
+        # float() also takes '1_000' and digits of other scripts; a log's cells are ASCII decimal numbers
+        if len(row) != k or not all(map(math.isfinite, row)) or not all(c.isascii() and "_" not in c for c in cells):
             for c, cell in enumerate(cells):
                 try:
-                    ok = math.isfinite(float(cell))
+                    ok = cell.isascii() and "_" not in cell and math.isfinite(float(cell))
                 except ValueError:
                     ok = False
                 if not ok:
@@ -303,7 +305,7 @@ def _check_segment_rows(path: Path, seg: np.ndarray, rownos: list[int], no_qd: b
     if short.size:
         lo, k = int(starts[short[0]]), int(sizes[short[0]])
         what = "qd and qdd from q" if need == 3 else "qd from q" if no_qd else "qdd from qd"
-        cols = "qd1..qdN and qdd1..qdN" if need == 3 else "qd1..qdN" if no_qd else "qdd1..qddN"
+        cols = "qd1..qdN and qdd1..qddN" if need == 3 else "qd1..qdN" if no_qd else "qdd1..qddN"
         rows = f"{k} row{'s' if k > 1 else ''}"
         where = f"row {rownos[lo]}: segment {int(seg[lo])} has {rows}" if has_segments else f"the log has {rows}"
         raise LogFormatError(f"{path}: {where}; computing {what} needs at least {need} rows per segment: merge or "

@@ -153,6 +153,12 @@ CASES = {
     "ragged row (long)": (HEAD + "\n0,1,2,3,4,5\n", 2, "tau2", "1 extra cell"),
     "non-numeric cell": (HEAD + "\n0,1,2,3,4\n0.1,1,two,3,4\n", 3, "q2", "got 'two'"),
     "empty cell": (HEAD + "\n0,1,,3,4\n", 2, "q2", "got ''"),
+    # a row of empty cells (what pandas writes for a row of NaN) was skipped as a blank line
+    "row of empty cells": (HEAD + "\n0,1,2,3,4\n,,,,\n0.2,1,2,3,4\n", 3, "t", "got ''"),
+    # float() takes these; a log's cells are ASCII decimal numbers
+    "underscore in a number": (HEAD + "\n0,1_000,2,3,4\n", 2, "q1", "got '1_000'"),
+    "digits of another script": (HEAD + "\n0,1,\u0661\u0662,3,4\n", 2, "q2", "got '\u0661\u0662'"),
+    "non-breaking space": (HEAD + "\n0,1,2,\u00a03,4\n", 2, "tau1", "expected a finite number"),
     "NaN cell": (HEAD + "\n0,1,2,3,4\n0.1,1,2,nan,4\n", 3, "tau1", "got 'nan'"),
     "inf cell": (HEAD + "\n0,1,2,3,4\n0.1,1,2,3,-inf\n", 3, "tau2", "got '-inf'"),
     "t repeats": (HEAD + "\n0,1,2,3,4\n0.1,1,2,3,4\n0.1,1,2,3,4\n", 4, "t", "strictly increasing"),
@@ -207,7 +213,7 @@ def test_a_segment_too_short_to_differentiate_is_refused(tmp_path: Path) -> None
     rows = "0,0,1.0,2\n0.1,0,1.2,2\n0.2,0,1.4,2\n0.3,1,1.0,2\n0.4,1,1.1,2\n"
     path.write_text("t,segment,q1,tau1\n" + rows)
     with pytest.raises(LogFormatError, match=r"log.csv: row 5: segment 1 has 2 rows; computing qd and qdd from q "
-                                             r"needs at least 3 rows per segment.*give the qd1..qdN and qdd1..qdN"):
+                                             r"needs at least 3 rows per segment.*give the qd1..qdN and qdd1..qddN columns"):
         read_log(path)
     path.write_text("t,segment,q1,qd1,tau1\n" + rows.replace(",2\n", ",0.5,2\n"))
     assert read_log(path).n_samples == 5  # qdd from qd: 2 rows are enough
