@@ -12,7 +12,17 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SavGol", "as_savgol", "differentiate"]
+__all__ = ["SavGol", "as_savgol", "differentiate", "UNIFORM_TOLERANCE", "is_uniform"]
+
+#: Sample periods within this fraction of their median count as uniform sampling.
+UNIFORM_TOLERANCE = 0.05
+
+
+def is_uniform(t: np.ndarray) -> bool:
+    """Whether the periods of the sample times ``t`` (one segment, ascending) are all within
+    :data:`UNIFORM_TOLERANCE` of their median."""
+    d = np.diff(t)
+    return not d.size or bool(np.max(np.abs(d - np.median(d))) <= UNIFORM_TOLERANCE * np.median(d))
 
 
 @dataclass(frozen=True)
@@ -20,8 +30,9 @@ class SavGol:
     r"""Savitzky-Golay smoothing for :meth:`cascgp.data.DynamicsData.from_measurements`.
 
     The acceleration is the first derivative of a local polynomial of degree ``polyorder``
-    fitted by least squares to ``window`` consecutive velocity samples. It assumes uniform sampling
-    within a segment (the segment's median period is used).
+    fitted by least squares to ``window`` consecutive velocity samples. A uniformly sampled segment uses its
+    median period; one whose periods vary by more than :data:`UNIFORM_TOLERANCE` of the median (dropped samples,
+    say) is fitted at the actual sample times (centred filter; :func:`differentiate`).
 
     ============  =====================================================================================
     ``causal``    the estimate at sample :math:`t`
@@ -99,9 +110,12 @@ def differentiate(t: np.ndarray, x: np.ndarray, segment: np.ndarray, smoothing: 
     :meth:`cascgp.data.DynamicsData.from_measurements` and of logs without derivative columns (:mod:`cascgp.logs`).
 
     With ``smoothing`` a segment of at least ``smoothing.window`` rows uses :func:`scipy.signal.savgol_filter`
-    (``deriv=1``, ``delta`` = the segment's median period, ``mode="interp"``); shorter segments and
-    ``smoothing=None`` use :func:`numpy.gradient` on the sample times. A one-row segment gets 0. A causal
-    ``smoothing`` (:class:`SavGol` with ``causal=True``) uses past rows only, in every segment.
+    (``deriv=1``, ``delta`` = the segment's median period, ``mode="interp"``) where it is uniformly sampled
+    (:func:`is_uniform`), and the same local polynomial fitted at the actual sample times where it is not
+    (a log with dropped samples: the uniform filter took every period for the median one, and was off by a fifth
+    with one sample in ten dropped); shorter segments and ``smoothing=None`` use :func:`numpy.gradient` on the
+    sample times. A one-row segment gets 0. A causal ``smoothing`` (:class:`SavGol` with ``causal=True``) uses
+    past rows only, in every segment, at the median period.
     """
     out = np.zeros_like(x, dtype=np.float64)
     cuts = np.flatnonzero(np.diff(segment) != 0) + 1
@@ -111,6 +125,8 @@ def differentiate(t: np.ndarray, x: np.ndarray, segment: np.ndarray, smoothing: 
         ts = t[lo:hi]
         if smoothing is not None and smoothing.causal:
             out[lo:hi] = _causal_derivative(x[lo:hi], float(np.median(np.diff(ts))), smoothing)
+        elif smoothing is not None and hi - lo >= smoothing.window and not is_uniform(ts):
+            out[lo:hi] = _local_polynomial_derivative(ts, x[lo:hi], smoothing.window, smoothing.polyorder)
         elif smoothing is not None and hi - lo >= smoothing.window:
             from scipy.signal import savgol_filter
 
@@ -120,6 +136,23 @@ def differentiate(t: np.ndarray, x: np.ndarray, segment: np.ndarray, smoothing: 
         else:
             out[lo:hi] = np.gradient(x[lo:hi], ts, axis=0, edge_order=1)
     return out
+
+
+def _local_polynomial_derivative(t: np.ndarray, x: np.ndarray, window: int, polyorder: int) -> np.ndarray:
+    """The centred Savitzky-Golay derivative of one segment ``x`` (T, N), T >= ``window``, at the sample times ``t``:
+    at each row the slope of the polynomial of degree ``polyorder`` fitted by least squares to the ``window`` rows
+    around it (the first or last ``window`` rows near the segment's ends, as ``savgol_filter``'s ``mode="interp"``).
+    Written here because SciPy's filter takes one sample period; on uniform times it equals that filter to
+    round-off."""
+    T, h = len(t), window // 2
+    idx = np.clip(np.arange(T) - h, 0, T - window)[:, None] + np.arange(window)  # (T, window): each row's rows
+    scale = float(np.median(np.diff(t)))
+    tau = (t[idx] - t[:, None]) / scale  # the window's times from the row's, in periods (well conditioned)
+    V = tau[:, :, None] ** np.arange(polyorder + 1)  # (T, window, polyorder + 1)
+    # least squares by the normal equations: the slope at tau = 0 is row 1 of (V^T V)^-1 V^T
+    G = np.linalg.inv(np.einsum("twi,twj->tij", V, V))
+    slope = np.einsum("tj,twj->tw", G[:, 1, :], V) / scale  # (T, window)
+    return np.einsum("tw,twn->tn", slope, x[idx])
 
 
 def _causal_derivative(x: np.ndarray, h: float, smoothing: SavGol) -> np.ndarray:

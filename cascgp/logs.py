@@ -31,7 +31,8 @@ Missing derivatives
 Within each segment, :math:`\dot q` is the derivative of :math:`q` and :math:`\ddot q` the derivative of
 :math:`\dot q` (the given or the computed one), both by the same filter, by default :data:`DEFAULT_SMOOTHING`
 (Savitzky-Golay, window 7, polynomial order 2, :class:`cascgp.data.SavGol`): the derivative of a local quadratic
-fitted by least squares to 7 samples, centred (no lag), assuming the segment's median sample period; segments
+fitted by least squares to 7 samples, centred (no lag), at the segment's median sample period where its sampling
+is uniform, and at the actual sample times where its periods vary by more than 5 % (dropped samples); segments
 shorter than the window, and ``smoothing=None``, use central differences (:func:`numpy.gradient` on the times).
 A segment needs 3 rows to compute both, 2 to compute one of them; a shorter one is refused with a
 :class:`LogFormatError` naming its first row (it would get a zero derivative). The filter used is recorded in
@@ -59,6 +60,7 @@ from typing import Any
 import numpy as np
 
 from cascgp.data import DynamicsData, SavGol, differentiate
+from cascgp.derivatives import UNIFORM_TOLERANCE
 from cascgp.io import atomic_write
 
 __all__ = ["LogFormatError", "DEFAULT_SMOOTHING", "read_log", "write_log", "write_predictions", "differentiate",
@@ -313,14 +315,16 @@ def _check_segment_rows(path: Path, seg: np.ndarray, rownos: list[int], no_qd: b
 
 
 def _check_uniform(path: Path, t: np.ndarray, seg: np.ndarray, smoothing: SavGol | None) -> None:
-    """Warn when the Savitzky-Golay filter's uniform-sampling assumption is off by more than 5 %."""
+    """Warn when sample periods vary by more than :data:`~cascgp.derivatives.UNIFORM_TOLERANCE` of their median: the
+    derivative is then fitted at the sample times, and a polynomial that spans a pause in logging is a poor one."""
     if smoothing is None:
         return
     d = np.diff(t)[np.diff(seg) == 0]
-    if d.size and np.max(np.abs(d - np.median(d))) > 0.05 * np.median(d):
-        warnings.warn(f"{path}: sample periods vary by more than 5 % of their median ({np.median(d):.4g} s, "
-                      f"longest {d.max():.4g} s); the {filter_name(smoothing)} derivative assumes uniform sampling: "
-                      "start a new segment (column 'segment') where logging paused", stacklevel=3)
+    if d.size and np.max(np.abs(d - np.median(d))) > UNIFORM_TOLERANCE * np.median(d):
+        warnings.warn(f"{path}: sample periods vary by more than {UNIFORM_TOLERANCE:.0%} of their median "
+                      f"({np.median(d):.4g} s, longest {d.max():.4g} s); the {filter_name(smoothing)} derivative "
+                      f"fits its polynomial at the actual sample times there, which spans a pause: start a new segment "
+                      "(column 'segment') where logging paused", stacklevel=3)
 
 
 #: A median sample period above this (s) is taken for a time column in other units than seconds: no arm's dynamics
