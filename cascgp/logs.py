@@ -42,8 +42,8 @@ A segment needs 3 rows to compute both, 2 to compute one of them; a shorter one 
 times too small.
 
 Errors are :class:`LogFormatError` (a ``ValueError``) naming the file, the row and the column. Predictions are
-written by :func:`write_predictions` (columns ``t``, ``tau1..tauN`` predicted means, ``var1..varN`` their
-variances in N² m²).
+written by :func:`write_predictions` (columns ``t``, ``segment`` for a log of several segments, ``tau1..tauN``
+predicted means, ``var1..varN`` their variances in N² m²).
 """
 
 from __future__ import annotations
@@ -425,15 +425,21 @@ def write_log(path: str | os.PathLike, data: DynamicsData) -> Path:
     return atomic_write(path, lambda f: f.write(body))
 
 
-def write_predictions(path: str | os.PathLike, t: np.ndarray, mean: np.ndarray, var: np.ndarray) -> Path:
-    """Write predictions atomically as CSV: ``t``, ``tau1..tauN`` (predicted mean torques, N m) and
-    ``var1..varN`` (their variances, N² m²), one row per query."""
+def write_predictions(path: str | os.PathLike, t: np.ndarray, mean: np.ndarray, var: np.ndarray,
+                      segment: np.ndarray | None = None) -> Path:
+    """Write predictions atomically as CSV: ``t``, ``segment`` (the log's segment ids, when ``segment`` holds more
+    than one: times may restart in each segment), ``tau1..tauN`` (predicted mean torques, N m) and ``var1..varN``
+    (their variances, N² m²), one row per query."""
     t = np.asarray(t, dtype=np.float64)
     mean, var = np.asarray(mean, dtype=np.float64), np.asarray(var, dtype=np.float64)
     if mean.ndim != 2 or var.shape != mean.shape or t.shape != (mean.shape[0],):
         raise ValueError(f"predictions: expected t (T,), mean and var (T, N); got t {t.shape}, mean {mean.shape}, "
                          f"var {var.shape}")
-    cols = {"t": t, **{f"tau{j + 1}": mean[:, j] for j in range(mean.shape[1])},
+    seg = None if segment is None else np.asarray(segment)
+    if seg is not None and seg.shape != t.shape:
+        raise ValueError(f"predictions: expected segment {t.shape}, got {seg.shape}")
+    cols = {"t": t, **({"segment": seg} if seg is not None and len(np.unique(seg)) > 1 else {}),
+            **{f"tau{j + 1}": mean[:, j] for j in range(mean.shape[1])},
             **{f"var{j + 1}": var[:, j] for j in range(mean.shape[1])}}
     body = _csv_bytes(cols)
     return atomic_write(path, lambda f: f.write(body))

@@ -79,6 +79,12 @@ def test_write_predictions(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="predictions"):
         write_predictions(tmp_path / "q.csv", t, mean, var[:2])
     assert not (tmp_path / "q.csv").exists()
+    # several segments (times may restart in each): their ids, to match rows back; one segment: no column
+    seg = np.array([0, 0, 3, 3])
+    text = write_predictions(tmp_path / "s.csv", t, mean, var, seg).read_text().splitlines()
+    assert text[0] == "t,segment,tau1,tau2,var1,var2"
+    np.testing.assert_array_equal(np.array([r.split(",") for r in text[1:]], float)[:, 1], seg)
+    assert write_predictions(tmp_path / "one.csv", t, mean, var, np.zeros(4)).read_text().startswith("t,tau1,")
 
 
 # --------------------------------------------------------------------------- derivatives

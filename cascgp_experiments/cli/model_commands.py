@@ -475,6 +475,6 @@ def _predict(a: argparse.Namespace, prog: str) -> int:
         if short:
             log_notes.note(prog, f"note: {short} row(s) lack {2 * model.df_delta:g} s of history within their segment; "
                         "their predictions use the segment's first position for the missing history")
-    write_predictions(a.out, data.t, mean, var)
+    write_predictions(a.out, data.t, mean, var, data.segment)
     print(f"wrote {data.n_samples} predictions of {model.name} to {a.out}")
     return 0
