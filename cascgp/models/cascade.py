@@ -43,7 +43,8 @@ class CascadedGPModel:
         rbd: the rigid-body mean function of an SP model (:class:`cascgp.rbd.RigidBodyModel`); ``None`` for NP.
         gp_config: the :class:`cascgp.gp.GPFitConfig` of the fits.
         df_delta: the history step of ``-df`` features (s).
-        train_on_predicted: cascades only: each joint trained on its neighbour's predicted torque (not measured).
+        train_on_predicted: cascades only (a standard model ignores it): each joint trained on its neighbour's
+            predicted torque (not measured).
         order: joints (0-based) in prediction order (inward: N-1 .. 0, else 0 .. N-1).
         banks: the fitted :class:`cascgp.gp.GPBank` objects; ``where[j] = (k, b)``: joint j is GP ``b`` of ``banks[k]``.
     """
