@@ -146,12 +146,12 @@ def _local_polynomial_derivative(t: np.ndarray, x: np.ndarray, window: int, poly
     round-off."""
     T, h = len(t), window // 2
     idx = np.clip(np.arange(T) - h, 0, T - window)[:, None] + np.arange(window)  # (T, window): each row's rows
-    scale = float(np.median(np.diff(t)))
-    tau = (t[idx] - t[:, None]) / scale  # the window's times from the row's, in periods (well conditioned)
-    V = tau[:, :, None] ** np.arange(polyorder + 1)  # (T, window, polyorder + 1)
-    # least squares by the normal equations: the slope at tau = 0 is row 1 of (V^T V)^-1 V^T
-    G = np.linalg.inv(np.einsum("twi,twj->tij", V, V))
-    slope = np.einsum("tj,twj->tw", G[:, 1, :], V) / scale  # (T, window)
+    tau = t[idx] - t[:, None]  # the window's times from the row's
+    span = np.abs(tau).max(axis=1)  # > 0: times increase within a segment
+    V = (tau / span[:, None])[:, :, None] ** np.arange(polyorder + 1)  # (T, window, polyorder + 1), entries in [-1, 1]
+    # least squares by the pseudo-inverse (SVD: as well conditioned as the scaled Vandermonde matrix, whatever the
+    # pause inside a window); the slope at tau = 0 is row 1 of pinv(V), over the window's span
+    slope = np.linalg.pinv(V)[:, 1, :] / span[:, None]  # (T, window)
     return np.einsum("tw,twn->tn", slope, x[idx])
 
 

@@ -60,7 +60,7 @@ from typing import Any
 import numpy as np
 
 from cascgp.data import DynamicsData, SavGol, differentiate
-from cascgp.derivatives import UNIFORM_TOLERANCE
+from cascgp.derivatives import UNIFORM_TOLERANCE, is_uniform
 from cascgp.io import atomic_write
 
 __all__ = ["LogFormatError", "DEFAULT_SMOOTHING", "read_log", "write_log", "write_predictions", "differentiate",
@@ -168,8 +168,8 @@ def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[i
                 except ValueError:
                     ok = False
                 if not ok:
-                    raise LogFormatError(f"{path}: row {r}, column {names[c]!r}: expected a finite number, "
-                                         f"got {cell.strip()!r}")
+                    got = repr(cell.strip()) if cell.isascii() else f"{cell!r} (characters that are not ASCII)"
+                    raise LogFormatError(f"{path}: row {r}, column {names[c]!r}: expected a finite number, got {got}")
         values.append(row)
         rownos.append(r)
     if not values:
@@ -315,16 +315,22 @@ def _check_segment_rows(path: Path, seg: np.ndarray, rownos: list[int], no_qd: b
 
 
 def _check_uniform(path: Path, t: np.ndarray, seg: np.ndarray, smoothing: SavGol | None) -> None:
-    """Warn when sample periods vary by more than :data:`~cascgp.derivatives.UNIFORM_TOLERANCE` of their median: the
-    derivative is then fitted at the sample times, and a polynomial that spans a pause in logging is a poor one."""
+    """Warn when a segment's sample periods vary by more than :data:`~cascgp.derivatives.UNIFORM_TOLERANCE` of its
+    median (:func:`~cascgp.derivatives.is_uniform`): a centred filter then fits at the sample times, and a polynomial
+    that spans a pause in logging is a poor one; a causal filter takes the median period."""
     if smoothing is None:
         return
-    d = np.diff(t)[np.diff(seg) == 0]
-    if d.size and np.max(np.abs(d - np.median(d))) > UNIFORM_TOLERANCE * np.median(d):
-        warnings.warn(f"{path}: sample periods vary by more than {UNIFORM_TOLERANCE:.0%} of their median "
-                      f"({np.median(d):.4g} s, longest {d.max():.4g} s); the {filter_name(smoothing)} derivative "
-                      f"fits its polynomial at the actual sample times there, which spans a pause: start a new segment "
-                      "(column 'segment') where logging paused", stacklevel=3)
+    cuts = np.flatnonzero(np.diff(seg) != 0) + 1
+    for lo, hi in zip(np.r_[0, cuts], np.r_[cuts, len(t)]):
+        if not is_uniform(t[lo:hi]):
+            d = np.diff(t[lo:hi])
+            how = ("takes every period for the median one" if smoothing.causal else
+                   "fits its polynomial at the actual sample times there, also across a pause")
+            warnings.warn(f"{path}: sample periods vary by more than {UNIFORM_TOLERANCE:.0%} of their median within "
+                          f"a segment ({np.median(d):.4g} s, longest {d.max():.4g} s); the {filter_name(smoothing)} "
+                          f"derivative {how}: start a new segment (column 'segment') where logging paused",
+                          stacklevel=3)
+            return
 
 
 #: A median sample period above this (s) is taken for a time column in other units than seconds: no arm's dynamics
@@ -436,8 +442,9 @@ def write_predictions(path: str | os.PathLike, t: np.ndarray, mean: np.ndarray, 
         raise ValueError(f"predictions: expected t (T,), mean and var (T, N); got t {t.shape}, mean {mean.shape}, "
                          f"var {var.shape}")
     seg = None if segment is None else np.asarray(segment)
-    if seg is not None and seg.shape != t.shape:
-        raise ValueError(f"predictions: expected segment {t.shape}, got {seg.shape}")
+    if seg is not None and (seg.shape != t.shape or seg.dtype.kind not in "iuf"
+                            or not np.isfinite(seg.astype(np.float64)).all() or (seg != np.round(seg)).any()):
+        raise ValueError(f"segment: expected integer ids of shape {t.shape}, got {seg.dtype} {seg.shape}")
     cols = {"t": t, **({"segment": seg} if seg is not None and len(np.unique(seg)) > 1 else {}),
             **{f"tau{j + 1}": mean[:, j] for j in range(mean.shape[1])},
             **{f"var{j + 1}": var[:, j] for j in range(mean.shape[1])}}

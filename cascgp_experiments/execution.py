@@ -85,8 +85,8 @@ class JobResults(list):
 
     ``n_cached`` (jobs read from the cache), ``job_seconds`` (wall time of each job where it ran; for
     a cached job the time recorded when it ran), ``wall_s`` (the whole call), ``workers`` and
-    ``backend`` (``"in-process"``, ``"processes"`` or ``"ray"``; ``"cache"`` with 0 workers when every job came
-    from the cache and none ran)."""
+    ``backend`` (``"in-process"``, ``"processes"`` or ``"ray"``; ``"cache"`` with 0 workers when there were jobs
+    and every one came from the cache)."""
 
     n_cached: int = 0
     job_seconds: list[float | None]
@@ -380,7 +380,7 @@ def run_jobs(fn: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], *, worke
         raise JobError(f"{desc}: job {name}({label(jobs[i])}) failed {failures[i]} times; inputs: "
                        f"{_short(jobs[i])}\nlast error: {value}", jobs[i], value)
 
-    backend, used = ("in-process", 1) if todo else ("cache", 0)
+    backend, used = ("cache", 0) if jobs and not todo else ("in-process", 1)
     try:
         if todo:
             if ray_address is not None:

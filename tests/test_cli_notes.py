@@ -108,16 +108,18 @@ def test_evaluate_and_predict_note_a_log_far_outside_the_training_positions(logs
     r = cascgp("evaluate", "--model", "np.npz", "--data", "test.csv", cwd=logs)
     assert r.returncode == 0 and far not in r.stderr and "in-sample" not in r.stderr, r.stderr  # no note
     r = cascgp("evaluate", "--model", "np.npz", "--data", "train.csv", "--json", "in.json", cwd=logs)
-    assert r.returncode == 0 and "note: 15% of the rows are the model's training rows" in r.stderr, r.stderr  # 60/400
+    assert r.returncode == 0 and "note: 60 of the log's 400 rows (15.0%) are the model's training rows" in r.stderr, (
+        r.stderr)
     notes = json.loads((logs / "in.json").read_text())["notes"]  # the scores' file keeps what was noted
-    assert len(notes) == 1 and notes[0].startswith("15% of the rows are the model's training rows")
+    assert len(notes) == 1 and notes[0].startswith("60 of the log's 400 rows (15.0%) are the model's training rows")
     # a model fitted on a few of the log's rows (10 of 400: under 5 % of them) holds all its training rows there
     r = cascgp("fit", "--data", "train.csv", "--model", "np-inward", "--out", "np10.npz", "--max-samples", "10",
                "--restarts", "1", cwd=logs)
     assert r.returncode == 0, r.stderr
     r = cascgp("evaluate", "--model", "np10.npz", "--data", "train.csv", cwd=logs)
-    assert r.returncode == 0 and ("note: 2% of the rows are the model's training rows (the same positions, bit for "
-                                  "bit; 100% of its training rows are in the log)") in r.stderr, r.stderr
+    assert r.returncode == 0 and ("note: 10 of the log's 400 rows (2.5%) are the model's training rows (the same "
+                                  "positions, bit for bit; 100% of its training rows are in the log)") in r.stderr, (
+        r.stderr)
     for command, out in (("evaluate", ()), ("predict", ("--out", "pred.csv"))):
         r = cascgp(command, "--model", "np.npz", "--data", "test_deg.csv", *out, cwd=logs)
         assert r.returncode == 0, r.stderr

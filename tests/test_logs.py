@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -85,6 +86,10 @@ def test_write_predictions(tmp_path: Path) -> None:
     assert text[0] == "t,segment,tau1,tau2,var1,var2"
     np.testing.assert_array_equal(np.array([r.split(",") for r in text[1:]], float)[:, 1], seg)
     assert write_predictions(tmp_path / "one.csv", t, mean, var, np.zeros(4)).read_text().startswith("t,tau1,")
+    for bad in (np.array([0.5, 1, 1, 1]), np.array([0, 1, np.nan, 1]), np.zeros(3), np.array(["a"] * 4)):
+        with pytest.raises(ValueError, match=r"^segment: expected integer ids of shape \(4,\)"):
+            write_predictions(tmp_path / "bad.csv", t, mean, var, bad)
+    assert not (tmp_path / "bad.csv").exists()
 
 
 # --------------------------------------------------------------------------- derivatives
@@ -120,6 +125,14 @@ def test_nonuniform_sampling_is_warned_about(tmp_path: Path) -> None:
     path.write_text("t,q1,tau1\n" + "".join(f"{float(x)!r},{float(np.sin(x))!r},0.5\n" for x in t))
     with pytest.warns(UserWarning, match=r"log.csv: sample periods vary .*longest 0.04 s.*actual sample times.*"
                                           r"start a new segment"):
+        read_log(path)
+    with pytest.warns(UserWarning, match=r"causal.* takes every period for the median one"):  # not fitted at the times
+        read_log(path, smoothing=SavGol(7, 2, causal=True))
+    # two segments, each uniform at its own rate: no warning (the periods were pooled across segments)
+    path.write_text("t,segment,q1,tau1\n" + "".join(f"{float(x)!r},{int(x > 0.19)},{float(np.sin(x))!r},0.5\n"
+                                                     for x in t))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
         read_log(path)
 
 
@@ -165,7 +178,7 @@ CASES = {
     # float() takes these; a log's cells are ASCII decimal numbers
     "underscore in a number": (HEAD + "\n0,1_000,2,3,4\n", 2, "q1", "got '1_000'"),
     "digits of another script": (HEAD + "\n0,1,\u0661\u0662,3,4\n", 2, "q2", "got '\u0661\u0662'"),
-    "non-breaking space": (HEAD + "\n0,1,2,\u00a03,4\n", 2, "tau1", "expected a finite number"),
+    "non-breaking space": (HEAD + "\n0,1,2,\u00a03,4\n", 2, "tau1", "got '\\xa03' (characters that are not ASCII)"),
     "NaN cell": (HEAD + "\n0,1,2,3,4\n0.1,1,2,nan,4\n", 3, "tau1", "got 'nan'"),
     "inf cell": (HEAD + "\n0,1,2,3,4\n0.1,1,2,3,-inf\n", 3, "tau2", "got '-inf'"),
     "t repeats": (HEAD + "\n0,1,2,3,4\n0.1,1,2,3,4\n0.1,1,2,3,4\n", 4, "t", "strictly increasing"),

@@ -102,7 +102,9 @@ class GPPosterior:
         ``(m, d)``: :math:`\partial\mu/\partial x_c = \frac{y_{std} s_f^2}{x_{scale,c}} \sum_k
         2\,k'(r^2_k)\,(z_c - Z_{kc})\,\alpha_k` (0 for an ignored column)."""
         x = self.query(x)
-        if isinstance(col, bool) or not isinstance(col, (int, np.integer)) or not 0 <= col < x.shape[1]:
+        if isinstance(col, bool) or not isinstance(col, (int, np.integer)):
+            raise TypeError(f"col: expected an integer input column, got {type(col).__name__} {col!r}")
+        if not 0 <= col < x.shape[1]:
             raise ValueError(f"col: expected an input column in [0, {x.shape[1]}), got {col!r}")
         if not np.isfinite(self.x_scale[col]):
             return np.zeros(x.shape[0])

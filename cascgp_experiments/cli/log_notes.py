@@ -84,9 +84,10 @@ def in_sample_note(prog: str, model: Any, data: Any) -> str | None:
 
     share, held = fraction_in_training(model, data.q), fraction_of_training_in(model, data.q)
     if share >= 0.05 or held >= 0.5:
-        msg = (f"{share:.0%} of the rows are the model's training rows (the same positions, bit for bit; "
-               f"{held:.0%} of its training rows are in the log): scores on them are in-sample, not a test; "
-               "evaluate on a log the model was not fitted to")
+        rows = round(share * data.n_samples)
+        msg = (f"{rows} of the log's {data.n_samples} rows ({share:.1%}) are the model's training rows (the same "
+               f"positions, bit for bit; {held:.0%} of its training rows are in the log): scores on them are "
+               "in-sample, not a test; evaluate on a log the model was not fitted to")
         note(prog, f"note: {msg}")
         return msg
     return None

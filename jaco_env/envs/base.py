@@ -275,8 +275,9 @@ class JacoMujocoEnv(MujocoEnv):
         timestep = self.control_dt / n_sub
         self.n_marbles = int(n_marbles)
         self.torque_limits = robot.TORQUE_LIMITS.copy()
-        # MujocoEnv asserts render_fps == round(1 / dt) with dt = timestep * frame_skip, which can round to the other
-        # side of a half-integer control_freq (19.5 Hz: 20 against round(19.5) = 19): computed the same way here
+        # MujocoEnv asserts render_fps == round(1 / dt) with dt = timestep * frame_skip, which can fall on the other
+        # side of a half-integer control_freq (19.5 Hz: 1 / dt = 19.4999..., 19, against round(19.5) = 20): computed
+        # the same way here
         self.metadata = {**type(self).metadata, "render_fps": int(np.round(1.0 / (timestep * n_sub)))}
 
         # The sensing pipeline (signal_pipeline.py): None for "ideal", whose measurement is the noise alone; its
