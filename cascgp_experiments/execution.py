@@ -31,9 +31,10 @@ more; if it fails again :class:`JobError` is raised naming the inputs (local pro
 already running have finished and been cached, jobs not yet started are cancelled; Ray: ``ray.cancel``
 interrupts the running jobs too, so only those that had finished are cached). Any other exception in
 this process (Ctrl-C, a cache write that fails) cancels the jobs not yet started at once; Ctrl-C ends the pool
-processes too, without a word. A worker process that dies (a crash in native code, the out-of-memory killer) ends
-the run with a ``RuntimeError`` naming a job it was running; the finished jobs are in the cache, so running the
-command again resumes.
+processes too, without a word. A local worker process that dies (a crash in native code, the out-of-memory killer)
+ends the run with a ``RuntimeError`` naming a job it was running; the finished jobs are in the cache, so running the
+command again resumes. On Ray a dead worker is a failed job like any other (Ray starts another worker): the job is
+submitted again, as above. A job's numbers do not depend on the backend; how a crash is handled does.
 
 Cache: with ``cache_dir``, every finished job's result is kept (:mod:`cascgp_experiments.job_cache`), and a run
 started again with the same inputs skips the jobs already there.
@@ -331,8 +332,14 @@ def run_jobs(fn: Callable[..., Any], jobs: Sequence[Mapping[str, Any]], *, worke
     units_l = [max(1, int(u)) for u in units] if units is not None else [1] * n
     if len(units_l) != n:
         raise ValueError(f"units: expected {n} values (one per job), got {len(units_l)}")
+    if priority is not None and len(priority) != n:
+        raise ValueError(f"priority: expected {n} values (one per job), got {len(priority)}")
+    retries = check_count(retries, "retries", 0)
     label = label or (lambda job: ", ".join(f"{k}={v!r}" for k, v in job.items() if not isinstance(v, dict)))
     name = fn.__name__
+    if cache_dir is not None and "<" in getattr(fn, "__qualname__", "<"):  # <lambda>, <locals>: one name for many
+        raise ValueError(f"fn: a cached job's function is named in its cache key, so it must be a module-level "
+                         f"function; got {getattr(fn, '__qualname__', fn)!r}")
     cache = Path(cache_dir) if cache_dir is not None else None
     results = JobResults([None] * n)
     results.job_seconds = [None] * n

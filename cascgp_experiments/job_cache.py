@@ -12,8 +12,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 from pathlib import Path
 from typing import Any, Callable, Mapping
+
+import numpy as np
 
 from cascgp.io import json_safe, read_json, write_json
 
@@ -28,11 +31,31 @@ def _fn_name(fn: Callable) -> str:
 
 
 def canonical_json(inputs: Mapping[str, Any]) -> str:
-    """``inputs`` as canonical JSON (sorted keys, no spaces, no NaN); ``TypeError`` when it cannot be."""
+    """``inputs`` as canonical JSON (sorted keys, no spaces), distinct for distinct inputs (:func:`_distinct`; a
+    tuple is the same input as a list of the same items); ``TypeError`` when it cannot be."""
     try:
-        return json.dumps(json_safe(dict(inputs)), sort_keys=True, separators=(",", ":"), allow_nan=False)
+        return json.dumps(json_safe(_distinct(dict(inputs))), sort_keys=True, separators=(",", ":"), allow_nan=False)
     except (TypeError, ValueError) as exc:
         raise TypeError(f"job inputs must be JSON-serialisable to be cached: {inputs!r} ({exc})") from exc
+
+
+def _distinct(x: Any) -> Any:
+    """``x`` with what JSON would merge kept apart: a non-finite float (JSON's null, as ``None``) as
+    ``{"__float__": "nan"}`` (or ``"inf"``, ``"-inf"``), a dict with a key that is not a string (JSON makes every key
+    one: ``{1: 0}`` and ``{"1": 0}``) as ``{"__items__": [[key, value], ...]}`` in a fixed order; any other input
+    as JSON writes it, so that the cache keys of ordinary inputs are what they were."""
+    if isinstance(x, dict):
+        if all(isinstance(k, str) for k in x):
+            return {k: _distinct(v) for k, v in x.items()}
+        items = [[_distinct(k), _distinct(v)] for k, v in x.items()]
+        return {"__items__": sorted(items, key=lambda kv: json.dumps(json_safe(kv), sort_keys=True))}
+    if isinstance(x, (list, tuple)):
+        return [_distinct(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _distinct(x.tolist())
+    if isinstance(x, (float, np.floating)) and not math.isfinite(float(x)):
+        return {"__float__": repr(float(x))}
+    return x
 
 
 def job_key(fn: Callable, inputs: Mapping[str, Any]) -> str:
@@ -71,6 +94,7 @@ def write_cached(cache_dir: Path, fn: Callable, inputs: Mapping[str, Any], resul
     it reads back (:func:`_normalise`), so that computed and cached results are identical."""
     value = _normalise(result)
     write_json(_cache_path(cache_dir, fn, inputs), {"format": CACHE_FORMAT, "version": CACHE_VERSION,
-                                                    "fn": _fn_name(fn), "inputs": dict(inputs), "wall_s": seconds,
+                                                    "fn": _fn_name(fn), "inputs": json.loads(canonical_json(inputs)),
+                                                    "wall_s": seconds,
                                                     "result": value})
     return value

@@ -87,6 +87,43 @@ def counting_job(x: int, log_dir: str) -> int:
     return x + 1
 
 
+def echo_job(v: Any) -> Any:
+    return {"v": v}
+
+
+def test_inputs_that_json_would_merge_are_distinct_jobs(tmp_path: Path) -> None:
+    """The cache key was the inputs' JSON, in which NaN, inf and None are all null and every dict key a string: a job
+    on NaN got the cached result of the job on None. A tuple and a list of the same items stay one input."""
+    groups = [[None, float("nan"), float("inf"), -np.inf, np.float64("nan")], [{1: "a"}, {"1": "a"}],
+              [[1, 2], [1.0, 2.0]]]
+    for i, group in enumerate(groups):
+        cache = tmp_path / f"c{i}"
+        for k, v in enumerate(group):
+            res = run_jobs(echo_job, [{"v": v}], workers=1, cache_dir=cache, show_progress=False)
+            assert res.n_cached == (1 if (i, k) in ((0, 4),) else 0), (v, res.n_cached)  # nan twice: one job
+    same = run_jobs(echo_job, [{"v": (1, 2)}], workers=1, cache_dir=tmp_path / "c2", show_progress=False)
+    assert same.n_cached == 1
+    # an unchanged key for an ordinary input: the record an earlier version wrote is still found
+    from cascgp_experiments.job_cache import canonical_json
+
+    assert canonical_json({"x": 1, "grid": (1.0, 2.5), "name": "a"}) == '{"grid":[1.0,2.5],"name":"a","x":1}'
+
+
+def test_run_jobs_refuses_bad_arguments_before_any_job(tmp_path: Path) -> None:
+    log = tmp_path / "log"
+    log.mkdir()
+    jobs = [{"x": x, "log_dir": str(log)} for x in range(3)]
+    for kwargs, exc, match in (({"priority": [1.0]}, ValueError, r"^priority: expected 3 values"),
+                               ({"priority": [1.0] * 4}, ValueError, r"^priority: expected 3 values"),
+                               ({"retries": -1}, ValueError, r"^retries: expected an integer >= 0"),
+                               ({"retries": 2.5}, ValueError, r"^retries: expected an integer >= 0")):
+        with pytest.raises(exc, match=match):
+            run_jobs(counting_job, jobs, workers=1, show_progress=False, **kwargs)
+    with pytest.raises(ValueError, match=r"^fn: a cached job's function .* module-level function; got '.*<lambda>'"):
+        run_jobs(lambda x, log_dir: x, jobs, workers=1, cache_dir=tmp_path / "c", show_progress=False)
+    assert not list(log.iterdir())
+
+
 # --------------------------------------------------------------------------- the layer
 def test_same_results_with_one_and_two_workers_in_job_order() -> None:
     jobs = [{"x": x, "seed": 100 + x} for x in range(6)]
