@@ -40,8 +40,8 @@ from typing import Any, Protocol
 import numpy as np
 
 from cascgp.checks import check_count
-from cascgp.controller_args import (Reference, as_gain, check_finite_reference, check_time, measured,
-                                    reference_at)
+from cascgp.controller_args import (Reference, as_gain, check_finite_reference, check_predict_one, check_time,
+                                    measured, reference_at)
 from cascgp.data import all_finite
 from cascgp.gates import (GATE_RULES, GATE_SUFFIXES, INNOVATION_HALF_LIFE_S, GateRule, InnovationGate, gate_weights,
                           innovation_weights, make_gate)
@@ -90,7 +90,8 @@ class FeedforwardController:
 
     Args:
         model: the feedforward model: a fitted :mod:`cascgp.models` model (uses its lean
-            ``predict_one`` path), an object with ``inverse_dynamics`` (e.g. the nominal
+            ``predict_one`` path; another object with ``predict_one(q, qd, qdd, q_hist=None)`` returning the (N,)
+            torques works too), an object with ``inverse_dynamics`` (e.g. the nominal
             :class:`~cascgp.rbd.RigidBodyModel`), or ``None`` for PD only.
         kp: proportional gains (N m / rad; N / m for a prismatic joint), scalar or per joint.
         kd: derivative gains (N m s / rad; N s / m for a prismatic joint), scalar or per joint.
@@ -167,6 +168,7 @@ class FeedforwardController:
             if not (hasattr(model, "predict_one") or hasattr(model, "inverse_dynamics")):
                 raise TypeError("model: expected a fitted cascgp model, an object with inverse_dynamics(q, qd, qdd) "
                                 f"or None (PD only), got {type(model).__name__}")
+            check_predict_one(model)
             if getattr(model, "fitted", True) is False:
                 raise ValueError(f"model: {getattr(model, 'name', type(model).__name__)} is not fitted (fit it "
                                  "first: model.fit(data))")

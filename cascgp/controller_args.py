@@ -4,6 +4,7 @@ float64 array of the right shape) first, at the cost of a few comparisons."""
 
 from __future__ import annotations
 
+import inspect
 import math
 from typing import Any, Callable
 
@@ -11,7 +12,7 @@ import numpy as np
 
 from cascgp.data import F64 as _F64, as_real_array
 
-__all__ = ["as_gain", "check_time", "check_finite_reference", "measured", "reference_at"]
+__all__ = ["as_gain", "check_time", "check_finite_reference", "check_predict_one", "measured", "reference_at"]
 
 Reference = Callable[[float], tuple[np.ndarray, np.ndarray, np.ndarray]]
 
@@ -93,3 +94,19 @@ def reference_at(reference: Reference, t: float, dof: int) -> tuple[np.ndarray, 
             raise ValueError(f"reference: {nm} must have shape ({dof},), got {arr.shape}")
         parts.append(arr.astype(float, copy=False))
     return parts[0], parts[1], parts[2]
+
+
+def check_predict_one(model: Any) -> None:
+    """``TypeError`` naming ``model`` when its ``predict_one`` cannot take what the controller passes, ``(q, qd, qdd,
+    q_hist=...)`` (a model without it fell back to the rigid-body torque on every tick, raising nothing)."""
+    fn = getattr(model, "predict_one", None)
+    if fn is None:
+        return
+    try:
+        sig = inspect.signature(fn)
+        sig.bind(None, None, None, q_hist=None)
+    except ValueError:  # no signature to read (a compiled function): trusted
+        return
+    except TypeError:
+        raise TypeError(f"model: the controller calls predict_one(q, qd, qdd, q_hist=...), and "
+                        f"{type(model).__name__}.predict_one{sig} cannot take that") from None

@@ -132,9 +132,9 @@ def run_episode(
     """
     if not all(hasattr(env, a) for a in ("reset", "step", "unwrapped")):
         raise TypeError(f"env: expected a Gymnasium environment, got {type(env).__name__}")
-    if not (callable(controller) and hasattr(controller, "dof") and hasattr(controller, "start")):
-        raise TypeError("controller: expected a controller (dof, start(env, info), controller(t, q, qd, reference); "
-                        f"cascgp.controller.Controller), got {type(controller).__name__}")
+    if not (callable(controller) and all(hasattr(controller, a) for a in ("dof", "name", "start"))):
+        raise TypeError("controller: expected a controller (dof, name, start(env, info), controller(t, q, qd, "
+                        f"reference); cascgp.controller.Controller), got {type(controller).__name__}")
     if callback is not None and not callable(callback):
         raise TypeError(f"callback: expected a callable or None, got {type(callback).__name__}")
     dof = controller.dof

@@ -83,9 +83,11 @@ class GateRule(Protocol):
         ...
 
 
-def _check_bound(model: Any, nominal: Any, needs: str) -> None:
-    if model is None or not hasattr(model, needs):
-        raise ValueError(f"gate: needs a fitted cascgp model (with {needs}), got {type(model).__name__}")
+def _check_bound(model: Any, nominal: Any, *needs: str) -> None:
+    missing = [n for n in needs if not hasattr(model, n)]
+    if model is None or missing:
+        raise ValueError(f"gate: needs a fitted cascgp model (with {', '.join(needs)}), got {type(model).__name__}"
+                         + (f" without {', '.join(missing)}" if model is not None else ""))
     if nominal is None:
         raise ValueError("gate: needs a nominal rigid-body model to fall back toward: pass fallback=... "
                          "(an SP model's own rbd is used when there is none)")
@@ -233,7 +235,7 @@ class _VarianceRule:
 
     def bind(self, model: Any, nominal: Any, dof: int) -> None:
         self._check(model)
-        _check_bound(model, nominal, "predict_one_var")
+        _check_bound(model, nominal, "predict_one_var", "signal_var", "prepare_variance")
         self.model, self.nominal = model, nominal
         self._share = _shares_rbd(model, nominal)
         self.prior = np.asarray(model.signal_var, dtype=float)
@@ -279,7 +281,8 @@ class WienerGate(_VarianceRule):
 
     A correction well above its uncertainty is kept, one within its uncertainty is shrunk; near the data
     (:math:`v \to 0`) it is the learned model. A correction smaller than its standard deviation is removed almost
-    entirely (:math:`w_j d_j \approx d_j^3 / v_j`), however systematic it is. Any model with ``predict_one_var``.
+    entirely (:math:`w_j d_j \approx d_j^3 / v_j`), however systematic it is. Any model with ``predict_one_var``,
+    ``signal_var`` (the GPs' prior variances, (N,)) and ``prepare_variance()``, as the cascgp models have.
     """
 
     name = "wiener"
@@ -329,7 +332,7 @@ class VarianceGate(_VarianceRule):
 
     It shrinks any correction, however large, as soon as the query leaves the training data, although the GP
     posterior mean already reverts toward its prior there: away from the data the correction is shrunk twice.
-    Any model with ``predict_one_var``.
+    Any model with ``predict_one_var``, ``signal_var`` and ``prepare_variance()`` (:class:`WienerGate`).
     """
 
     name = "variance"

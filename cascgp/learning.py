@@ -110,10 +110,12 @@ class RunHooks:
         return None
 
     def before_episode(self, ctx: AttemptContext, model: Any | None) -> None:
-        """Called before the episode with the learned model it uses (None before the first fit)."""
+        """Called before the episode with the learned model it uses (None before the first fit), as fitted: an
+        online controller's window of an earlier attempt is closed."""
 
     def after_episode(self, ctx: AttemptContext, model: Any | None, record: dict[str, Any]) -> None:
-        """Called after the episode, before any refit, with the same model and the attempt's record."""
+        """Called after the episode, before any refit, with the same model and the attempt's record (an online
+        controller's samples of this episode still in the model's window, which is closed after this call)."""
 
     def after_attempt(self, ctx: AttemptContext, record: dict[str, Any]) -> None:
         """Called when the attempt is complete (after the refit, whose time is ``record["fit_seconds"]``)."""
@@ -180,7 +182,13 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
         feedback: gains and torque limits.
         config: seeds and refit settings.
         reset_options: env reset options besides the task (e.g. the payload).
-        model_factory: makes the unfitted model of each refit (:func:`default_model_factory`).
+        model_factory: makes the unfitted model of each refit (:func:`default_model_factory`). Another model
+            needs ``fit(data, init=previous)`` returning itself, ``fitted``, ``n_train``, ``dof`` and what the
+            controller calls (:class:`cascgp.controller.FeedforwardController`): ``predict_one(q, qd, qdd,
+            q_hist=None)``; with a variance gate also ``predict_one_var``, ``signal_var`` and
+            ``prepare_variance()``; with ``-online``, ``start_online``, ``add_sample`` and ``stop_online``.
+            A hook or model that raises ends the run with its error: the records of the attempts so far are not
+            returned, and the episodes stay in ``buffer_dir``.
         buffer_dir: folder that persists the buffer (must be empty); ``None``: in memory.
         hooks: :class:`RunHooks` called in order around every attempt (progress, video, extra evaluations).
 
@@ -202,7 +210,7 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
     learns = base not in PLAIN_CONTROLLERS
     buffer = DataBuffer(buffer_dir) if learns else None
     if buffer is not None and len(buffer):
-        raise ValueError(f"buffer folder {buffer_dir} already holds data; use an empty --out folder")
+        raise ValueError(f"buffer_dir: {buffer_dir} already holds data; use an empty folder")
     options = dict(reset_options or {})
     model = None
     run = ControllerRun(name)
@@ -221,6 +229,8 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
             record["online_samples"] = controller.n_online_samples
         for h in hooks:
             h.after_episode(ctx, model, record)
+        if controller.online and model is not None:  # the next attempt, and its hooks, start from the fitted model
+            model.stop_online()
         if buffer is not None and phase == "train":  # buffer: a learning controller
             buffer.append(result.data)
             t0 = time.perf_counter()
@@ -263,7 +273,8 @@ def run_controllers(names: Sequence[str], make_env: Callable[[], Any], plan: Seq
     """:func:`run_controller` for each of ``names`` in turn on one env from ``make_env()`` (closed at the end).
 
     Args:
-        names: controller names (:func:`check_controller`), all checked before the env is made.
+        names: distinct controller names (:func:`check_controller`), all checked before the env is made, and so
+            are their buffer folders.
         make_env: makes the env that every controller runs on (closed at the end, also after an error).
         plan, rbd, feedback, config, reset_options, model_factory, hooks: as for :func:`run_controller`.
         buffer_root: folder under which controller ``name``'s buffer is kept, as ``buffer_root / name`` (each
@@ -274,6 +285,12 @@ def run_controllers(names: Sequence[str], make_env: Callable[[], Any], plan: Seq
     """
     for name in names:
         check_controller(name)
+    if len(set(names)) != len(names):
+        raise ValueError(f"names: expected distinct controllers (each keeps its own buffer), got {list(names)}")
+    if buffer_root is not None:  # every folder now, not after the controllers before it have run
+        for name in names:
+            if parse_controller(name)[0] not in PLAIN_CONTROLLERS and len(DataBuffer(Path(buffer_root) / name)):
+                raise ValueError(f"buffer_root: {Path(buffer_root) / name} already holds data; use an empty folder")
     env = make_env()
     try:
         return [run_controller(name, env, plan, rbd, feedback, config, reset_options=reset_options,

@@ -113,6 +113,27 @@ def test_retraining_plans_and_arguments_are_checked_before_anything_runs(tmp_pat
     assert isinstance(RetrainConfig(), RetrainConfig)
 
 
+def test_run_controllers_checks_every_buffer_folder_before_any_controller_runs(tmp_path):
+    """A later controller's folder holding data was refused only when its turn came, after the controllers before it
+    had run (their records lost, and their own folders then refused on a rerun)."""
+    from cascgp.buffer import DataBuffer
+    from cascgp.learning import run_controllers
+    from tests.conftest import make_arm, sinusoid_data
+
+    DataBuffer(tmp_path / "np-inward").append(sinusoid_data(make_arm(2), 1.0, 10.0, seed=0))
+    feedback = Feedback(kp=np.ones(6), kd=np.ones(6), torque_limits=np.asarray(TORQUE_LIMITS, float))
+
+    def make_env():
+        raise AssertionError("the env was made: a controller would have run")
+
+    plan = [("front", 0, "train")]
+    with pytest.raises(ValueError, match=r"^buffer_root: .*np-inward already holds data; use an empty folder"):
+        run_controllers(["pd", "sp-inward", "np-inward"], make_env, plan, None, feedback, buffer_root=tmp_path)
+    with pytest.raises(ValueError, match=r"^names: expected distinct controllers"):
+        run_controllers(["pd", "pd"], make_env, plan, None, feedback, buffer_root=tmp_path / "other")
+    assert not (tmp_path / "sp-inward").exists() or not any((tmp_path / "sp-inward").iterdir())
+
+
 @pytest.mark.parametrize("change, exc, match", [
     ({"tilt": 0.0}, ValueError, r"tilt must be in \(0, pi\]"),
     ({"tilt": np.nan}, ValueError, "tilt must be finite"),

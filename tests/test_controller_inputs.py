@@ -227,3 +227,41 @@ def test_the_model_is_read_only(fitted_planar_model, arm3_rbd) -> None:
     assert ctrl.model is fitted_planar_model
     for copied in (copy.deepcopy(ctrl), pickle.loads(pickle.dumps(ctrl))):
         assert copied.model is not None and copied.name == ctrl.name
+
+
+class _OwnModel:
+    """A duck-typed learned model of three joints: a constant torque."""
+
+    dof = 3
+
+    def predict_one_var(self, q, qd, qdd, q_hist=None):
+        return np.ones(3), np.full(3, 0.1)
+
+
+class _NoHist(_OwnModel):
+    def predict_one(self, q, qd, qdd):
+        return np.ones(3)
+
+
+class _WithHist(_OwnModel):
+    def predict_one(self, q, qd, qdd, q_hist=None):
+        return np.ones(3)
+
+
+def test_an_own_model_is_refused_when_the_controller_could_not_call_it(arm3_rbd) -> None:
+    """A model whose predict_one takes no q_hist was accepted, then fell back to the rigid-body torque on every tick
+    (the TypeError of each call counted, nothing raised); a variance gate on a model without signal_var or
+    prepare_variance raised AttributeError instead of the gate's ValueError."""
+    LIM3 = np.full(3, 50.0)
+    with pytest.raises(TypeError, match=r"^model: the controller calls predict_one\(q, qd, qdd, q_hist=\.\.\.\), and "
+                                        r"_NoHist\.predict_one\(q, qd, qdd\) cannot take that"):
+        FeedforwardController(_NoHist(), 1.0, 0.1, LIM3, fallback=arm3_rbd)
+    ctrl = FeedforwardController(_WithHist(), 1.0, 0.1, LIM3, fallback=arm3_rbd)
+    ctrl.start(None, {})
+    q = np.zeros(3)
+    ctrl(0.0, q, q, lambda t: (q, q, q))
+    assert ctrl.n_fallbacks == 0
+    for gate in ("variance", "wiener"):
+        with pytest.raises(ValueError, match=r"^gate: needs a fitted cascgp model \(with predict_one_var, signal_var, "
+                                             r"prepare_variance\), got _WithHist without signal_var, prepare_variance"):
+            FeedforwardController(_WithHist(), 1.0, 0.1, LIM3, fallback=arm3_rbd, gate=gate)

@@ -124,12 +124,27 @@ def test_good_ticks_between_faults_too_few_to_differentiate_are_left_out_too():
         run_episode(FaultyEnv(bad=range(0, 80, 2)), ctrl, seed=0)
 
 
+class _Nameless:
+    """A controller without ``name``."""
+
+    dof = 2
+
+    def start(self, env, info) -> None:
+        pass
+
+    def __call__(self, t, q, qd, reference):
+        return np.zeros(2)
+
+
 @pytest.mark.parametrize("kwargs, exc, match", [({"smoothing": 4}, ValueError, "SavGol.window"),
                                                 ({"smoothing": "5"}, TypeError, "smoothing: expected"),
                                                 ({"meta": [1]}, TypeError, "meta: expected a dict"),
                                                 ({"meta": {"x": object()}}, TypeError, "meta: expected a JSON"),
                                                 ({"callback": 3}, TypeError, "callback: expected a callable"),
                                                 ({"controller": None}, TypeError, "controller: expected a controller"),
+                                                # no name: the episode ran, then its record failed
+                                                ({"controller": _Nameless()}, TypeError,
+                                                 r"controller: expected a controller \(dof, name, .*_Nameless"),
                                                 ({"controller": FeedforwardController(None, 1.0, 1.0, np.ones(3))},
                                                  ValueError, r"controller: 3 joints, but the env's actions have "
                                                              r"shape \(2,\)")])

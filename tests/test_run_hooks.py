@@ -112,3 +112,29 @@ def test_paired_episodes_run_on_the_learners_model_and_change_nothing() -> None:
             repr({k: v for k, v in p.items() if k != "fit_seconds"})
     # once a model is fitted, the gate acts
     assert hooked[2]["paired"]["np-inward-gated"]["tracking_rmse"] != hooked[2]["tracking_rmse"]
+
+
+class OnlineProbe(RunHooks):
+    """Records the number of online samples in the model each hook sees."""
+
+    def __init__(self) -> None:
+        self.seen: list[tuple[str, int, int]] = []
+
+    def before_episode(self, ctx: AttemptContext, model) -> None:
+        if model is not None:
+            self.seen.append(("before", ctx.index, model.n_online))
+
+    def after_episode(self, ctx: AttemptContext, model, record) -> None:
+        if model is not None:
+            self.seen.append(("after", ctx.index, model.n_online))
+
+
+def test_before_episode_sees_the_fitted_model_without_an_earlier_attempts_online_samples() -> None:
+    """With a plan whose later attempts do not refit, the same model object came to the next attempt's
+    before_episode with the previous episode's online window still in it (its predictions changed)."""
+    probe = OnlineProbe()
+    plan = [("sine", 0, "train"), ("sine", 0, "eval"), ("sine", 1, "eval")]
+    run_controller("np-inward-online", TwoJointEnv(steps=60), plan, ExactID(), FEEDBACK, SMALL, hooks=[probe])
+    befores = [n for kind, _, n in probe.seen if kind == "before"]
+    afters = [n for kind, _, n in probe.seen if kind == "after"]
+    assert befores == [0, 0] and all(n > 0 for n in afters[1:]), probe.seen
