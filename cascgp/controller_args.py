@@ -102,6 +102,8 @@ def check_predict_one(model: Any) -> None:
     fn = getattr(model, "predict_one", None)
     if fn is None:
         return
+    if not callable(fn):
+        raise TypeError(f"model: predict_one must be a method, got {type(fn).__name__} on {type(model).__name__}")
     try:
         sig = inspect.signature(fn)
         sig.bind(None, None, None, q_hist=None)

@@ -229,8 +229,9 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
             record["online_samples"] = controller.n_online_samples
         for h in hooks:
             h.after_episode(ctx, model, record)
-        if controller.online and model is not None:  # the next attempt, and its hooks, start from the fitted model
-            model.stop_online()
+        stop = getattr(model, "stop_online", None) if controller.online else None
+        if stop is not None:  # the next attempt, and its hooks, start from the fitted model
+            stop()
         if buffer is not None and phase == "train":  # buffer: a learning controller
             buffer.append(result.data)
             t0 = time.perf_counter()

@@ -31,8 +31,9 @@ def _fn_name(fn: Callable) -> str:
 
 
 def canonical_json(inputs: Mapping[str, Any]) -> str:
-    """``inputs`` as canonical JSON (sorted keys, no spaces), distinct for distinct inputs (:func:`_distinct`; a
-    tuple is the same input as a list of the same items); ``TypeError`` when it cannot be."""
+    """``inputs`` as canonical JSON (sorted keys, no spaces), with NaN, inf and None, and the dict keys ``1`` and
+    ``"1"``, kept apart (:func:`_distinct`; a tuple is the same input as a list of the same items); ``TypeError``
+    when it cannot be."""
     try:
         return json.dumps(json_safe(_distinct(dict(inputs))), sort_keys=True, separators=(",", ":"), allow_nan=False)
     except (TypeError, ValueError) as exc:

@@ -256,6 +256,10 @@ def test_an_own_model_is_refused_when_the_controller_could_not_call_it(arm3_rbd)
     with pytest.raises(TypeError, match=r"^model: the controller calls predict_one\(q, qd, qdd, q_hist=\.\.\.\), and "
                                         r"_NoHist\.predict_one\(q, qd, qdd\) cannot take that"):
         FeedforwardController(_NoHist(), 1.0, 0.1, LIM3, fallback=arm3_rbd)
+    bad = _WithHist()
+    bad.predict_one = 5
+    with pytest.raises(TypeError, match=r"^model: predict_one must be a method, got int on _WithHist"):
+        FeedforwardController(bad, 1.0, 0.1, LIM3, fallback=arm3_rbd)
     ctrl = FeedforwardController(_WithHist(), 1.0, 0.1, LIM3, fallback=arm3_rbd)
     ctrl.start(None, {})
     q = np.zeros(3)

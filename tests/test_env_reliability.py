@@ -64,8 +64,10 @@ def test_repeated_make_close_keeps_memory_flat() -> None:
     """Before the fix each make added ~3-4 MiB (a mesh cache entry per fresh folder): +70 MiB over 20 makes. The
     process's memory climbs by about 25 MiB over the first ten makes and stays there (the allocator's pools; the
     same before this check's last change), so the growth is measured after them."""
-    for _ in range(10):  # warm-up: the first make fills the mesh cache, the first ten the allocator's pools
-        gym.make("JacoPayload-v0").close()
+    for i in range(10):  # warm-up: the first make fills the mesh cache, the first ten the allocator's pools
+        env = gym.make("JacoPayload-v0")
+        env.reset(seed=i)
+        env.close()
     r0 = _rss_mib()
     for i in range(20):
         env = gym.make("JacoPayload-v0")
