@@ -161,7 +161,8 @@ def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[i
         except ValueError:
             row = []
         # float() also takes '1_000' and digits of other scripts; a log's cells are ASCII decimal numbers
-        if len(row) != k or not all(map(math.isfinite, row)) or not all(c.isascii() and "_" not in c for c in cells):
+        line = "".join(cells)  # one test of the row's characters, not one per cell
+        if len(row) != k or not all(map(math.isfinite, row)) or not line.isascii() or "_" in line:
             for c, cell in enumerate(cells):
                 try:
                     ok = cell.isascii() and "_" not in cell and math.isfinite(float(cell))

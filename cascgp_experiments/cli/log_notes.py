@@ -80,9 +80,9 @@ def in_sample_note(prog: str, model: Any, data: Any) -> str | None:
     """A note when at least 5 % of a test log's rows are the model's training rows (their positions bit for bit), or
     when the log holds at least half of the model's training rows (a model fitted on a few of a long log's rows,
     evaluated on that log); returns it (``None``: no note)."""
-    from cascgp.models.coverage import fraction_in_training, fraction_of_training_in
+    from cascgp.models.coverage import training_overlap
 
-    share, held = fraction_in_training(model, data.q), fraction_of_training_in(model, data.q)
+    share, held = training_overlap(model, data.q)
     if share >= 0.05 or held >= 0.5:
         rows = round(share * data.n_samples)
         msg = (f"{rows} of the log's {data.n_samples} rows ({share:.1%}) are the model's training rows (the same "
