@@ -123,10 +123,13 @@ class RunHooks:
 
 @dataclass
 class ControllerRun:
-    """One controller's sequence of attempts (one record per attempt)."""
+    """One controller's sequence of attempts (one record per attempt) and, for a learning controller, ``model``:
+    the model of the last refit, fitted on every training attempt's data (``None`` when nothing was fitted), e.g.
+    to save with its ``save`` method."""
 
     name: str
     attempts: list[dict[str, Any]] = field(default_factory=list)
+    model: Any | None = None
 
 
 def make_controller(name: str, rbd: Any, model: Any | None, feedback: Feedback) -> FeedforwardController:
@@ -195,7 +198,8 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
     Returns:
         The run; each record holds ``attempt``, ``task``, ``task_attempt``, ``phase``, ``n_train`` (rows the
         controller's model was fitted on), the episode's :meth:`EpisodeResult.summary`, ``online_samples`` for an
-        online controller and, after a refit, ``fit_seconds``; hooks may add keys.
+        online controller and, after a refit, ``fit_seconds``; hooks may add keys. ``run.model`` is the model of
+        the last refit (the one after the last ``"train"`` attempt, fitted on all the run's data).
     """
     base, _, _ = parse_controller(name)
     if not isinstance(config, RetrainConfig):
@@ -241,6 +245,7 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
         run.attempts.append(record)
         for h in hooks:
             h.after_attempt(ctx, record)
+    run.model = model
     return run
 
 

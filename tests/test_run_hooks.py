@@ -138,3 +138,19 @@ def test_before_episode_sees_the_fitted_model_without_an_earlier_attempts_online
     befores = [n for kind, _, n in probe.seen if kind == "before"]
     afters = [n for kind, _, n in probe.seen if kind == "after"]
     assert befores == [0, 0] and all(n > 0 for n in afters[1:]), probe.seen
+
+
+def test_the_run_returns_the_model_of_its_last_refit() -> None:
+    """The refit after the last training attempt was computed and dropped; the run now returns it."""
+    run = _run("np-inward")
+    assert run.model is not None and run.model.fitted
+    # fitted on all three attempts' data: more rows than the model the last attempt ran on
+    assert run.model.n_train > run.attempts[-1]["n_train"] > 0
+    # with an evaluation after the training: the model that attempt ran on, its online window closed
+    seen = Recorder()
+    online = run_controller("np-inward-online", TwoJointEnv(steps=60), PLAN + [("sine", 3, "eval")], ExactID(),
+                            FEEDBACK, SMALL, hooks=[seen])
+    last_model = [c[6] for c in seen.calls if c[0] == "before"][-1]
+    assert online.model is last_model and online.model.n_online == 0
+    assert online.attempts[-1]["n_train"] == online.model.n_train
+    assert _run("rbd").model is None
