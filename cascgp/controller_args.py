@@ -96,19 +96,20 @@ def reference_at(reference: Reference, t: float, dof: int) -> tuple[np.ndarray, 
     return parts[0], parts[1], parts[2]
 
 
-def check_predict_one(model: Any) -> None:
-    """``TypeError`` naming ``model`` when its ``predict_one`` cannot take what the controller passes, ``(q, qd, qdd,
-    q_hist=...)`` (a model without it fell back to the rigid-body torque on every tick, raising nothing)."""
-    fn = getattr(model, "predict_one", None)
+def check_predict_one(model: Any, method: str = "predict_one") -> None:
+    """``TypeError`` naming ``model`` when its ``method`` (``predict_one``, or a variance gate's
+    ``predict_one_var``) cannot take what the controller passes, ``(q, qd, qdd, q_hist=...)`` (a model without it
+    fell back to the rigid-body torque on every tick, raising nothing)."""
+    fn = getattr(model, method, None)
     if fn is None:
         return
     if not callable(fn):
-        raise TypeError(f"model: predict_one must be a method, got {type(fn).__name__} on {type(model).__name__}")
+        raise TypeError(f"model: {method} must be a method, got {type(fn).__name__} on {type(model).__name__}")
     try:
         sig = inspect.signature(fn)
         sig.bind(None, None, None, q_hist=None)
     except ValueError:  # no signature to read (a compiled function): trusted
         return
     except TypeError:
-        raise TypeError(f"model: the controller calls predict_one(q, qd, qdd, q_hist=...), and "
-                        f"{type(model).__name__}.predict_one{sig} cannot take that") from None
+        raise TypeError(f"model: the controller calls {method}(q, qd, qdd, q_hist=...), and "
+                        f"{type(model).__name__}.{method}{sig} cannot take that") from None

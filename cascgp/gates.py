@@ -34,6 +34,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from cascgp.controller_args import check_predict_one
 from cascgp.data import all_finite
 
 __all__ = ["GateRule", "InnovationGate", "WienerGate", "FloorGate", "VarianceGate", "GATE_RULES", "GATE_SUFFIXES",
@@ -236,6 +237,7 @@ class _VarianceRule:
     def bind(self, model: Any, nominal: Any, dof: int) -> None:
         self._check(model)
         _check_bound(model, nominal, "predict_one_var", "signal_var", "prepare_variance")
+        check_predict_one(model, "predict_one_var")
         self.model, self.nominal = model, nominal
         self._share = _shares_rbd(model, nominal)
         self.prior = np.asarray(model.signal_var, dtype=float)

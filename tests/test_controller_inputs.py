@@ -269,3 +269,26 @@ def test_an_own_model_is_refused_when_the_controller_could_not_call_it(arm3_rbd)
         with pytest.raises(ValueError, match=r"^gate: needs a fitted cascgp model \(with predict_one_var, signal_var, "
                                              r"prepare_variance\), got _WithHist without signal_var, prepare_variance"):
             FeedforwardController(_WithHist(), 1.0, 0.1, LIM3, fallback=arm3_rbd, gate=gate)
+
+
+class _VarNoHist(_WithHist):
+    signal_var = np.ones(3)
+
+    def predict_one_var(self, q, qd, qdd):
+        return np.ones(3), np.full(3, 0.1)
+
+    def prepare_variance(self):
+        return None
+
+
+def test_a_variance_gate_refuses_a_predict_one_var_without_q_hist(arm3_rbd) -> None:
+    """The variance gates call predict_one_var(q, qd, qdd, q_hist=...): one without q_hist raised TypeError on every
+    tick, each counted as a fallback to the rigid-body torque, nothing raised."""
+    LIM3 = np.full(3, 50.0)
+    for gate in ("variance", "wiener"):
+        with pytest.raises(TypeError, match=r"^model: the controller calls predict_one_var\(q, qd, qdd, "
+                                            r"q_hist=\.\.\.\), and _VarNoHist\.predict_one_var\(q, qd, qdd\) cannot"):
+            FeedforwardController(_VarNoHist(), 1.0, 0.1, LIM3, fallback=arm3_rbd, gate=gate)
+    ok = _VarNoHist()
+    ok.predict_one_var = lambda q, qd, qdd, q_hist=None: (np.ones(3), np.full(3, 0.1))
+    FeedforwardController(ok, 1.0, 0.1, LIM3, fallback=arm3_rbd, gate="variance")
