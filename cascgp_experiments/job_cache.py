@@ -40,13 +40,18 @@ def canonical_json(inputs: Mapping[str, Any]) -> str:
         raise TypeError(f"job inputs must be JSON-serialisable to be cached: {inputs!r} ({exc})") from exc
 
 
+#: The one-key dicts by which :func:`_distinct` tags what JSON would merge.
+_TAGS = ("__float__", "__items__")
+
+
 def _distinct(x: Any) -> Any:
     """``x`` with what JSON would merge kept apart: a non-finite float (JSON's null, as ``None``) as
     ``{"__float__": "nan"}`` (or ``"inf"``, ``"-inf"``), a dict with a key that is not a string (JSON makes every key
-    one: ``{1: 0}`` and ``{"1": 0}``) as ``{"__items__": [[key, value], ...]}`` in a fixed order; any other input
-    as JSON writes it, so that the cache keys of ordinary inputs are what they were."""
+    one: ``{1: 0}`` and ``{"1": 0}``), or one that could be taken for these tags (a dict with the one key
+    ``"__float__"`` or ``"__items__"``), as ``{"__items__": [[key, value], ...]}`` in a fixed order; any other
+    input as JSON writes it, so that the cache keys of ordinary inputs are what they were."""
     if isinstance(x, dict):
-        if all(isinstance(k, str) for k in x):
+        if all(isinstance(k, str) for k in x) and not (len(x) == 1 and next(iter(x)) in _TAGS):
             return {k: _distinct(v) for k, v in x.items()}
         items = [[_distinct(k), _distinct(v)] for k, v in x.items()]
         return {"__items__": sorted(items, key=lambda kv: json.dumps(json_safe(kv), sort_keys=True))}

@@ -93,9 +93,10 @@ def echo_job(v: Any) -> Any:
 
 def test_inputs_that_json_would_merge_are_distinct_jobs(tmp_path: Path) -> None:
     """The cache key was the inputs' JSON, in which NaN, inf and None are all null and every dict key a string: a job
-    on NaN got the cached result of the job on None. A tuple and a list of the same items stay one input."""
-    groups = [[None, float("nan"), float("inf"), -np.inf, np.float64("nan")], [{1: "a"}, {"1": "a"}],
-              [[1, 2], [1.0, 2.0]]]
+    on NaN got the cached result of the job on None; an input written as the key's own tags shared the key of what
+    they tag. A tuple and a list of the same items stay one input."""
+    groups = [[None, float("nan"), float("inf"), -np.inf, np.float64("nan"), {"__float__": "nan"}],
+              [{1: "a"}, {"1": "a"}, {"__items__": [[1, "a"]]}], [[1, 2], [1.0, 2.0]]]
     for i, group in enumerate(groups):
         cache = tmp_path / f"c{i}"
         for k, v in enumerate(group):
