@@ -1,8 +1,9 @@
 r"""Logged robot data as CSV: the one place where the log format is defined, read and checked.
 
 A log is a text file with one header row and one row per sample, comma-separated (``csv`` dialect "excel",
-surrounding blanks ignored). Rows are numbered as lines of the file: the header is **row 1**, the first sample
-row 2; error messages use these numbers. Blank lines are skipped (they keep their row numbers).
+surrounding blanks ignored; the decimal separator is ``.``). Rows are numbered as lines of the file: the header is
+**row 1**, the first sample row 2; error messages use these numbers. Blank lines are skipped (they keep their row
+numbers), and so is a spreadsheet's separator line ``sep=,`` before the header.
 
 =====================  ========  ================================================================================
 column                 needed    meaning
@@ -170,6 +171,8 @@ def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[i
                     ok = False
                 if not ok:
                     got = repr(cell.strip()) if cell.isascii() else f"{cell!r} (characters that are not ASCII)"
+                    if "," in cell and _is_number(cell.replace(",", ".")):
+                        got += " (a decimal comma: a log's decimal separator is '.')"
                     raise LogFormatError(f"{path}: row {r}, column {names[c]!r}: expected a finite number, got {got}")
         values.append(row)
         rownos.append(r)
@@ -177,6 +180,13 @@ def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[i
         raise LogFormatError(f"{path}: row {reader.line_num + 1}: no data rows after the header (at least one "
                              "sample is needed)")
     return np.array(values, dtype=np.float64), rownos
+
+
+def _is_number(cell: str) -> bool:
+    try:
+        return math.isfinite(float(cell))
+    except ValueError:
+        return False
 
 
 class _CsvRows:
@@ -217,6 +227,15 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
         raise LogFormatError(f"{path}: row 1: empty file; expected a header row with columns t, q1..qN, "
                              "tau1..tauN (see cascgp.logs)")
     names = [c.strip() for c in header]
+    if names and names[0].lower().startswith("sep="):  # Excel's separator line, before the header
+        if names != ["sep=", ""]:
+            raise LogFormatError(f"{path}: row {reader.line_num}: a spreadsheet's separator line, "
+                                 f"{','.join(header)!r}; a log's columns are separated by commas (sep=,)")
+        header = next(reader, None)
+        if header is None:
+            raise LogFormatError(f"{path}: row {reader.line_num + 1}: expected a header row after the separator line "
+                                 "sep=, with columns t, q1..qN, tau1..tauN (see cascgp.logs)")
+        names = [c.strip() for c in header]
     n, cols, seg_col = _header(path, names, reader.line_num, require_tau)
     a, rownos = _rows(path, names, reader)
     t = a[:, names.index("t")]
