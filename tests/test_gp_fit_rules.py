@@ -313,3 +313,37 @@ def test_far_out_trial_points_give_inf_not_an_error():
     f, g, _ = nll_and_grad(theta, X, y, snr_max=1e6)
     assert math.isfinite(float(f[0])) and bool(torch.isinf(f[1:]).all())
     assert bool((g[1:] == 0).all()) and bool(torch.isfinite(g).all())
+
+
+def test_log_hyperparameters_that_drift_far_are_clipped_to_what_a_saved_bank_holds(monkeypatch):
+    """An unneeded input's log lengthscale (12,632) or a log noise far below its floor (-2,673) left the fit as they
+    were, and the saved model was refused by its own loader (|log hyperparameter| <= 700). They are now clipped to
+    +-700, where the input is ignored and the noise is the floor's to float64, as at the limit."""
+    import cascgp.gp.bank as bank_module
+
+    real = bank_module.minimize_batched
+
+    def drifting(*args, **kwargs):
+        states = real(*args, **kwargs)
+        for st in states:  # input 2 unneeded, noise at its floor: the optimiser wandered off along flat directions
+            st.x = st.x.copy()
+            st.x[2], st.x[-1] = 12632.0, -2673.0
+        return states
+
+    monkeypatch.setattr(bank_module, "minimize_batched", drifting)
+    rng = np.random.default_rng(4)
+    X, Y = _data(rng, 30, 3, 2)
+    bank = GPBank(GPFitConfig(n_restarts=2, max_iter=30)).fit([X, X], [Y[:, 0], Y[:, 1]])
+    assert np.abs(bank.theta).max() == 700.0
+    np.testing.assert_array_equal(bank.theta[:, [2, -1]], [[700.0, -700.0]] * 2)
+    loaded = GPBank.from_state_dict(bank.state_dict())  # refused before
+    Xs = rng.normal(size=(7, 3))
+    other = Xs.copy()
+    other[:, 2] = rng.normal(size=7) * 100.0
+    for b in (bank, loaded):
+        mean, var = b.predict([Xs, Xs])
+        mean2, var2 = b.predict([other, other])
+        assert all(np.isfinite(m).all() for m in mean + var)
+        for m, m2 in zip(mean + var, mean2 + var2):  # the clipped lengthscale ignores its input, bit for bit
+            np.testing.assert_array_equal(m, m2)
+    assert bank.hyperparameters(0)["noise_var"] == loaded.hyperparameters(0)["noise_var"]

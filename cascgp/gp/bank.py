@@ -23,6 +23,8 @@ Edge cases (documented behaviour)
   not optimised, ``y_std = 1``, hyperparameters at the default start (variances in target units squared that say
   nothing of its scale), the posterior mean exactly the constant, ``fit_info[b]["constant_target"]`` True.
 * NaN/inf, wrong shapes, ``n < 2``, unequal ``n``, bad kernel: ``ValueError``; not a list, or not real: ``TypeError``.
+* A log hyperparameter driven beyond ±700 (an unneeded input's lengthscale, a noise variance far below its floor) is
+  clipped to it, as a saved bank holds (``state.THETA_MAX``): at :math:`e^{\pm 700}` predictions are the limit's.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from cascgp.gp.likelihood import DTYPE, fit_threads, nll_and_grad
 from cascgp.gp.memory import plan_chunk
 from cascgp.gp.posterior import ZCLIP, Factors, GPPosterior, compute_factors
 from cascgp.gp.restarts import initial_thetas, make_pruner, warm_theta
-from cascgp.gp.state import BankData, bank_from_state, bank_state
+from cascgp.gp.state import THETA_MAX, BankData, bank_from_state, bank_state
 
 __all__ = ["GPBank", "SharedGPError"]
 
@@ -72,12 +74,10 @@ class _Objective:
 
     def bind(self, X: torch.Tensor, y: torch.Tensor, gp_of: np.ndarray, stage: str):
         def fun(Th: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            cfg = self.cfg
-            gsel = torch.as_tensor(gp_of[idx])
+            cfg, gsel = self.cfg, torch.as_tensor(gp_of[idx])
             floor = cfg.noise_floor if self.floor_gp is None else self.floor_gp[gp_of[idx]]
             f, g, jit = nll_and_grad(torch.as_tensor(Th, dtype=DTYPE), X[gsel], y[gsel], self.mask[gsel],
-                                     cfg.kernel, floor, cfg.jitter_max, chunk=self.chunk,
-                                     snr_max=cfg.snr_max)
+                                     cfg.kernel, floor, cfg.jitter_max, chunk=self.chunk, snr_max=cfg.snr_max)
             assert g is not None  # need_grad (the default) returns the gradient
             np.maximum.at(self.max_jit, gp_of[idx], jit.numpy())
             self.n_eval += len(idx)
@@ -376,7 +376,7 @@ class GPBank:
         for b in opt_gps:
             r = int(np.argmin(np.where(np.isfinite(rec.nll[b]), rec.nll[b], np.inf)))
             k = int(np.flatnonzero((gp_of == b) & (start_idx == r))[0])
-            final_theta[b] = states[k].x
+            final_theta[b] = np.clip(states[k].x, -THETA_MAX, THETA_MAX)  # what a saved bank holds (docstring)
 
     def _screen(self, obj: _Objective, x0: np.ndarray, member_gp: np.ndarray, member_start: np.ndarray,
                 opt_gps: np.ndarray, warm: bool, rng: np.random.Generator, rec: _StartRecord

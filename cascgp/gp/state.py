@@ -108,8 +108,9 @@ def bank_state(config: GPFitConfig, data: BankData, fit_info: list[dict[str, Any
     }
 
 
-#: Largest |log hyperparameter| a saved state may hold: exp() of 709.8 overflows float64, and exp(-745) is 0.
-_THETA_MAX = 700.0
+#: Largest |log hyperparameter| a saved state may hold, and a fit gives (:class:`~cascgp.gp.bank.GPBank`, clipped):
+#: exp() of 709.8 overflows float64, and exp(-745) is 0.
+THETA_MAX = 700.0
 
 
 def bank_from_state(d: dict[str, Any]) -> tuple[GPFitConfig, BankData, list[dict[str, Any]]]:
@@ -160,8 +161,8 @@ def bank_from_state(d: dict[str, Any]) -> tuple[GPFitConfig, BankData, list[dict
         arrs[k] = a
     if not np.all(np.isfinite(Xp)):
         raise ValueError("state['X']: contains NaN or inf")
-    if np.abs(arrs["theta"]).max() > _THETA_MAX:  # exp() of it overflows (or underflows to a zero lengthscale)
-        raise ValueError(f"state['theta']: expected log hyperparameters within +-{_THETA_MAX:g}, got "
+    if np.abs(arrs["theta"]).max() > THETA_MAX:  # exp() of it overflows (or underflows to a zero lengthscale)
+        raise ValueError(f"state['theta']: expected log hyperparameters within +-{THETA_MAX:g}, got "
                          f"{arrs['theta'].flat[np.abs(arrs['theta']).argmax()]:g}")
     try:
         fit_info = json.loads(str(np.asarray(d["fit_info_json"])))
