@@ -378,7 +378,8 @@ def read_log(path: str | os.PathLike, *, smoothing: SavGol | int | None = DEFAUL
         smoothing: derivative filter for missing ``qd`` / ``qdd`` columns: a :class:`~cascgp.data.SavGol`, an odd
             ``int`` window (polynomial order 2) or ``None`` (central differences).
         require_tau: if ``False``, the ``tau`` columns may be absent: ``tau`` is then zero and
-            ``meta["has_tau"]`` is ``False`` (for prediction only).
+            ``meta["has_tau"]`` is ``False`` (for prediction only); if ``True``, such a log saved as ``.npz`` is
+            refused too.
 
     Returns:
         The validated :class:`~cascgp.data.DynamicsData`; ``meta`` records ``source``, ``has_tau``,
@@ -413,6 +414,9 @@ def read_log(path: str | os.PathLike, *, smoothing: SavGol | int | None = DEFAUL
         data = DynamicsData.load(path)
     except ValueError as exc:
         raise LogFormatError(str(exc)) from exc
+    if require_tau and data.meta.get("has_tau") is False:
+        raise LogFormatError(f"{path}: holds no measured torques (its tau is the zero placeholder of a log read for "
+                             "prediction, read_log(..., require_tau=False)); fitting and evaluating need tau1..tauN")
     meta = {**data.meta, "source": str(path), "format": "cascgp.DynamicsData .npz"}
     meta.setdefault("has_tau", True)
     meta.setdefault("derivative_filter", None)
@@ -434,7 +438,8 @@ def _csv_bytes(columns: dict[str, np.ndarray]) -> bytes:
 def write_log(path: str | os.PathLike, data: DynamicsData) -> Path:
     """Write ``data`` atomically (:func:`cascgp.io.atomic_write`): ``.npz`` as :meth:`DynamicsData.save`,
     anything else as a CSV log with every column (``t``, ``segment`` when there is more than one segment,
-    ``q``, ``qd``, ``qdd``, ``tau``), values printed to round-trip exactly (Python's shortest repr of each float)."""
+    ``q``, ``qd``, ``qdd``, ``tau``; no ``tau`` for a log read without torques, ``meta["has_tau"]`` false), values
+    printed to round-trip exactly (Python's shortest repr of each float)."""
     if not isinstance(data, DynamicsData):
         raise TypeError(f"data: expected DynamicsData, got {type(data).__name__}")
     path = Path(path)
@@ -445,6 +450,8 @@ def write_log(path: str | os.PathLike, data: DynamicsData) -> Path:
         assert data.segment is not None  # DynamicsData stores the ids (None is only a constructor argument)
         cols["segment"] = data.segment
     for g in _GROUPS:
+        if g == "tau" and data.meta.get("has_tau") is False:  # a zero placeholder, not measured torques
+            continue
         for j in range(data.dof):
             cols[f"{g}{j + 1}"] = getattr(data, g)[:, j]
     body = _csv_bytes(cols)

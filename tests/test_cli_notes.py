@@ -167,3 +167,15 @@ def test_fit_takes_a_kernel_that_the_model_file_keeps(logs: Path) -> None:
                "--kernel", "matern12", cwd=logs)
     assert r.returncode == 2 and "--kernel: expected one of ('matern52', 'matern32', 'rbf'), got 'matern12'" \
         in r.stderr and not (logs / "m12.npz").exists()
+
+
+def test_an_npz_logs_derivatives_are_noted_as_computed_when_it_was_read(logs: Path) -> None:
+    """A saved log holds qd and qdd; the note said they were computed because the file had "no such columns"."""
+    read_log(logs / "train.csv").save(logs / "train.npz")
+    r = cascgp("fit", "--data", "train.npz", "--urdf", "robot.urdf", "--model", "sp-standard", "--out", "npz.npz",
+               "--max-samples", "40", "--restarts", "1", cwd=logs)
+    assert r.returncode == 0, r.stderr
+    assert "computed qd and qdd when the log was read with Savitzky-Golay" in r.stderr, r.stderr
+    r = cascgp("fit", "--data", "train.csv", "--urdf", "robot.urdf", "--model", "sp-standard", "--out", "csv.npz",
+               "--max-samples", "40", "--restarts", "1", cwd=logs)
+    assert "computed qd and qdd (no such columns) with Savitzky-Golay" in r.stderr, r.stderr

@@ -72,6 +72,25 @@ def test_tau_is_optional_only_when_asked(tmp_path: Path, data: DynamicsData) -> 
     assert d.meta["has_tau"] is False and not d.tau.any()
 
 
+def test_a_log_without_torques_stays_one_when_saved_and_cannot_be_fitted(tmp_path: Path, data: DynamicsData) -> None:
+    """A log read without torques (tau a zero placeholder) became a log of measured zero torques once saved: the .npz
+    was fitted silently (the model predicted 0), and write_log wrote the placeholder as tau columns."""
+    from cascgp.models import make_model
+
+    states = read_log(write_columns(tmp_path / "states.csv", data, ("q",)), require_tau=False)
+    states.save(tmp_path / "states.npz")
+    with pytest.raises(LogFormatError, match=r"states\.npz: holds no measured torques"):
+        read_log(tmp_path / "states.npz")
+    assert read_log(tmp_path / "states.npz", require_tau=False).meta["has_tau"] is False
+    write_log(tmp_path / "again.csv", states)
+    assert "tau1" not in (tmp_path / "again.csv").read_text().splitlines()[0]
+    with pytest.raises(LogFormatError, match=r"column 'tau1': missing"):
+        read_log(tmp_path / "again.csv")
+    np.testing.assert_array_equal(read_log(tmp_path / "again.csv", require_tau=False).q, states.q)
+    with pytest.raises(ValueError, match=r"^data: holds no measured torques"):
+        make_model("np-standard", states.dof).fit(states)
+
+
 def test_write_predictions(tmp_path: Path) -> None:
     t, mean, var = np.arange(4) * 0.1, np.arange(8.0).reshape(4, 2), np.full((4, 2), 0.5)
     text = write_predictions(tmp_path / "p.csv", t, mean, var).read_text().splitlines()

@@ -44,6 +44,9 @@ def training_arrays(model: CascadedGPModel, data: DynamicsData, q_hist: Any = No
         raise TypeError(f"data: expected DynamicsData, got {type(data).__name__}")
     if data.dof != model.dof:
         raise ValueError(f"data: DOF mismatch: the model has dof={model.dof}, data.dof={data.dof}")
+    if data.meta.get("has_tau") is False:
+        raise ValueError("data: holds no measured torques (meta['has_tau'] is False: its tau is the zero placeholder "
+                         "of a log read for prediction); a fit needs them")
     if model.feature_kind == "df" and q_hist is not None:
         q_hist, valid = _given_history(q_hist, data)
     elif model.feature_kind == "df":

@@ -82,7 +82,8 @@ def _describe(prog: str, data: Any, path: Path) -> None:
                          f"{period} from {path}")
     computed = [g for g in ("qd", "qdd") if m.get(f"{g}_source") == "computed"]
     if computed:
-        log_notes.note(prog, f"computed {' and '.join(computed)} (no such columns) with {m.get('derivative_filter')}")
+        how = "when the log was read" if path.suffix.lower() == ".npz" else "(no such columns)"
+        log_notes.note(prog, f"computed {' and '.join(computed)} {how} with {m.get('derivative_filter')}")
 
 
 def _sha256(path: Path) -> str:
