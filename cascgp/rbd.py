@@ -431,10 +431,10 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints
     * ``model.meta`` records these assumptions (``meta["sidecar"]`` is ``None``).
 
     A manufacturer's URDF often has joints that a log does not (a gripper's fingers): ``joints`` names the
-    model's joints, in Pinocchio's order of the URDF's joints (depth first from the base), and the others are
-    locked, at 0 (the URDF's zero) or at the positions ``locked`` gives; a sidecar then lists the model's
-    joints only. Continuous joints are revolute joints whose position is the angle in rad, zero at the URDF's
-    zero, in any range (:mod:`cascgp.rbd_joints`).
+    model's joints, in Pinocchio's order of the URDF's joints (depth first from the base, branches by joint
+    name), and the others are locked, at 0 (the URDF's zero) or at the positions ``locked`` gives; a sidecar then
+    lists the model's joints only. Continuous joints are revolute joints whose position is the angle in rad, zero
+    at the URDF's zero, in any range (:mod:`cascgp.rbd_joints`).
 
     Args:
         urdf_path: the URDF file.

@@ -11,9 +11,9 @@ Pinocchio model before :class:`cascgp.rbd.RigidBodyModel` uses it:
   position is then its angle, in any range (multi-turn angles included). The Kinova Jaco 2's own URDF has
   three such joints.
 * **Joints the log does not have.** A gripper's fingers, for instance. :func:`lock_joints` keeps the joints
-  named (the log's, in Pinocchio's order of the URDF's joints: depth first from the base) and locks every
-  other one at a given position (default 0, the URDF's zero), with Pinocchio's ``buildReducedModel``: the
-  locked joint's bodies become rigid parts of their parent body, inertia included.
+  named (the log's, in Pinocchio's order of the URDF's joints: depth first from the base, branches by joint name)
+  and locks every other one at a given position (default 0, the URDF's zero), with Pinocchio's
+  ``buildReducedModel``: the locked joint's bodies become rigid parts of their parent body, inertia included.
 * **Mimic joints.** A URDF ``<mimic>`` joint (a gripper's second finger) moves with another joint:
   :math:`q = m\\,q_\\text{primary} + o`. Pinocchio reads it as a joint of its own; :func:`mimic_joints` reads the
   relation from the URDF, and :func:`joint_selection` locks a mimic joint whose primary is locked at the

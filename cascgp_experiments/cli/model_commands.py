@@ -102,7 +102,7 @@ def _load(path: Path) -> Any:
 
 def _check_dof(model: Any, data: Any, path: Path) -> None:
     if data.dof != model.dof:
-        raise _Fail(f"{path}: the log has {data.dof} joints, the model {model.name!r} has {model.dof}")
+        raise _Fail(f"{path}: the log has {data.dof} joint(s), the model {model.name!r} has {model.dof}")
 
 
 # --------------------------------------------------------------------------- fit
@@ -120,9 +120,9 @@ def fit_main(argv: list[str] | None = None, prog: str | None = None) -> int:
                    help="the robot's URDF (sp-* models only; a sidecar JSON next to it is optional)")
     p.add_argument("--joints", default=None, metavar="NAME,...",
                    help="the URDF joints that are the log's q1..qN, in the order Pinocchio lists the URDF's "
-                        "joints (depth first from the base; an error prints it). Default: every joint not in "
-                        "--lock. The others (a gripper's fingers, say) are locked, except a URDF mimic joint of one of "
-                        "them, which moves with it. A continuous joint's q is its "
+                        "joints (depth first from the base, branches by joint name; an error prints it). Default: "
+                        "every joint not in --lock. The others (a gripper's fingers, say) are locked, except a URDF "
+                        "mimic joint of one of them, which moves with it. A continuous joint's q is its "
                         "angle (rad, any range)")
     p.add_argument("--lock", default=None, metavar="NAME=Q,...",
                    help="positions (rad or m; 0 is the URDF's zero) at which the joints not in --joints are locked "
