@@ -7,6 +7,7 @@ element) what would make the rigid-body model silently wrong:
   parser's words (:func:`cascgp.urdf_parser_output.dropped_inertials`);
 - a link that is the child of two joints (the parser drops one of the joints);
 - a ``<mimic>`` of a joint the URDF lacks, or of itself (the relation would be ignored);
+- a link with more than one ``<inertial>`` (the parser reads the first and drops the others);
 - a negative mass, or a principal moment of inertia below -1 % of the link's largest one (not a rigid body: a sign
   or a product of inertia is wrong; rounded CAD values stay far above that);
 - a joint axis of (almost) zero length (the joint moves nothing).
@@ -74,11 +75,14 @@ def _structure_errors(root: ET.Element) -> list[str]:
 
 
 def _inertial_errors(root: ET.Element) -> list[str]:
-    """Links with a negative mass or a principal moment of inertia below -1 % of their largest (rounded CAD values
+    """Links with several ``<inertial>``, a negative mass or a principal moment of inertia below -1 % of their largest (rounded CAD values
     may also break the triangle inequality of the principal moments, which no rigid body does; that leaves the mass
     matrix positive definite and is not reported)."""
     errors = []
     for link in (e for e in root if xml_tag(e.tag) == "link"):
+        if len(_children(link, "inertial")) > 1:  # the parser reads the first and drops the others
+            errors.append(f"link {link.get('name')!r} has {len(_children(link, 'inertial'))} <inertial> elements "
+                          "(URDF allows one: merge them into one body's mass, centre of mass and inertia)")
         for inertial in _children(link, "inertial"):
             mass = next((_floats(m.get("value"), [0.0])[0] for m in _children(inertial, "mass")), 0.0)
             if mass < 0:

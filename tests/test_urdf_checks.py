@@ -21,6 +21,9 @@ ARM = arm_urdf(("revolute",) * 3)
      r"not parse inertial element for Link \[l2\]\)"),
     ('<mass value="0.9"/>', '<mass value="nan"/>', r"urdfdom: Inertial: mass \[nan\] is not a float"),
     ('<mass value="0.9"/>', '<mass value="-0.9"/>', r"link 'l2' has a negative mass \(-0.9 kg\)"),
+    # the parser kept the first and dropped the second, silently
+    ('<mass value="0.9"/>', '<mass value="0.9"/></inertial><inertial><mass value="2.0"/>',
+     r"link 'l2' has 2 <inertial> elements \(URDF allows one"),
     ('iyy="0.018000000000000002"', 'iyy="-0.018"', r"link 'l2' has an inertia with a negative principal moment"),
     ('<axis xyz="1 0 0"/>', '<axis xyz="0 0 0"/>', r"joint 'j3' has an axis of zero length \('0 0 0'\)"),
     ('</robot>', '<joint name="extra" type="fixed"><parent link="base"/><child link="l3"/></joint></robot>',
