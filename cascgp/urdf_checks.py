@@ -75,9 +75,9 @@ def _structure_errors(root: ET.Element) -> list[str]:
 
 
 def _inertial_errors(root: ET.Element) -> list[str]:
-    """Links with several ``<inertial>``, a negative mass or a principal moment of inertia below -1 % of their largest (rounded CAD values
-    may also break the triangle inequality of the principal moments, which no rigid body does; that leaves the mass
-    matrix positive definite and is not reported)."""
+    """Links with several ``<inertial>``, a negative mass or a principal moment of inertia below -1 % of their
+    largest (rounded CAD values may also break the triangle inequality of the principal moments, which no rigid body
+    does; that leaves the mass matrix positive definite and is not reported)."""
     errors = []
     for link in (e for e in root if xml_tag(e.tag) == "link"):
         if len(_children(link, "inertial")) > 1:  # the parser reads the first and drops the others

@@ -179,3 +179,22 @@ def test_an_npz_logs_derivatives_are_noted_as_computed_when_it_was_read(logs: Pa
     r = cascgp("fit", "--data", "train.csv", "--urdf", "robot.urdf", "--model", "sp-standard", "--out", "csv.npz",
                "--max-samples", "40", "--restarts", "1", cwd=logs)
     assert "computed qd and qdd (no such columns) with Savitzky-Golay" in r.stderr, r.stderr
+
+
+def test_torques_beyond_twice_the_effort_limits_are_noted(logs: Path) -> None:
+    """Torques logged in N mm were fitted without a word, and evaluate then showed an nRMSE of about 485."""
+    train = read_log(logs / "train.csv")
+    mm = DynamicsData(q=train.q, qd=train.qd, qdd=train.qdd, tau=1000.0 * train.tau, t=train.t)
+    _write(logs / "train_mm.csv", mm)
+    r = cascgp("fit", "--data", "train_mm.csv", "--urdf", "robot.urdf", "--model", "sp-standard", "--out", "mm.npz",
+               "--max-samples", "40", "--restarts", "1", cwd=logs)
+    assert r.returncode == 0, r.stderr
+    note = next(line for line in r.stderr.splitlines() if "beyond twice the URDF's effort limits" in line)
+    assert "tau1 " in note and "torques must be in N m" in note, note
+    r = cascgp("evaluate", "--model", "mm.npz", "--data", "train_mm.csv", "--json", "mm.json", cwd=logs)
+    assert r.returncode == 0, r.stderr
+    notes = json.loads((logs / "mm.json").read_text())["notes"]
+    assert any("beyond twice the URDF's effort limits" in n for n in notes), notes
+    r = cascgp("fit", "--data", "train.csv", "--urdf", "robot.urdf", "--model", "sp-standard", "--out", "nm.npz",
+               "--max-samples", "40", "--restarts", "1", cwd=logs)
+    assert r.returncode == 0 and "effort limits" not in r.stderr, r.stderr

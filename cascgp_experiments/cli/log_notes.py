@@ -55,6 +55,26 @@ def limits_note(prog: str, rbd: Any, data: Any) -> str | None:
     return None
 
 
+def torque_note(prog: str, rbd: Any, data: Any) -> str | None:
+    """One note naming the joints with rows whose torque exceeds twice the URDF's effort limit (torques in N mm or
+    another unit, say; a motor's short peak stays within twice its rating); returns it (``None``: no note, no
+    torques, or a rigid-body model without torque limits)."""
+    limits = getattr(rbd, "torque_limits", None)
+    if limits is None or data.meta.get("has_tau") is False:
+        return None
+    found = []
+    for j, lim in enumerate(limits):
+        out = float((np.abs(data.tau[:, j]) > 2.0 * lim).mean())
+        if out > 0:
+            found.append(f"tau{j + 1} {out:.0%} (limit {lim:.4g}, largest {np.abs(data.tau[:, j]).max():.4g})")
+    if not found:
+        return None
+    msg = (f"rows with torques beyond twice the URDF's effort limits: {', '.join(found)}; torques must be in N m (N "
+           "for a prismatic joint)")
+    note(prog, f"note: {msg}")
+    return msg
+
+
 def coverage_note(prog: str, model: Any, data: Any) -> str | None:
     """One note naming the joints with at least 5 % of the rows far outside the positions the model was trained on:
     more than the training range's width beyond it (ordinary extrapolation near the range is not noted); returns

@@ -313,6 +313,7 @@ def _fit(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         locked += "".join(f"; {n} moves with {j} ({m:g} x {j} + {o:g})" for n, (j, m, o) in rbd.coupled.items())
         log_notes.note(prog, f"rigid-body model: {a.urdf} ({rbd.dof} joints: {', '.join(rbd.joint_names)}{locked})")
         log_notes.limits_note(prog, rbd, data)
+        log_notes.torque_note(prog, rbd, data)
     cfg = _fit_config(a)
     model = make_model(a.model, data.dof, rbd, gp_config=cfg)
     data, q_hist, thinned = _training_rows(prog, a, model, data)
@@ -395,8 +396,8 @@ def _evaluate(a: argparse.Namespace, prog: str, argv: list[str] | None) -> int:
         if rows.sum() < 2:
             raise _Fail(f"{a.data}: fewer than 2 rows have the {2 * model.df_delta:g} s of history the -df model "
                         "needs")
-    notes = [n for n in (log_notes.limits_note(prog, model.rbd, data), log_notes.coverage_note(prog, model, data),
-                         log_notes.in_sample_note(prog, model, data)) if n]
+    notes = [n for n in (log_notes.limits_note(prog, model.rbd, data), log_notes.torque_note(prog, model.rbd, data),
+                         log_notes.coverage_note(prog, model, data), log_notes.in_sample_note(prog, model, data)) if n]
     tau = data.tau[rows]
     flat = [j for j in range(model.dof) if np.ptp(tau[:, j]) == 0]
     if flat:
