@@ -9,6 +9,10 @@ from typing import Any, Literal, overload
 
 import numpy as np
 
+#: Most optimiser starts per GP a fit takes (the default is 10): a command line's 100000000 is refused at once
+#: instead of failing in the fit's memory plan.
+MAX_RESTARTS = 1000
+
 __all__ = ["check_count", "check_positive", "check_real_vector"]
 
 

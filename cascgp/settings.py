@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from cascgp.checks import check_count, check_positive
+from cascgp.checks import MAX_RESTARTS, check_count, check_positive
 from cascgp.features import STRUCTURES
 from cascgp.gates import GATE_SUFFIXES
 
@@ -87,4 +87,6 @@ class RetrainConfig:
         # takes seeds >= 0.
         for name, least in (("seed", 0), ("cap", 2), ("restarts", 1)):  # a GP needs two rows
             object.__setattr__(self, name, check_count(getattr(self, name), name, least))
+        if self.restarts > MAX_RESTARTS:
+            raise ValueError(f"restarts: expected at most {MAX_RESTARTS} starts per GP, got {self.restarts}")
         object.__setattr__(self, "rate_hz", check_positive(self.rate_hz, "rate_hz", "Hz"))

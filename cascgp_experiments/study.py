@@ -52,7 +52,7 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from cascgp.checks import check_count, check_positive
+from cascgp.checks import MAX_RESTARTS, check_count, check_positive
 from cascgp_experiments.common import (FULL_GRID, NP_DB, PAPER_TABLE, QUICK_GRID, RBD, SMOKE_GRID,
                                        VARIANTS, label, machine_info, make_table, median_curves,
                                        package_versions, read_json, write_json)
@@ -95,6 +95,9 @@ class Settings:
         for name, least in (("n_subsets", 1), ("n_restarts", 1), ("iter_n", 2), ("iter_restarts", 1),
                             ("sarcos_subsets", 1), ("seed", 0)):  # as Python ints: the settings go into JSON
             object.__setattr__(self, name, check_count(getattr(self, name), name, least))
+        for name in ("n_restarts", "iter_restarts"):
+            if getattr(self, name) > MAX_RESTARTS:
+                raise ValueError(f"{name}: expected at most {MAX_RESTARTS} starts per GP, got {getattr(self, name)}")
         if self.n_subsets > data.n_subsets:
             raise ValueError(f"n_subsets: expected at most the {self.collection!r} collection's {data.n_subsets} "
                              f"training subsets, got {self.n_subsets}")

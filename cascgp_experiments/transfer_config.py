@@ -15,6 +15,9 @@ from cascgp.checks import check_count
 from cascgp.settings import RetrainConfig, check_controller
 from cascgp_experiments.transfer_presets import ENV_ID, FULL_CONTROLLERS, FULL_TASKS
 
+#: Most training attempts per task a run takes (each is an episode and a refit): more would only fill the memory.
+MAX_ATTEMPTS = 1000
+
 if TYPE_CHECKING:
     import gymnasium as gym
 
@@ -66,6 +69,8 @@ class TransferConfig:
                     raise ValueError(f"{name}: {exc}") from None
             store(name, tuple(values))
         store("attempts", check_count(self.attempts, "attempts"))
+        if self.attempts > MAX_ATTEMPTS:
+            raise ValueError(f"attempts: expected at most {MAX_ATTEMPTS} per task, got {self.attempts}")
         store("n_marbles", check_count(self.n_marbles, "n_marbles"))
         if self.n_marbles > scene.MAX_MARBLES:
             raise ValueError(f"n_marbles: expected at most {scene.MAX_MARBLES}, got {self.n_marbles}")

@@ -204,6 +204,16 @@ def test_refused_study_prints_its_error_alone(tmp_path: Path, monkeypatch, capsy
 @pytest.mark.parametrize("command, argv, message", [
     ("transfer", ["--cap", "1"], "--cap: expected an integer >= 2, got 1"),  # failed after the first episode
     ("transfer", ["--restarts", "0"], "--restarts: expected an integer >= 1, got 0"),
+    # a typo's 100000000 filled the memory (attempts) or failed in every job's memory plan (restarts)
+    ("transfer", ["--attempts", "100000000"], "--attempts: expected at most 1000 per task, got 100000000"),
+    ("transfer", ["--restarts", "100000000"], "--restarts: expected at most 1000 starts per GP, got 100000000"),
+    ("study", ["--restarts", "100000000"], "--restarts: expected at most 1000 starts per GP, got 100000000"),
+    ("sarcos", ["--restarts", "1001", "--sarcos", "x.mat"], "--restarts: expected at most 1000 starts per GP"),
+    ("fit", ["--data", "x.csv", "--model", "np-inward", "--restarts", "1001"],
+     "--restarts: expected at most 1000 starts per GP, got 1001"),
+    # an empty list ran the default experiment
+    ("transfer", ["--controllers", ""], "--controllers: unknown controller ''"),
+    ("transfer", ["--tasks", ""], "--tasks: unknown task ''"),
     ("transfer", ["--attempts", "0"], "--attempts: expected an integer >= 1, got 0"),
     ("transfer", ["--seed", "-2"], "--seed: expected an integer >= 0, got -2"),
     ("transfer", ["--rate", "0"], "--rate: expected a finite number > 0 (Hz), got 0.0"),

@@ -27,6 +27,19 @@ def test_ctrl_c_is_one_line_and_names_the_resume(command: str, resumes: bool, mo
     assert ("run the same command again to resume" in err) == resumes
 
 
+def test_a_folder_that_cannot_be_written_during_a_run_is_one_line(monkeypatch, capsys) -> None:
+    """A cache folder of --out made read-only ended a study with a PermissionError traceback."""
+    module, func = cli.COMMANDS["study"][0].split(":")
+
+    def refused(argv, prog=None):
+        raise PermissionError(13, "Permission denied", "out/cache/jaco/x.json")
+
+    monkeypatch.setattr(f"{module}.{func}", refused)
+    assert cli.main(["study", "--out", "out"]) == 2
+    err = capsys.readouterr().err
+    assert err.strip() == "cascgp study: error: [Errno 13] Permission denied: 'out/cache/jaco/x.json'", err
+
+
 def test_plots_redraws_a_sarcos_json(tmp_path: Path, capsys) -> None:
     """A ``cascgp sarcos`` run's ``sarcos.json`` (here the SARCOS block of the documented study run) gives the
     study's SARCOS figure, CSV and claims, and the files that ``cascgp sarcos`` writes are named as it names them
@@ -76,3 +89,24 @@ def test_plots_refuses_a_json_of_something_else(tmp_path: Path, capsys) -> None:
     with pytest.raises(SystemExit):
         cli.main(["plots", "--json", str(tmp_path / "cut.json"), "--out", str(tmp_path / "out")])
     assert "missing entry 'models'" in capsys.readouterr().err and not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("edit", ["grid_str", "grid_short", "median_short", "no_rows"])
+def test_plots_refuses_a_results_file_whose_entries_cannot_be_drawn(tmp_path: Path, capsys, edit: str) -> None:
+    """A hand-edited entry of another type or length ended in a traceback (ValueError, StopIteration)."""
+    run = json.loads((REPO / "docs" / "results.json").read_text())
+    if edit == "grid_str":
+        run["jaco"]["grid_s"] = "abc"
+    elif edit == "grid_short":
+        run["jaco"]["grid_s"] = run["jaco"]["grid_s"][:1]
+    elif edit == "median_short":
+        model = next(iter(run["jaco"]["models"].values()))
+        model["nrmse_median"] = model["nrmse_median"][:2]
+    else:
+        run["paper_table"]["rows"] = {}
+    (tmp_path / "edited.json").write_text(json.dumps(run))
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["plots", "--json", str(tmp_path / "edited.json"), "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and "edited.json: not a complete study results file" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()

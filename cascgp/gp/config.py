@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from cascgp.checks import check_count, check_positive
+from cascgp.checks import MAX_RESTARTS, check_count, check_positive
 from cascgp.gp.kernels import check_kernel
 
 __all__ = ["GPFitConfig", "INIT_SPREAD_MAX", "MAX_THREADS", "check_target_floor", "noise_var"]
@@ -34,7 +34,7 @@ class GPFitConfig:
 
     Attributes:
         kernel: ``"matern52"`` (paper), ``"matern32"`` or ``"rbf"`` (:mod:`cascgp.gp.kernels`).
-        n_restarts: starts per GP (>= 1); the best is kept.
+        n_restarts: starts per GP (1 to 1000); the best is kept.
         max_iter: L-BFGS iterations per start.
         grad_tol: stop when max |dNLL/dtheta| <= grad_tol.
         rel_tol: stop when the relative NLL decrease of one iteration <= rel_tol (SciPy's ``factr`` test).
@@ -131,6 +131,8 @@ class GPFitConfig:
         for name in ("drop_after", "stall_window", "race_at", "threads"):
             check_count(getattr(self, name), name, optional=True)
         check_count(self.seed, "seed", minimum=0)  # NumPy's generators take seeds >= 0
+        if self.n_restarts > MAX_RESTARTS:
+            raise ValueError(f"n_restarts: expected at most {MAX_RESTARTS} starts per GP, got {self.n_restarts}")
         if self.snr_max is not None and (isinstance(self.snr_max, bool) or not isinstance(self.snr_max, (int, float))
                                          or not math.isfinite(self.snr_max) or self.snr_max <= 0):
             raise ValueError(f"snr_max: expected None or a finite number > 0, got {self.snr_max!r}")

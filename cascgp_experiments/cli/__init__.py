@@ -79,5 +79,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                 else "")
         print(f"\ncascgp {name}: interrupted{hint}", file=sys.stderr)
         return 130
+    except PermissionError as exc:  # a folder of --out that cannot be written, found during the run
+        print(f"cascgp {name}: error: {exc}", file=sys.stderr)
+        return 2
     return int(status or 0)
 

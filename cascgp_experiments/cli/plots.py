@@ -52,6 +52,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                 atomic_write_text(drawn[-1], summary_table(run) + "\n")
         except KeyError as exc:  # a hand-edited or truncated file: --out is left as it was
             ap.error(f"--json: {a.json}: not a complete study results file (missing entry {exc.args[0]!r})")
+        except (ValueError, TypeError, IndexError, StopIteration) as exc:  # an entry of another type or length
+            ap.error(f"--json: {a.json}: not a complete study results file (an entry cannot be drawn: "
+                     f"{type(exc).__name__}{': ' + str(exc) if str(exc) else ''})")
         out.mkdir(parents=True, exist_ok=True)
         for p in drawn:
             dest = out / p.relative_to(tmp)

@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cascgp.checks import MAX_RESTARTS
 from cascgp.io import atomic_write_text, write_json
 from cascgp_experiments.common import (SARCOS_ENV, default_sarcos, default_sarcos_source, limit_threads,
                                        machine_info, median_curves, package_versions)
@@ -57,6 +58,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
                  f"shipped: {IAS_SOURCE}")
     check_sarcos_file(ap, a.sarcos, "--sarcos" if a.sarcos != ap.get_default("sarcos") else default_sarcos_source())
     require_at_least(ap, a, 1, "restarts")
+    if a.restarts is not None and a.restarts > MAX_RESTARTS:
+        ap.error(f"--restarts: expected at most {MAX_RESTARTS} starts per GP, got {a.restarts}")
     require_at_least(ap, a, 0, "seed")
     check_output(ap, a.out, "--out", "folder")
     refuse_other_experiment(ap, a.out, "sarcos")

@@ -64,8 +64,9 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
     ap.add_argument("--models", default=None, help="comma-separated subset of the 12 variants")
     add_execution_args(ap)
     ap.add_argument("--restarts", type=int, default=None,
-                    help="GP starts per fit (default 10, one warm-started along the grid)")
-    ap.add_argument("--subsets", type=int, default=None, help="training subsets used (default 10)")
+                    help="GP starts per fit (default 10, --quick 3, --smoke 2; one warm-started along the grid)")
+    ap.add_argument("--subsets", type=int, default=None,
+                    help="training subsets used (default 10, --quick 3, --smoke 2)")
     ap.add_argument("--grid", default=None, help="comma-separated seconds of data (default: the preset's)")
     ap.add_argument("--max-seconds", type=float, default=None,
                     help="drop grid points above this many seconds (Jaco and SARCOS), e.g. 10 for Table I's "

@@ -57,9 +57,9 @@ def _config(a: argparse.Namespace) -> TransferConfig:
     from cascgp_experiments.transfer_config import TransferConfig
 
     return TransferConfig(
-        controllers=tuple(a.controllers.split(",")) if a.controllers else
+        controllers=tuple(a.controllers.split(",")) if a.controllers is not None else
         (QUICK_CONTROLLERS if a.quick else FULL_CONTROLLERS),
-        tasks=tuple(a.tasks.split(",")) if a.tasks else (QUICK_TASKS if a.quick else FULL_TASKS),
+        tasks=tuple(a.tasks.split(",")) if a.tasks is not None else (QUICK_TASKS if a.quick else FULL_TASKS),
         attempts=a.attempts,
         revisit=not a.no_revisit, payload_mass=a.payload, seed=a.seed, rate_hz=a.rate, cap=a.cap,
         restarts=a.restarts, sensor_pipeline=a.sensor_pipeline)
@@ -68,7 +68,9 @@ def _config(a: argparse.Namespace) -> TransferConfig:
 def parse_args(argv: list[str] | None = None, prog: str | None = None
                ) -> tuple[TransferConfig, Path, bool, argparse.Namespace]:
     p = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
-    p.add_argument("--out", type=Path, required=True, help="output folder (created; should be new or empty)")
+    p.add_argument("--out", type=Path, required=True,
+                   help="output folder (created): a new or empty one, or that of an earlier run with the same "
+                        "settings, which resumes (--overwrite starts it again)")
     p.add_argument("--quick", action="store_true",
                    help=f"short demo: controllers {','.join(QUICK_CONTROLLERS)}, tasks {','.join(QUICK_TASKS)}")
     p.add_argument("--controllers", type=str, default=None,
@@ -142,7 +144,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
         print(f"{prog or Path(sys.argv[0]).name}: error: {exc}", file=sys.stderr)
         sys.exit(2)
     if state == "resume":
-        print(f"resuming the run in {out} (finished controllers come from its job cache)", file=sys.stderr)
+        print(f"resuming the run in {out} (controllers that finished in this folder come from its job cache)",
+              file=sys.stderr)
     t0 = time.perf_counter()
     jobs: dict = {}
     with session(a.ray, a.workers):
