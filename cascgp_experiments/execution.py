@@ -62,7 +62,7 @@ from cascgp.checks import check_count
 from cascgp_experiments.cli.options import require_at_least
 from cascgp_experiments.common import install_hint
 from cascgp_experiments.job_cache import canonical_json, job_key, read_cached, write_cached
-from cascgp_experiments.pool_exit import exit_with_parent, interrupted
+from cascgp_experiments.pool_exit import exit_with_parent, on_interrupt, run_job
 from cascgp_experiments.ray_backend import RayAuthenticationError, import_ray, ray_connect, run_ray
 
 __all__ = ["run_jobs", "report_progress", "session", "default_workers", "check_workers", "job_key", "JobError",
@@ -192,7 +192,7 @@ def _init_process(channel: Any, parent_pid: int | None = None) -> None:
     of the terminal's group) exit without a traceback: the run's main process reports it."""
     global _CHANNEL
     _limit_threads()
-    signal.signal(signal.SIGINT, interrupted)
+    signal.signal(signal.SIGINT, on_interrupt)
     _CHANNEL = channel
     pid = os.getppid() if parent_pid is None else int(parent_pid)
     threading.Thread(target=exit_with_parent, args=(pid,), name="exit-with-parent", daemon=True).start()
@@ -207,7 +207,7 @@ def _call(fn: Callable, inputs: dict, index: int, attempt: int, channel: Any = N
     _CURRENT = (index, attempt)
     t0 = time.perf_counter()
     try:
-        result = fn(**inputs)
+        result = run_job(fn, inputs)
         return ("ok", result, time.perf_counter() - t0)
     except Exception as exc:  # noqa: BLE001 - reported with the inputs by the caller
         return ("error", f"{type(exc).__name__}: {exc}\n{traceback.format_exc()}", time.perf_counter() - t0)

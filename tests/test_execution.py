@@ -72,6 +72,13 @@ def endless_or_quick_job(x: int, pid_dir: str) -> int:
     return x
 
 
+def marked_slow_job(x: int, pid_dir: str) -> int:
+    """Leaves a mark that it started, then takes 3 s."""
+    (Path(pid_dir) / f"{x}.started").write_text(str(os.getpid()))
+    time.sleep(3.0)
+    return x
+
+
 def uncacheable_job(x: int, log_dir: str) -> Any:
     """Job 0 returns what JSON cannot hold (the run fails in this process, not in the job); the others
     take a while and leave a mark that they ran."""
@@ -370,3 +377,38 @@ def test_progress_ignores_malformed_and_out_of_range_messages() -> None:
         assert p.reported == [0, 0] and bar.n == 0
         p.tick((1, 0, 5, "note"))  # capped at the job's units
         assert p.reported == [0, 3] and bar.n == 3
+
+
+_QUEUED_SCRIPT = """
+import sys
+from cascgp_experiments.execution import run_jobs
+from test_execution import marked_slow_job
+try:
+    run_jobs(marked_slow_job, [{"x": x, "pid_dir": sys.argv[1]} for x in range(5)], workers=2, show_progress=False)
+except KeyboardInterrupt:
+    print("interrupted", file=sys.stderr)
+    sys.exit(130)
+"""
+
+
+@pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads process states from /proc")
+def test_after_ctrl_c_a_job_queued_in_a_pool_process_does_not_run(tmp_path: Path) -> None:
+    """The executor hands a pool process its next queued job after an interrupted one: that job ran to its end
+    (a transfer's next controller, for half a minute) before the run could stop, its result thrown away."""
+    p = subprocess.Popen([sys.executable, "-c", _QUEUED_SCRIPT, str(tmp_path)], env=subprocess_env(), cwd=REPO,
+                         start_new_session=True, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        while len(list(tmp_path.glob("*.started"))) < 2:  # jobs 0 and 1 running, the next ones queued
+            assert p.poll() is None, "the run ended before its workers started"
+            time.sleep(0.05)
+        pids = [int(f.read_text()) for f in tmp_path.glob("*.started")]
+        os.killpg(p.pid, signal.SIGINT)
+        _, err = p.communicate(timeout=60)
+        assert p.returncode == 130 and err.strip() == "interrupted", err
+        started = sorted(f.name for f in tmp_path.glob("*.started"))
+        assert started == ["0.started", "1.started"], f"jobs queued before Ctrl-C ran after it: {started}"
+        assert _all_gone(pids)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
