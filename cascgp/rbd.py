@@ -469,7 +469,9 @@ def load_nominal(urdf_path: str | os.PathLike, *, dof: int | None = None, joints
                          f"{', '.join(map(repr, missing))}; {_SIDECAR_FIELDS}")
     rbd = RigidBodyModel.from_urdf(urdf_path, dof=dof, joints=joints, locked=locked)
     if "dof" in meta and meta["dof"] != rbd.dof:
-        raise ValueError(f"sidecar {str(js)!r}: dof {meta['dof']} does not match the URDF's {rbd.dof} joints")
+        what = (f"the model's {rbd.dof} joints (the URDF's with {', '.join(rbd.locked)} locked: a sidecar lists the "
+                "model's joints only)" if rbd.locked else f"the URDF's {rbd.dof} joints")
+        raise ValueError(f"sidecar {str(js)!r}: dof {meta['dof']} does not match {what}")
     if list(meta["joint_names"]) != list(rbd.joint_names):
         raise ValueError(
             f"sidecar {str(js)!r}: joint_names {meta['joint_names']} do not match the URDF's {list(rbd.joint_names)}"

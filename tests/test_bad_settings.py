@@ -211,6 +211,9 @@ def test_refused_study_prints_its_error_alone(tmp_path: Path, monkeypatch, capsy
     ("sarcos", ["--restarts", "1001", "--sarcos", "x.mat"], "--restarts: expected at most 1000 starts per GP"),
     ("fit", ["--data", "x.csv", "--model", "np-inward", "--restarts", "1001"],
      "--restarts: expected at most 1000 starts per GP, got 1001"),
+    # ignored without a word
+    ("transfer", ["--video-controller", "rbd"], "--video-controller: chooses the learner of --video's clips"),
+    ("study", ["--no-sarcos", "--sarcos", "x.mat"], "--sarcos: the SARCOS part is skipped (--no-sarcos)"),
     # an empty list ran the default experiment
     ("transfer", ["--controllers", ""], "--controllers: unknown controller ''"),
     ("transfer", ["--tasks", ""], "--tasks: unknown task ''"),

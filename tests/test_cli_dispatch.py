@@ -110,3 +110,13 @@ def test_plots_refuses_a_results_file_whose_entries_cannot_be_drawn(tmp_path: Pa
     err = capsys.readouterr().err
     assert exc.value.code == 2 and "edited.json: not a complete study results file" in err and "Traceback" not in err
     assert not (tmp_path / "out").exists()
+
+
+def test_help_of_a_command_and_no_command(capsys) -> None:
+    """'cascgp help fit' showed the list of commands, and 'cascgp' alone (an error, exit 2) printed it on stdout."""
+    with pytest.raises(SystemExit) as exc:
+        cli.main(["help", "fit"])
+    assert exc.value.code == 0 and capsys.readouterr().out.startswith("usage: cascgp fit")
+    assert cli.main([]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.startswith("usage: cascgp")

@@ -427,3 +427,14 @@ def test_a_numba_that_cannot_cache_leaves_the_numpy_paths(monkeypatch) -> None:
     q = (new.q[1], new.qd[1], new.qdd[1])
     fitted.stop_online()
     np.testing.assert_allclose(model.predict_one(*q), fitted.predict_one(*q), rtol=1e-12, atol=1e-12)
+
+
+@pytest.mark.parametrize("value, on", [("0", False), ("false", False), ("No", False), (" OFF ", False), ("1", True),
+                                       ("yes", True)])
+def test_cascgp_jit_turns_the_compiled_loops_off_with_any_usual_word(monkeypatch, value: str, on: bool) -> None:
+    """Only "0" turned them off; "false", "no" and "off" left them on without a word."""
+    from cascgp.models import fastkernel
+
+    monkeypatch.setattr(fastkernel, "_kernel", lambda: object())  # as if Numba were installed
+    monkeypatch.setenv("CASCGP_JIT", value)
+    assert fastkernel.jit_enabled() is on

@@ -329,6 +329,12 @@ def test_construction_errors(tmp, exact_urdf):
     lone.with_suffix(".json").write_text(json.dumps({**side, "dof": 7}))
     with pytest.raises(ValueError, match="dof 7 does not match"):
         load_nominal(lone)
+    # a sidecar of the whole arm with a joint locked: it said the URDF had 5 joints
+    lone.with_suffix(".json").write_text(json.dumps({**side, "dof": 6}))
+    first = side["joint_names"][0]
+    with pytest.raises(ValueError, match=rf"dof 6 does not match the model's 5 joints \(the URDF's with {first} "
+                                         r"locked: a sidecar lists the model's joints only\)"):
+        load_nominal(lone, locked={first: 0.1})
 
     garbage = tmp / "garbage.urdf"
     garbage.write_text("<robot name='x'><link name='a'>")

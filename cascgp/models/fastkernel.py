@@ -53,8 +53,9 @@ _compiled: dict[str, Callable[..., Any] | None] = {}
 
 
 def jit_enabled() -> bool:
-    """Whether the compiled path may be used: ``CASCGP_JIT`` unset or not ``0``, and ``numba`` importable."""
-    if os.environ.get("CASCGP_JIT", "1") == "0":
+    """Whether the compiled path may be used: ``CASCGP_JIT`` unset or not one of ``0``, ``false``, ``no``, ``off``
+    (any case), and ``numba`` importable."""
+    if os.environ.get("CASCGP_JIT", "1").strip().lower() in ("0", "false", "no", "off"):
         return False
     return _kernel() is not None
 

@@ -58,8 +58,10 @@ def _usage() -> str:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``cascgp`` console script; returns the exit status."""
     args = list(sys.argv[1:] if argv is None else argv)
+    if len(args) == 2 and args[0] == "help" and args[1] in COMMANDS:  # 'cascgp help fit': fit's own help
+        args = [args[1], "--help"]
     if not args or args[0] in ("-h", "--help", "help"):
-        print(_usage())
+        print(_usage(), file=sys.stdout if args else sys.stderr)  # no command: an error, on stderr
         return 0 if args else 2
     if args[0] == "--version":
         from cascgp import __version__

@@ -106,6 +106,8 @@ def main(argv: list[str] | None = None, prog: str | None = None) -> None:
         bad = [m for m in models if m not in VARIANTS]
         if bad or not models:
             ap.error(f"--models: {f'unknown {bad}' if bad else 'no name'}; expected names from {list(VARIANTS)}")
+    if a.no_sarcos and a.sarcos is not None:
+        ap.error("--sarcos: the SARCOS part is skipped (--no-sarcos): give one of the two")
     sarcos, skip_note = None, None
     if not a.no_sarcos:
         found = default_sarcos()

@@ -129,6 +129,8 @@ def parse_args(argv: list[str] | None = None, prog: str | None = None
 
         a.video_options = VideoOptions(str(a.video.resolve()), ("rbd", learned), video_attempts(cfg.plan()))
     else:
+        if a.video_controller is not None:
+            p.error("--video-controller: chooses the learner of --video's clips; give --video DIR too")
         a.video_options = None
     return cfg, a.out, a.overwrite, a
 
