@@ -13,7 +13,7 @@ import numpy as np
 #: instead of failing in the fit's memory plan.
 MAX_RESTARTS = 1000
 
-__all__ = ["check_count", "check_positive", "check_real_vector"]
+__all__ = ["MAX_RESTARTS", "check_count", "check_positive", "check_real_vector"]
 
 
 @overload

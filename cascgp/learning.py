@@ -124,8 +124,9 @@ class RunHooks:
 @dataclass
 class ControllerRun:
     """One controller's sequence of attempts (one record per attempt) and, for a learning controller, ``model``:
-    the model of the last refit, fitted on every training attempt's data (``None`` when nothing was fitted), e.g.
-    to save with its ``save`` method."""
+    the model of the last refit, fitted on the training set of every training attempt's data (``RetrainConfig``'s
+    rate and cap; ``None`` when nothing was fitted, and in the runs of
+    :func:`cascgp_experiments.transfer.run_transfer`, whose records come back as JSON), e.g. to save."""
 
     name: str
     attempts: list[dict[str, Any]] = field(default_factory=list)
@@ -199,7 +200,7 @@ def run_controller(name: str, env: Any, plan: Iterable[Attempt], rbd: Any, feedb
         The run; each record holds ``attempt``, ``task``, ``task_attempt``, ``phase``, ``n_train`` (rows the
         controller's model was fitted on), the episode's :meth:`EpisodeResult.summary`, ``online_samples`` for an
         online controller and, after a refit, ``fit_seconds``; hooks may add keys. ``run.model`` is the model of
-        the last refit (the one after the last ``"train"`` attempt, fitted on all the run's data).
+        the last refit (the one after the last ``"train"`` attempt, on the training set of all the run's data).
     """
     base, _, _ = parse_controller(name)
     if not isinstance(config, RetrainConfig):

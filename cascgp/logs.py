@@ -172,7 +172,7 @@ def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[i
                 if not ok:
                     got = repr(cell.strip()) if cell.isascii() else f"{cell!r} (characters that are not ASCII)"
                     if "," in cell and _is_number(cell.replace(",", ".")):
-                        got += " (a decimal comma: a log's decimal separator is '.')"
+                        got += " (a decimal comma? a log's decimal separator is '.', with no thousands separator)"
                     raise LogFormatError(f"{path}: row {r}, column {names[c]!r}: expected a finite number, got {got}")
         values.append(row)
         rownos.append(r)
@@ -228,9 +228,9 @@ def _read_csv(path: Path, smoothing: SavGol | None, require_tau: bool) -> Dynami
                              "tau1..tauN (see cascgp.logs)")
     names = [c.strip() for c in header]
     if names and names[0].lower().startswith("sep="):  # Excel's separator line, before the header
-        if names != ["sep=", ""]:
+        if ",".join(header).strip().lower() != "sep=,":
             raise LogFormatError(f"{path}: row {reader.line_num}: a spreadsheet's separator line, "
-                                 f"{','.join(header)!r}; a log's columns are separated by commas (sep=,)")
+                                 f"{','.join(header)!r}; expected sep=, (a log's columns are separated by commas)")
         header = next(reader, None)
         if header is None:
             raise LogFormatError(f"{path}: row {reader.line_num + 1}: expected a header row after the separator line "

@@ -74,7 +74,7 @@ class RetrainConfig:
             (an integer >= 0).
         rate_hz: rate (Hz) to which the buffer's episodes are subsampled for a refit.
         cap: the most training rows of a refit (evenly spaced over the subsampled buffer; at least 2).
-        restarts: GP optimiser starts per joint's GP in a refit.
+        restarts: GP optimiser starts per joint's GP in a refit (1 to 1000).
     """
 
     seed: int = 0

@@ -38,9 +38,8 @@ def interrupted(*_: Any) -> None:
 
 def on_interrupt(*_: Any) -> None:
     """The SIGINT handler of a pool process (Ctrl-C reaches every process of the terminal's group): leave the job
-    that runs (:func:`interrupted`), or, between jobs, only remember it. An exception raised while the executor's own
-    loop read or wrote its queues could leave half a message in them, and the run's main process then waited for the
-    rest for ever (1 in about 80 interrupted ``cascgp collect`` runs hung)."""
+    that runs (:func:`interrupted`), or, between jobs, only remember it: an exception raised while the executor's own
+    loop reads or writes its queues could leave half a message in them."""
     _STATE["stop"] = True
     if _STATE["busy"]:
         interrupted()
@@ -50,10 +49,11 @@ def run_job(fn: Callable[..., Any], inputs: dict[str, Any]) -> Any:
     """``fn(**inputs)``, which Ctrl-C may interrupt; after a Ctrl-C a job queued in this process leaves at once
     instead of running (the executor hands a process its next queued job after an interrupted one: a transfer's
     next controller ran on for half a minute after Ctrl-C, its result thrown away)."""
-    if _STATE["stop"]:
-        interrupted()
-    _STATE["busy"] = True
+    outer = _STATE["busy"]  # a job that runs jobs itself (run_jobs in-process) stays interruptible after them
+    _STATE["busy"] = True  # before the check: a Ctrl-C between the two is not missed
     try:
+        if _STATE["stop"]:
+            interrupted()
         return fn(**inputs)
     finally:
-        _STATE["busy"] = False
+        _STATE["busy"] = outer

@@ -18,7 +18,7 @@ and with each variance gate (RBD plus ``predict_one_var``); the innovation- and 
 may idle and the caches fill with other work) and busy-waiting (as a real-time loop on a dedicated core), and, as a
 reference, a NumPy dot product of 0.3 MB back to back and paced the same way. Medians, 90th and 99th percentiles
 over ``--reps`` calls, one thread; ``compiled`` says whether the compiled single-query loop ran
-(:mod:`cascgp.models.fastkernel`: Numba installed, ``CASCGP_JIT`` not 0). When it ran, the compiled online sample
+(:mod:`cascgp.models.fastkernel`: Numba installed, ``CASCGP_JIT`` not 0 or off). When it ran, the compiled online sample
 and variance loop are also timed against their reference paths (NumPy sample, per-joint BLAS solves) on the same
 model in alternating rounds. Prints tables and writes ``bench_online.json``.
 """

@@ -412,3 +412,38 @@ def test_after_ctrl_c_a_job_queued_in_a_pool_process_does_not_run(tmp_path: Path
     finally:
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
+
+
+_RUN_JOB_SCRIPT = """
+import sys
+from cascgp_experiments import pool_exit
+ran = []
+def inner():
+    ran.append("inner")
+def outer():
+    pool_exit.run_job(inner, {})  # a job that runs a job of its own: still interruptible afterwards
+    pool_exit.on_interrupt()       # Ctrl-C in the outer job: leaves it
+    ran.append("outer went on")
+pool_exit.on_interrupt()            # between jobs: remembered, nothing raised
+assert pool_exit._STATE == {"stop": True, "busy": False}, pool_exit._STATE
+pool_exit._STATE["stop"] = False
+try:
+    pool_exit.run_job(outer, {})
+except SystemExit as exc:
+    assert exc.code == 130 and ran == ["inner"], ran
+else:
+    raise AssertionError("the outer job ran on after Ctrl-C")
+try:
+    pool_exit.run_job(inner, {})   # queued after the Ctrl-C: leaves before it runs
+except SystemExit:
+    assert ran == ["inner"], ran
+    sys.stdout.write("ok")
+"""
+
+
+def test_a_pool_process_leaves_only_a_running_job_on_ctrl_c() -> None:
+    """pool_exit's rules, in a process of their own (interrupted() sends stderr to the null device): between jobs a
+    Ctrl-C is only remembered; a running job leaves, also after a job it ran itself; a later job leaves at once."""
+    out = subprocess.run([sys.executable, "-c", _RUN_JOB_SCRIPT], env=subprocess_env(), cwd=REPO,
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout == "ok", out.stderr

@@ -347,3 +347,15 @@ def test_log_hyperparameters_that_drift_far_are_clipped_to_what_a_saved_bank_hol
         for m, m2 in zip(mean + var, mean2 + var2):  # the clipped lengthscale ignores its input, bit for bit
             np.testing.assert_array_equal(m, m2)
     assert bank.hyperparameters(0)["noise_var"] == loaded.hyperparameters(0)["noise_var"]
+
+
+def test_a_warm_started_constant_target_keeps_its_log_hyperparameters_within_700():
+    """A constant target is not optimised: it keeps the warm start, whose log lengthscales are shifted by the change
+    of the inputs' spread, so a lengthscale at the bound (700) came back at 702.3 and the bank could not be loaded."""
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(40, 2))
+    first = GPBank(GPFitConfig(n_restarts=1)).fit([X], [np.sin(X[:, 0])])
+    first._data.theta[0, 1] = 700.0  # an unneeded input's lengthscale, clipped by its fit
+    second = GPBank(GPFitConfig(n_restarts=1)).fit([X * 0.1], [np.full(40, 2.0)], init=first)
+    assert second.fit_info[0]["constant_target"] and np.abs(second.theta).max() <= 700.0
+    GPBank.from_state_dict(second.state_dict())  # refused before

@@ -198,8 +198,8 @@ CASES = {
     "underscore in a number": (HEAD + "\n0,1_000,2,3,4\n", 2, "q1", "got '1_000'"),
     "digits of another script": (HEAD + "\n0,1,\u0661\u0662,3,4\n", 2, "q2", "got '\u0661\u0662'"),
     "non-breaking space": (HEAD + "\n0,1,2,\u00a03,4\n", 2, "tau1", "got '\\xa03' (characters that are not ASCII)"),
-    "quoted decimal comma": (HEAD + '\n0,1,"2,5",3,4\n', 2, "q2", "got '2,5' (a decimal comma: a log's decimal "
-                                                                     "separator is '.')"),
+    "quoted decimal comma": (HEAD + '\n0,1,"2,5",3,4\n', 2, "q2", "got '2,5' (a decimal comma? a log's decimal "
+                                                                     "separator is '.', with no thousands separator)"),
     "separator line not a comma": ("sep=;\nt;q1;tau1\n0;1;2\n", 1, None, "a spreadsheet's separator line, 'sep=;'"),
     "separator line alone": ("sep=,\n", 2, None, "expected a header row after the separator line"),
     "NaN cell": (HEAD + "\n0,1,2,3,4\n0.1,1,2,nan,4\n", 3, "tau1", "got 'nan'"),
@@ -239,6 +239,9 @@ def test_a_spreadsheets_separator_line_sep_comma_is_skipped(tmp_path: Path) -> N
     a, b = read_log(plain), read_log(excel)
     for name in ("t", "q", "qd", "qdd", "tau"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name))
+    for line in ("SEP=,", '"sep=,"'):  # any case, quoted or not
+        excel.write_text(line + "\n" + body)
+        np.testing.assert_array_equal(read_log(excel).q, a.q)
     excel.write_text("sep=,\n" + HEAD + "\n0,1,2,3,x\n")
     with pytest.raises(LogFormatError, match=r"row 3, column 'tau2'"):  # rows are still the file's lines
         read_log(excel)

@@ -324,8 +324,8 @@ class GPBank:
         for b in opt_gps:
             best_r[b] = int(np.argmin(np.where(np.isfinite(rec.nll[b]), rec.nll[b], np.inf)))
 
-        data.theta = final_theta
-        factors = self._set_data(data)
+        data.theta = np.clip(final_theta, -THETA_MAX, THETA_MAX)  # what a saved bank holds (docstring); a warm
+        factors = self._set_data(data)  # start's shifted lengthscales too (a constant target is not optimised)
         self.fit_info = [{
             "nll": [json_num(v) for v in rec.nll[b]],
             "n_iter": [int(v) for v in rec.n_iter[b]],
@@ -376,7 +376,7 @@ class GPBank:
         for b in opt_gps:
             r = int(np.argmin(np.where(np.isfinite(rec.nll[b]), rec.nll[b], np.inf)))
             k = int(np.flatnonzero((gp_of == b) & (start_idx == r))[0])
-            final_theta[b] = np.clip(states[k].x, -THETA_MAX, THETA_MAX)  # what a saved bank holds (docstring)
+            final_theta[b] = states[k].x
 
     def _screen(self, obj: _Objective, x0: np.ndarray, member_gp: np.ndarray, member_start: np.ndarray,
                 opt_gps: np.ndarray, warm: bool, rng: np.random.Generator, rec: _StartRecord

@@ -17,7 +17,8 @@ the solves are the same to the bit; only the sum of squares runs in another orde
 The compiler is Numba, the standard just-in-time compiler for numerical Python
 loops over NumPy arrays (no C toolchain at install time, the same source as the reference, cached on disk).
 
-It is an optional fast path: used when ``numba`` can be imported and ``CASCGP_JIT`` is not ``0``; otherwise (and as
+It is an optional fast path: used when ``numba`` can be imported and ``CASCGP_JIT`` is not ``0`` (or ``false``,
+``no``, ``off``); otherwise (and as
 the reference the tests compare with) :meth:`~cascgp.models.fastpath.FastPath.mean_numpy` runs. The two agree to
 round-off (the sums run in another order; the kernel's ``exp``/``sqrt`` may differ in the last bit).
 """

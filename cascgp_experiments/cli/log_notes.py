@@ -56,7 +56,7 @@ def limits_note(prog: str, rbd: Any, data: Any) -> str | None:
 
 
 def torque_note(prog: str, rbd: Any, data: Any) -> str | None:
-    """One note naming the joints with rows whose torque exceeds twice the URDF's effort limit (torques in N mm or
+    """One note naming the joints with rows whose torque exceeds twice the URDF's (or its sidecar's) limit (N mm or
     another unit, say; a motor's short peak stays within twice its rating); returns it (``None``: no note, no
     torques, or a rigid-body model without torque limits)."""
     limits = getattr(rbd, "torque_limits", None)
@@ -66,11 +66,12 @@ def torque_note(prog: str, rbd: Any, data: Any) -> str | None:
     for j, lim in enumerate(limits):
         out = float((np.abs(data.tau[:, j]) > 2.0 * lim).mean())
         if out > 0:
-            found.append(f"tau{j + 1} {out:.0%} (limit {lim:.4g}, largest {np.abs(data.tau[:, j]).max():.4g})")
+            share = f"{out:.0%}" if out >= 0.01 else "<1%"
+            found.append(f"tau{j + 1} {share} (limit {lim:.4g}, largest {np.abs(data.tau[:, j]).max():.4g})")
     if not found:
         return None
-    msg = (f"rows with torques beyond twice the URDF's effort limits: {', '.join(found)}; torques must be in N m (N "
-           "for a prismatic joint)")
+    msg = (f"rows with torques beyond twice the URDF's effort limits (or the sidecar's torque_limits): "
+           f"{', '.join(found)}; torques must be in N m (N for a prismatic joint)")
     note(prog, f"note: {msg}")
     return msg
 
