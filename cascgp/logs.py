@@ -165,11 +165,7 @@ def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[i
         line = "".join(cells)  # one test of the row's characters, not one per cell
         if len(row) != k or not all(map(math.isfinite, row)) or not line.isascii() or "_" in line:
             for c, cell in enumerate(cells):
-                try:
-                    ok = cell.isascii() and "_" not in cell and math.isfinite(float(cell))
-                except ValueError:
-                    ok = False
-                if not ok:
+                if not (cell.isascii() and "_" not in cell and _is_number(cell)):
                     got = repr(cell.strip()) if cell.isascii() else f"{cell!r} (characters that are not ASCII)"
                     if "," in cell and _is_number(cell.replace(",", ".")):
                         got += " (a decimal comma? a log's decimal separator is '.', with no thousands separator)"
@@ -183,6 +179,7 @@ def _rows(path: Path, names: list[str], reader: Any) -> tuple[np.ndarray, list[i
 
 
 def _is_number(cell: str) -> bool:
+    """Whether ``float`` reads ``cell`` as a finite number."""
     try:
         return math.isfinite(float(cell))
     except ValueError:

@@ -80,10 +80,11 @@ def _inertial_errors(root: ET.Element) -> list[str]:
     does; that leaves the mass matrix positive definite and is not reported)."""
     errors = []
     for link in (e for e in root if xml_tag(e.tag) == "link"):
-        if len(_children(link, "inertial")) > 1:  # the parser reads the first and drops the others
-            errors.append(f"link {link.get('name')!r} has {len(_children(link, 'inertial'))} <inertial> elements "
+        inertials = _children(link, "inertial")
+        if len(inertials) > 1:  # the parser reads the first and drops the others
+            errors.append(f"link {link.get('name')!r} has {len(inertials)} <inertial> elements "
                           "(URDF allows one: merge them into one body's mass, centre of mass and inertia)")
-        for inertial in _children(link, "inertial"):
+        for inertial in inertials:
             mass = next((_floats(m.get("value"), [0.0])[0] for m in _children(inertial, "mass")), 0.0)
             if mass < 0:
                 errors.append(f"link {link.get('name')!r} has a negative mass ({mass:g} kg)")

@@ -64,10 +64,11 @@ def torque_note(prog: str, rbd: Any, data: Any) -> str | None:
         return None
     found = []
     for j, lim in enumerate(limits):
-        out = float((np.abs(data.tau[:, j]) > 2.0 * lim).mean())
+        size = np.abs(data.tau[:, j])
+        out = float((size > 2.0 * lim).mean())
         if out > 0:
             share = f"{out:.0%}" if out >= 0.01 else "<1%"
-            found.append(f"tau{j + 1} {share} (limit {lim:.4g}, largest {np.abs(data.tau[:, j]).max():.4g})")
+            found.append(f"tau{j + 1} {share} (limit {lim:.4g}, largest {size.max():.4g})")
     if not found:
         return None
     msg = (f"rows with torques beyond twice the URDF's effort limits (or the sidecar's torque_limits): "
